@@ -1,0 +1,11 @@
+//! imubake: body-worn inertial captures in, animation out.
+//!
+//! The library is a pipeline over one data model, [`take::Take`]: readers ([`read`]) turn
+//! capture logs into takes, and analysis ([`inspect`]) summarises them. Conventions for frames,
+//! time and units are those of `conventions.md`: quaternions are Hamilton, written w, x, y, z;
+//! times are seconds on the take's clock (t = 0 at the earliest kept sample).
+
+pub mod inspect;
+pub mod read;
+pub mod take;
+pub mod world;

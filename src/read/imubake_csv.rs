@@ -1,0 +1,469 @@
+//! imubake's own CSV (README, "imubake CSV"): a header row, then one row per sensor sample.
+//!
+//! Columns (any order, names case-insensitive):
+//! - time: exactly one of `time_s`, `time_ms`, `time_us`;
+//! - `sensor`;
+//! - orientation `qw,qx,qy,qz` (q_world_sensor, normalised on read) or `yaw,pitch,roll` (degrees,
+//!   intrinsic Z-Y-X; `_deg` suffix accepted), and/or raw `gx,gy,gz,ax,ay,az[,mx,my,mz]` with
+//!   optional unit suffixes (gyro `_rad_s` (default) or `_dps`; accelerometer `_m_s2` (default) or
+//!   `_g`; magnetometer `_ut` (default), `_nt`, `_gauss`, or `_au` kept as is).
+//!
+//! Lines starting with `#` are comments; `# world: ned` before the header declares the world
+//! (default `enu`). Blank lines are ignored.
+
+use super::lines::{LineReader, number_problem, parse_f64, split_fields};
+use super::{InputFormat, ReadError, ReadOptions, check_text, sniff};
+use crate::take::{ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg};
+use crate::world::World;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+/// Standard gravity, for accelerometer columns in g.
+pub const STANDARD_GRAVITY_M_S2: f64 = 9.80665;
+
+/// At most this many columns are looked at.
+const MAX_COLUMNS: usize = 32;
+
+const EXPECTED_COLUMNS: &str = "a time column (time_s, time_ms or time_us), `sensor`, and \
+     qw,qx,qy,qz or yaw,pitch,roll or gx,gy,gz,ax,ay,az[,mx,my,mz]";
+
+/// Column positions resolved from the header.
+#[derive(Debug, Clone, PartialEq)]
+struct Layout {
+    columns: usize,
+    time: usize,
+    clock: ClockUnit,
+    sensor: usize,
+    quaternion: Option<[usize; 4]>,
+    ypr: Option<[usize; 3]>,
+    gyro: Option<([usize; 3], f64)>,
+    accel: Option<([usize; 3], f64)>,
+    mag: Option<([usize; 3], f64)>,
+    ignored: Vec<String>,
+}
+
+fn split_unit(name: &str) -> (&str, &str) {
+    match name.find('_') {
+        Some(i) => (&name[..i], &name[i + 1..]),
+        None => (name, ""),
+    }
+}
+
+fn gyro_scale(unit: &str) -> Option<f64> {
+    match unit {
+        "" | "rad_s" | "rads" | "radps" => Some(1.0),
+        "dps" | "deg_s" | "degs" => Some(std::f64::consts::PI / 180.0),
+        _ => None,
+    }
+}
+
+fn accel_scale(unit: &str) -> Option<f64> {
+    match unit {
+        "" | "m_s2" | "ms2" | "mps2" => Some(1.0),
+        "g" => Some(STANDARD_GRAVITY_M_S2),
+        _ => None,
+    }
+}
+
+fn mag_scale(unit: &str) -> Option<f64> {
+    match unit {
+        "" | "ut" | "au" => Some(1.0),
+        "nt" => Some(1e-3),
+        "gauss" | "ga" => Some(100.0),
+        "mgauss" | "mga" => Some(0.1),
+        _ => None,
+    }
+}
+
+impl Layout {
+    fn from_header(header: &[u8], path: &Path, line: u64) -> Result<Layout, ReadError> {
+        let text = std::str::from_utf8(header).map_err(|_| {
+            ReadError::line(path, line, "header is not UTF-8 text; expected column names")
+        })?;
+        let names: Vec<String> = text
+            .split(',')
+            .map(|n| n.trim().to_ascii_lowercase())
+            .collect();
+        if names.len() > MAX_COLUMNS {
+            return Err(ReadError::line(
+                path,
+                line,
+                format!("header has {} columns; at most {MAX_COLUMNS} are supported", names.len()),
+            ));
+        }
+        let mut time = None;
+        let mut sensor = None;
+        let mut q = [None; 4];
+        let mut ypr = [None; 3];
+        let mut gyro = [None; 3];
+        let mut accel = [None; 3];
+        let mut mag = [None; 3];
+        let mut ignored = Vec::new();
+        let set = |slot: &mut Option<(usize, f64)>, i: usize, scale: f64, name: &str| {
+            if slot.is_some() {
+                return Err(ReadError::line(
+                    path,
+                    line,
+                    format!("column `{name}` appears twice in the header"),
+                ));
+            }
+            *slot = Some((i, scale));
+            Ok(())
+        };
+        let mut time_slot: Option<(usize, f64)> = None;
+        let mut sensor_slot: Option<(usize, f64)> = None;
+        for (i, name) in names.iter().enumerate() {
+            let (base, unit) = split_unit(name);
+            let axis = |b: &str| match b.as_bytes().get(1) {
+                Some(b'x') => Some(0),
+                Some(b'y') => Some(1),
+                Some(b'z') => Some(2),
+                _ => None,
+            };
+            match (name.as_str(), base) {
+                ("time_s" | "time_ms" | "time_us", _) => {
+                    if time_slot.is_some() {
+                        return Err(ReadError::line(
+                            path,
+                            line,
+                            "header has more than one time column; expected one of time_s, time_ms, time_us",
+                        ));
+                    }
+                    time_slot = Some((i, 0.0));
+                    time = Some(match name.as_str() {
+                        "time_s" => ClockUnit::Seconds,
+                        "time_ms" => ClockUnit::Milliseconds,
+                        _ => ClockUnit::Microseconds,
+                    });
+                }
+                ("sensor", _) => set(&mut sensor_slot, i, 1.0, name)?,
+                ("qw", _) => set(&mut q[0], i, 1.0, name)?,
+                ("qx", _) => set(&mut q[1], i, 1.0, name)?,
+                ("qy", _) => set(&mut q[2], i, 1.0, name)?,
+                ("qz", _) => set(&mut q[3], i, 1.0, name)?,
+                (_, "yaw" | "pitch" | "roll") if unit.is_empty() || unit == "deg" => {
+                    let k = match base {
+                        "yaw" => 0,
+                        "pitch" => 1,
+                        _ => 2,
+                    };
+                    set(&mut ypr[k], i, 1.0, name)?
+                }
+                (_, "gx" | "gy" | "gz") if gyro_scale(unit).is_some() => {
+                    set(&mut gyro[axis(base).unwrap_or(0)], i, gyro_scale(unit).unwrap_or(1.0), name)?
+                }
+                (_, "ax" | "ay" | "az") if accel_scale(unit).is_some() => {
+                    set(&mut accel[axis(base).unwrap_or(0)], i, accel_scale(unit).unwrap_or(1.0), name)?
+                }
+                (_, "mx" | "my" | "mz") if mag_scale(unit).is_some() => {
+                    set(&mut mag[axis(base).unwrap_or(0)], i, mag_scale(unit).unwrap_or(1.0), name)?
+                }
+                _ => ignored.push(name.clone()),
+            }
+        }
+        sensor = sensor.or(sensor_slot.map(|s| s.0));
+        let mut missing = Vec::new();
+        if time.is_none() {
+            missing.push("time_s|time_ms|time_us".to_string());
+        }
+        if sensor.is_none() {
+            missing.push("sensor".to_string());
+        }
+        let group = |slots: &[Option<(usize, f64)>], names: &[&str], missing: &mut Vec<String>| {
+            let present = slots.iter().filter(|s| s.is_some()).count();
+            if present == 0 {
+                None
+            } else if present < slots.len() {
+                for (slot, n) in slots.iter().zip(names) {
+                    if slot.is_none() {
+                        missing.push(n.to_string());
+                    }
+                }
+                None
+            } else {
+                Some(slots.iter().map(|s| s.expect("all present")).collect::<Vec<_>>())
+            }
+        };
+        let quaternion = group(&q, &["qw", "qx", "qy", "qz"], &mut missing)
+            .map(|v| [v[0].0, v[1].0, v[2].0, v[3].0]);
+        let ypr = group(&ypr, &["yaw", "pitch", "roll"], &mut missing).map(|v| [v[0].0, v[1].0, v[2].0]);
+        let triple = |v: Vec<(usize, f64)>| ([v[0].0, v[1].0, v[2].0], v[0].1);
+        let gyro = group(&gyro, &["gx", "gy", "gz"], &mut missing).map(triple);
+        let accel = group(&accel, &["ax", "ay", "az"], &mut missing).map(triple);
+        let mag = group(&mag, &["mx", "my", "mz"], &mut missing).map(triple);
+        if gyro.is_some() != accel.is_some() {
+            missing.push(if gyro.is_some() { "ax,ay,az" } else { "gx,gy,gz" }.to_string());
+        }
+        if quaternion.is_none() && ypr.is_none() && gyro.is_none() && missing.is_empty() {
+            missing.push("qw,qx,qy,qz or yaw,pitch,roll or gx,gy,gz,ax,ay,az".to_string());
+        }
+        if !missing.is_empty() {
+            return Err(ReadError::line(
+                path,
+                line,
+                format!(
+                    "header is missing column(s) {}; expected {EXPECTED_COLUMNS}",
+                    missing.join(", ")
+                ),
+            ));
+        }
+        let (Some(time), Some(sensor), Some(clock)) = (time_slot.map(|t| t.0), sensor, time) else {
+            unreachable!("missing columns were reported above");
+        };
+        Ok(Layout {
+            columns: names.len(),
+            time,
+            clock,
+            sensor,
+            quaternion,
+            ypr,
+            gyro: gyro.filter(|_| accel.is_some()),
+            accel,
+            mag: mag.filter(|_| gyro.is_some()),
+            ignored,
+        })
+    }
+}
+
+/// True when the first non-comment line is an imubake CSV header.
+pub fn looks_like(head: &[u8]) -> bool {
+    let mut reader = LineReader::new(head);
+    while let Ok(Some((_, line))) = reader.next_line() {
+        let t = line.trim_ascii();
+        if t.is_empty() || t.starts_with(b"#") {
+            continue;
+        }
+        let lower = t.to_ascii_lowercase();
+        let has = |name: &[u8]| lower.split(|&b| b == b',').any(|f| f.trim_ascii() == name);
+        return (has(b"time_s") || has(b"time_ms") || has(b"time_us")) && has(b"sensor");
+    }
+    false
+}
+
+pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    check_text(path, &sniff(path)?)?;
+    let file = File::open(path).map_err(|e| ReadError::io(path, e))?;
+    let size_hint = file.metadata().map(|m| m.len()).unwrap_or(0);
+    read_sized(file, size_hint, path, options)
+}
+
+/// Reads an imubake CSV from any reader; `path` names it in reports.
+pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    read_sized(reader, 0, path, options)
+}
+
+/// Looks a sensor id up; the previous row's successor is tried first, as sensors usually take
+/// turns.
+struct SensorTable {
+    ids: Vec<(Box<[u8]>, SensorIdx)>,
+    next_guess: usize,
+}
+
+impl SensorTable {
+    #[inline]
+    fn find(&mut self, id: &[u8]) -> Option<SensorIdx> {
+        let n = self.ids.len();
+        if n == 0 {
+            return None;
+        }
+        let guess = self.next_guess % n;
+        if *self.ids[guess].0 == *id {
+            self.next_guess = guess + 1;
+            return Some(self.ids[guess].1);
+        }
+        let pos = self.ids.iter().position(|(k, _)| **k == *id)?;
+        self.next_guess = pos + 1;
+        Some(self.ids[pos].1)
+    }
+}
+
+/// Rows read before the per-sensor capacity is estimated from the file size.
+const ROWS_BEFORE_RESERVE: u64 = 4096;
+
+fn read_sized(
+    reader: impl Read,
+    size_hint: u64,
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Take, ReadError> {
+    let mut lines = LineReader::new(reader);
+    let mut world = World::Enu;
+    let mut layout = None;
+    let mut header_line = 0;
+    while let Some((line_no, line)) = lines.next_line().map_err(|e| ReadError::lines(path, e))? {
+        let t = line.trim_ascii();
+        if line_no <= options.skip_lines || t.is_empty() {
+            continue;
+        }
+        if let Some(comment) = t.strip_prefix(b"#") {
+            if let Some(w) = world_directive(comment) {
+                world = w.map_err(|e| ReadError::line(path, line_no, e.to_string()))?;
+            }
+            continue;
+        }
+        layout = Some(Layout::from_header(line, path, line_no)?);
+        header_line = line_no;
+        break;
+    }
+    let Some(layout) = layout else {
+        return Err(ReadError::format(
+            path,
+            format!("no header row found; expected {EXPECTED_COLUMNS}"),
+        ));
+    };
+    let world = options.world.unwrap_or(world);
+    let mut take = TakeBuilder::new(path, InputFormat::ImubakeCsv, world, layout.clock.clone());
+    for name in &layout.ignored {
+        take.warn(format!("line {header_line}: column `{name}` is not an imubake CSV column; ignored"));
+    }
+    let mut sensors = SensorTable {
+        ids: Vec::new(),
+        next_guess: 0,
+    };
+    let mut rows: u64 = 0;
+    let mut reserved = size_hint == 0;
+    let mut worst_norm_error: f64 = 0.0;
+    while let Some((line_no, line)) = lines.next_line().map_err(|e| ReadError::lines(path, e))? {
+        if line_no <= options.skip_lines {
+            take.drop_line(line_no, "skipped by --skip-lines", line);
+            continue;
+        }
+        let first = line.iter().find(|b| !b.is_ascii_whitespace());
+        match first {
+            None => continue,
+            Some(b'#') => continue,
+            _ => {}
+        }
+        let mut fields = [&b""[..]; MAX_COLUMNS];
+        let n = split_fields(line, b',', &mut fields);
+        if n != layout.columns {
+            take.drop_line(
+                line_no,
+                format!("expected {} comma-separated fields as in the header, found {n}", layout.columns),
+                line,
+            );
+            continue;
+        }
+        let number = |i: usize| parse_f64(fields[i]).ok_or(i);
+        let time = match number(layout.time) {
+            Ok(t) => t,
+            Err(i) => {
+                let reason = format!("time {}", number_problem(fields[i]));
+                take.drop_line(line_no, reason, line);
+                continue;
+            }
+        };
+        let id = fields[layout.sensor].trim_ascii();
+        let sensor = match sensors.find(id) {
+            Some(s) => s,
+            None => {
+                if id.is_empty() {
+                    take.drop_line(line_no, "sensor is empty", line);
+                    continue;
+                }
+                let Ok(name) = std::str::from_utf8(id) else {
+                    take.drop_line(line_no, "sensor is not UTF-8 text", line);
+                    continue;
+                };
+                let idx = take.sensor(name);
+                sensors.ids.push((id.into(), idx));
+                idx
+            }
+        };
+        let result = (|| {
+            let mut q = None;
+            if let Some(c) = layout.quaternion {
+                let v = Quaternion::new(number(c[0])?, number(c[1])?, number(c[2])?, number(c[3])?);
+                q = Some(v);
+            }
+            let mut ypr = None;
+            if let Some(c) = layout.ypr {
+                ypr = Some(YawPitchRollDeg {
+                    yaw: number(c[0])?,
+                    pitch: number(c[1])?,
+                    roll: number(c[2])?,
+                });
+            }
+            let vec3 = |(c, scale): ([usize; 3], f64)| -> Result<Vector3<f64>, usize> {
+                Ok(Vector3::new(number(c[0])?, number(c[1])?, number(c[2])?) * scale)
+            };
+            let mut imu = None;
+            if let (Some(g), Some(a)) = (layout.gyro, layout.accel) {
+                imu = Some(ImuSample {
+                    gyro_rad_s: vec3(g)?,
+                    accel_m_s2: vec3(a)?,
+                });
+            }
+            let mag = layout.mag.map(vec3).transpose()?;
+            Ok((q, ypr, imu, mag))
+        })();
+        let (q, ypr, imu, mag) = match result {
+            Ok(values) => values,
+            Err(i) => {
+                let reason = format!("column {} {}", column_name(&layout, i), number_problem(fields[i]));
+                take.drop_line(line_no, reason, line);
+                continue;
+            }
+        };
+        let push = |r: Result<(), _>| r.map_err(|e| ReadError::take(path, e));
+        if let Some(q) = q {
+            let norm = q.norm();
+            if norm < 1e-9 {
+                take.drop_line(line_no, "quaternion is zero; expected a unit quaternion qw,qx,qy,qz", line);
+                continue;
+            }
+            worst_norm_error = worst_norm_error.max((norm - 1.0).abs());
+            push(take.push_quaternion(sensor, time, UnitQuaternion::new_unchecked(q / norm), line_no, line))?;
+        }
+        if let Some(ypr) = ypr {
+            push(take.push_yaw_pitch_roll(sensor, time, ypr, line_no, line))?;
+        }
+        if let Some(imu) = imu {
+            push(take.push_inertial(sensor, time, imu, line_no, line))?;
+        }
+        if let Some(mag) = mag {
+            push(take.push_magnetometer(sensor, time, mag, line_no, line))?;
+        }
+        rows += 1;
+        if !reserved && rows == ROWS_BEFORE_RESERVE {
+            reserved = true;
+            let bytes_per_row = lines.bytes_consumed() as f64 / line_no as f64;
+            let expected_rows = size_hint as f64 / bytes_per_row;
+            let per_sensor = expected_rows / take.sensor_count() as f64 * 1.02;
+            take.reserve_orientation(per_sensor as usize);
+        }
+    }
+    if worst_norm_error > 0.01 {
+        take.warn(format!(
+            "quaternions deviate from unit length by up to {worst_norm_error:.3}; normalised"
+        ));
+    }
+    take.finish(options.skip_seconds)
+        .map_err(|e| ReadError::take(path, e))
+}
+
+fn column_name(layout: &Layout, index: usize) -> String {
+    let named: [(&str, Option<&[usize]>); 5] = [
+        ("qw,qx,qy,qz", layout.quaternion.as_ref().map(|c| &c[..])),
+        ("yaw,pitch,roll", layout.ypr.as_ref().map(|c| &c[..])),
+        ("gx,gy,gz", layout.gyro.as_ref().map(|c| &c.0[..])),
+        ("ax,ay,az", layout.accel.as_ref().map(|c| &c.0[..])),
+        ("mx,my,mz", layout.mag.as_ref().map(|c| &c.0[..])),
+    ];
+    for (names, cols) in named {
+        if let Some(k) = cols.and_then(|c| c.iter().position(|&c| c == index)) {
+            return names.split(',').nth(k).unwrap_or(names).to_string();
+        }
+    }
+    format!("{}", index + 1)
+}
+
+/// Parses `world: ned` / `world = ned` in a comment; `None` when the comment is something else.
+fn world_directive(comment: &[u8]) -> Option<Result<World, crate::world::UnknownWorld>> {
+    let text = std::str::from_utf8(comment).ok()?.trim();
+    let rest = text.strip_prefix("world")?.trim_start();
+    let value = rest.strip_prefix(':').or_else(|| rest.strip_prefix('='))?;
+    Some(value.trim().parse())
+}

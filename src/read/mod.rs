@@ -1,0 +1,287 @@
+//! Readers: one module per capture format, each turning a file or session folder into a
+//! [`Take`]. The format is detected from content; [`ReadOptions::format`] overrides.
+
+pub mod imubake_csv;
+pub mod lines;
+pub mod opensense_sto;
+pub mod sou;
+pub mod xio_session;
+pub mod xsens_dot;
+pub mod xsens_mtw;
+
+use crate::take::{BuildError, Take};
+use crate::world::World;
+use serde::Serialize;
+use std::fmt;
+use std::fs;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+/// The capture formats imubake reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum InputFormat {
+    /// Paper 002's SOU log: `timestamp_ms,SOU_ID,yaw1,pitch1,roll1,yaw2,pitch2,roll2`.
+    Sou,
+    /// imubake's own CSV (README, "imubake CSV").
+    ImubakeCsv,
+    /// OpenSense orientation `.sto` (quaternions per `<body>_imu` column).
+    OpensenseSto,
+    /// Movella/Xsens DOT CSV export: a folder with one file per sensor (or one such file).
+    XsensDot,
+    /// Xsens MTw `.txt` export (MT Manager, as used by OpenSense): one file, or a folder of them.
+    XsensMtw,
+    /// x-io x-IMU3 session folder, one sub-folder per device.
+    XioSession,
+}
+
+impl InputFormat {
+    pub const ALL: [InputFormat; 6] = [
+        InputFormat::Sou,
+        InputFormat::ImubakeCsv,
+        InputFormat::OpensenseSto,
+        InputFormat::XsensDot,
+        InputFormat::XsensMtw,
+        InputFormat::XioSession,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            InputFormat::Sou => "sou",
+            InputFormat::ImubakeCsv => "imubake-csv",
+            InputFormat::OpensenseSto => "opensense-sto",
+            InputFormat::XsensDot => "xsens-dot",
+            InputFormat::XsensMtw => "xsens-mtw",
+            InputFormat::XioSession => "xio-session",
+        }
+    }
+
+    /// What a person would call it.
+    pub fn description(self) -> &'static str {
+        match self {
+            InputFormat::Sou => "paper-002 SOU log",
+            InputFormat::ImubakeCsv => "imubake CSV",
+            InputFormat::OpensenseSto => "OpenSense orientation .sto",
+            InputFormat::XsensDot => "Movella/Xsens DOT CSV export",
+            InputFormat::XsensMtw => "Xsens MTw .txt export",
+            InputFormat::XioSession => "x-io x-IMU3 session",
+        }
+    }
+}
+
+impl fmt::Display for InputFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for InputFormat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        InputFormat::ALL
+            .into_iter()
+            .find(|f| f.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = InputFormat::ALL.iter().map(|f| f.name()).collect();
+                format!("unknown input format `{s}`; expected one of {}", names.join(", "))
+            })
+    }
+}
+
+/// How to read a take.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReadOptions {
+    /// Skip detection and read as this format.
+    pub format: Option<InputFormat>,
+    /// Drop the first N lines of a line-based single-file log (paper 002's fixed-length cleaning).
+    pub skip_lines: u64,
+    /// Drop samples earlier than this many seconds after the first sample; the clock is then
+    /// re-zeroed at the earliest kept sample.
+    pub skip_seconds: f64,
+    /// Overrides the world the format declares.
+    pub world: Option<World>,
+}
+
+/// Why a take could not be read. Every message names the file, the line when there is one, what
+/// was expected, and a hint.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    #[error("{}: cannot read: {source}", .path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: is empty; expected a capture log", .path.display())]
+    EmptyFile { path: PathBuf },
+    #[error("{}: looks binary (a NUL byte at offset {offset}); expected a text capture log", .path.display())]
+    Binary { path: PathBuf, offset: usize },
+    #[error("{}: line {line}: {message}", .path.display())]
+    Line {
+        path: PathBuf,
+        line: u64,
+        message: String,
+    },
+    #[error("{}: {message}", .path.display())]
+    Format { path: PathBuf, message: String },
+    #[error("{}: {source}", .path.display())]
+    Take {
+        path: PathBuf,
+        #[source]
+        source: BuildError,
+    },
+}
+
+impl ReadError {
+    pub(crate) fn line(path: &Path, line: u64, message: impl Into<String>) -> Self {
+        ReadError::Line {
+            path: path.to_path_buf(),
+            line,
+            message: message.into(),
+        }
+    }
+
+    pub(crate) fn format(path: &Path, message: impl Into<String>) -> Self {
+        ReadError::Format {
+            path: path.to_path_buf(),
+            message: message.into(),
+        }
+    }
+
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        ReadError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    pub(crate) fn take(path: &Path, source: BuildError) -> Self {
+        ReadError::Take {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    pub(crate) fn lines(path: &Path, e: lines::LineError) -> Self {
+        match e {
+            lines::LineError::Io(source) => ReadError::io(path, source),
+            lines::LineError::TooLong { line } => ReadError::line(path, line, e.to_string()),
+        }
+    }
+}
+
+/// How many bytes of a file detection and the binary check look at.
+const SNIFF_BYTES: usize = 8192;
+
+/// Reads up to [`SNIFF_BYTES`] of a file.
+pub(crate) fn sniff(path: &Path) -> Result<Vec<u8>, ReadError> {
+    let mut file = fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
+    let mut head = Vec::with_capacity(SNIFF_BYTES);
+    file.by_ref()
+        .take(SNIFF_BYTES as u64)
+        .read_to_end(&mut head)
+        .map_err(|e| ReadError::io(path, e))?;
+    Ok(head)
+}
+
+/// Fails on an empty file or one with NUL bytes near the start: no text capture log has them.
+pub(crate) fn check_text(path: &Path, head: &[u8]) -> Result<(), ReadError> {
+    if head.is_empty() {
+        return Err(ReadError::EmptyFile {
+            path: path.to_path_buf(),
+        });
+    }
+    if let Some(offset) = memchr::memchr(0, head) {
+        return Err(ReadError::Binary {
+            path: path.to_path_buf(),
+            offset,
+        });
+    }
+    Ok(())
+}
+
+/// Detects the format of a file or folder from its content.
+pub fn detect_format(path: &Path) -> Result<InputFormat, ReadError> {
+    let meta = fs::metadata(path).map_err(|e| ReadError::io(path, e))?;
+    if meta.is_dir() {
+        return detect_folder(path);
+    }
+    let head = sniff(path)?;
+    check_text(path, &head)?;
+    detect_bytes(&head).ok_or_else(|| {
+        ReadError::format(
+            path,
+            "unknown capture format; expected a SOU log (`timestamp_ms,SOU_ID,yaw1,...`), an imubake CSV \
+             (header with time_s|time_ms|time_us and sensor), an OpenSense .sto, a Movella DOT CSV or an \
+             Xsens MTw .txt. Hint: name the format with --input-format",
+        )
+    })
+}
+
+/// Detects a single-file format from its first bytes.
+pub fn detect_bytes(head: &[u8]) -> Option<InputFormat> {
+    if opensense_sto::looks_like(head) {
+        Some(InputFormat::OpensenseSto)
+    } else if xsens_mtw::looks_like(head) {
+        Some(InputFormat::XsensMtw)
+    } else if xsens_dot::looks_like(head) {
+        Some(InputFormat::XsensDot)
+    } else if imubake_csv::looks_like(head) {
+        Some(InputFormat::ImubakeCsv)
+    } else if sou::looks_like(head) {
+        Some(InputFormat::Sou)
+    } else {
+        None
+    }
+}
+
+fn detect_folder(path: &Path) -> Result<InputFormat, ReadError> {
+    if xio_session::looks_like_folder(path) {
+        return Ok(InputFormat::XioSession);
+    }
+    let entries = visible_files(path)?;
+    let mut formats = entries.iter().filter_map(|file| {
+        let head = sniff(file).ok()?;
+        detect_bytes(&head)
+    });
+    match formats.next() {
+        Some(f @ (InputFormat::XsensDot | InputFormat::XsensMtw)) => Ok(f),
+        _ => Err(ReadError::format(
+            path,
+            "folder is not a capture session; expected an x-IMU3 session (one sub-folder per device with \
+             Quaternion.csv or Inertial.csv), a Movella DOT export (one CSV per sensor) or Xsens MTw .txt files",
+        )),
+    }
+}
+
+/// Non-hidden regular files of a folder, sorted by name so reading order is stable.
+pub(crate) fn visible_files(dir: &Path) -> Result<Vec<PathBuf>, ReadError> {
+    let mut files = Vec::new();
+    for entry in fs::read_dir(dir).map_err(|e| ReadError::io(dir, e))? {
+        let entry = entry.map_err(|e| ReadError::io(dir, e))?;
+        let name = entry.file_name();
+        let hidden = name.to_string_lossy().starts_with('.');
+        if !hidden && entry.path().is_file() {
+            files.push(entry.path());
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
+/// Reads one take from a file or session folder.
+pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    let format = match options.format {
+        Some(f) => f,
+        None => detect_format(path)?,
+    };
+    match format {
+        InputFormat::Sou => sou::read(path, options),
+        InputFormat::ImubakeCsv => imubake_csv::read(path, options),
+        InputFormat::OpensenseSto => opensense_sto::read(path, options),
+        InputFormat::XsensDot => xsens_dot::read(path, options),
+        InputFormat::XsensMtw => xsens_mtw::read(path, options),
+        InputFormat::XioSession => xio_session::read(path, options),
+    }
+}

@@ -1,0 +1,141 @@
+//! Paper 002's SOU logs (Table 4): `timestamp_ms,SOU_ID,yaw1,pitch1,roll1,yaw2,pitch2,roll2`.
+//!
+//! Each line carries two nodes, `<SOU_ID>_0` and `<SOU_ID>_1`, as yaw/pitch/roll in degrees
+//! (intrinsic Z-Y-X, world NED, Madgwick output). A line that does not match the paper's pattern
+//! `^[0-9]+,[a-zA-Z0-9]+(,[ \-0-9\.]+){6}$`, or whose numbers do not parse to finite values, is
+//! dropped and reported — only that line, not everything before it as the paper did.
+
+use super::lines::{LineReader, parse_f64, split_fields};
+use super::{InputFormat, ReadError, ReadOptions, check_text, sniff};
+use crate::take::{ClockUnit, Take, TakeBuilder, YawPitchRollDeg};
+use crate::world::World;
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+const FIELD_NAMES: [&str; 8] = [
+    "timestamp_ms",
+    "SOU_ID",
+    "yaw1",
+    "pitch1",
+    "roll1",
+    "yaw2",
+    "pitch2",
+    "roll2",
+];
+
+/// Why a line does not match the SOU format, or `None` when it does (the paper's regex).
+pub fn format_problem(line: &[u8]) -> Option<String> {
+    let mut fields = [&b""[..]; 8];
+    let n = split_fields(line, b',', &mut fields);
+    if n != 8 {
+        return Some(format!(
+            "does not match the SOU format: {n} comma-separated fields, expected 8"
+        ));
+    }
+    if fields[0].is_empty() || !fields[0].iter().all(u8::is_ascii_digit) {
+        return Some("does not match the SOU format: timestamp_ms is not a whole number".into());
+    }
+    if fields[1].is_empty() || !fields[1].iter().all(u8::is_ascii_alphanumeric) {
+        return Some("does not match the SOU format: SOU_ID is not letters and digits".into());
+    }
+    for (i, field) in fields.iter().enumerate().skip(2) {
+        let allowed = |b: &u8| matches!(b, b' ' | b'-' | b'.' | b'0'..=b'9');
+        if field.is_empty() || !field.iter().all(allowed) {
+            return Some(format!(
+                "does not match the SOU format: {} is not a number",
+                FIELD_NAMES[i]
+            ));
+        }
+    }
+    None
+}
+
+/// True when the first lines look like a SOU log (debug text before the data is allowed).
+pub fn looks_like(head: &[u8]) -> bool {
+    let mut reader = LineReader::new(head);
+    let mut matching = 0;
+    let mut seen = 0;
+    while let Ok(Some((_, line))) = reader.next_line() {
+        seen += 1;
+        if format_problem(line).is_none() {
+            matching += 1;
+        }
+        if matching >= 2 || seen > 64 {
+            break;
+        }
+    }
+    matching >= 1
+}
+
+pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    check_text(path, &sniff(path)?)?;
+    let file = File::open(path).map_err(|e| ReadError::io(path, e))?;
+    read_from(file, path, options)
+}
+
+/// Reads a SOU log from any reader; `path` names it in reports.
+pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    let world = options.world.unwrap_or(World::Ned);
+    let mut take = TakeBuilder::new(path, InputFormat::Sou, world, ClockUnit::Milliseconds);
+    let mut lines = LineReader::new(reader);
+    // SOU_ID → (node _0, node _1)
+    let mut nodes = HashMap::new();
+    while let Some((line_no, line)) = lines.next_line().map_err(|e| ReadError::lines(path, e))? {
+        if line_no <= options.skip_lines {
+            take.drop_line(line_no, "skipped by --skip-lines", line);
+            continue;
+        }
+        if line.trim_ascii().is_empty() {
+            continue;
+        }
+        if let Some(problem) = format_problem(line) {
+            take.drop_line(line_no, problem, line);
+            continue;
+        }
+        let mut f = [&b""[..]; 8];
+        split_fields(line, b',', &mut f);
+        let Some(timestamp) = std::str::from_utf8(f[0]).ok().and_then(|s| s.parse::<u64>().ok())
+        else {
+            take.drop_line(line_no, "timestamp_ms does not fit in 64 bits", line);
+            continue;
+        };
+        let mut angles = [0.0; 6];
+        let mut bad = None;
+        for (i, angle) in angles.iter_mut().enumerate() {
+            match parse_f64(f[i + 2]) {
+                Some(v) => *angle = v,
+                None => {
+                    bad = Some(i + 2);
+                    break;
+                }
+            }
+        }
+        if let Some(i) = bad {
+            let reason = format!("{} is not a finite number", FIELD_NAMES[i]);
+            take.drop_line(line_no, reason, line);
+            continue;
+        }
+        // The pattern admits only ASCII letters and digits here.
+        let sou_id = String::from_utf8_lossy(f[1]).into_owned();
+        let (n0, n1) = *nodes.entry(sou_id).or_insert_with_key(|id| {
+            (
+                take.sensor(&format!("{id}_0")),
+                take.sensor(&format!("{id}_1")),
+            )
+        });
+        let t = timestamp as f64;
+        let ypr = |a: &[f64]| YawPitchRollDeg {
+            yaw: a[0],
+            pitch: a[1],
+            roll: a[2],
+        };
+        take.push_yaw_pitch_roll(n0, t, ypr(&angles[0..3]), line_no, line)
+            .map_err(|e| ReadError::take(path, e))?;
+        take.push_yaw_pitch_roll(n1, t, ypr(&angles[3..6]), line_no, line)
+            .map_err(|e| ReadError::take(path, e))?;
+    }
+    take.finish(options.skip_seconds)
+        .map_err(|e| ReadError::take(path, e))
+}
