@@ -85,7 +85,12 @@ impl SensorSummaries {
         SensorSummaries(
             take.sensors()
                 .iter()
-                .map(|s| (s.id().to_string(), SensorSummary::from_times(s.primary_times_s())))
+                .map(|s| {
+                    (
+                        s.id().to_string(),
+                        SensorSummary::from_times(s.primary_times_s()),
+                    )
+                })
                 .collect(),
         )
     }
@@ -131,7 +136,14 @@ impl Inspection {
         );
         let _ = writeln!(out, "Time frame: {:.3} seconds", self.time_frame_s);
         let _ = writeln!(out, "Node count: {}", self.node_count);
-        let width = self.sensors.0.iter().map(|(id, _)| id.chars().count()).max().unwrap_or(4).max(4);
+        let width = self
+            .sensors
+            .0
+            .iter()
+            .map(|(id, _)| id.chars().count())
+            .max()
+            .unwrap_or(4)
+            .max(4);
         let _ = writeln!(
             out,
             "{:<width$}  {:>8}  {:>11}  {:>10}  {:>10}  {:>5}",
@@ -192,7 +204,11 @@ impl Inspection {
 
 fn more(out: &mut String, total: usize, shown: usize) {
     if total > shown {
-        let _ = writeln!(out, "  … and {} more (all of them with --json)", total - shown);
+        let _ = writeln!(
+            out,
+            "  … and {} more (all of them with --json)",
+            total - shown
+        );
     }
 }
 

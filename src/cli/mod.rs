@@ -8,7 +8,11 @@ use imubake::world::World;
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
-#[command(name = "imubake", version, about = "Body-worn IMU captures in, clean animation out")]
+#[command(
+    name = "imubake",
+    version,
+    about = "Body-worn IMU captures in, clean animation out"
+)]
 pub struct Cli {
     #[command(subcommand)]
     command: Command,

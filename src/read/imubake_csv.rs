@@ -80,7 +80,11 @@ fn mag_scale(unit: &str) -> Option<f64> {
 impl Layout {
     fn from_header(header: &[u8], path: &Path, line: u64) -> Result<Layout, ReadError> {
         let text = std::str::from_utf8(header).map_err(|_| {
-            ReadError::line(path, line, "header is not UTF-8 text; expected column names")
+            ReadError::line(
+                path,
+                line,
+                "header is not UTF-8 text; expected column names",
+            )
         })?;
         let names: Vec<String> = text
             .split(',')
@@ -90,7 +94,10 @@ impl Layout {
             return Err(ReadError::line(
                 path,
                 line,
-                format!("header has {} columns; at most {MAX_COLUMNS} are supported", names.len()),
+                format!(
+                    "header has {} columns; at most {MAX_COLUMNS} are supported",
+                    names.len()
+                ),
             ));
         }
         let mut time = None;
@@ -151,15 +158,24 @@ impl Layout {
                     };
                     set(&mut ypr[k], i, 1.0, name)?
                 }
-                (_, "gx" | "gy" | "gz") if gyro_scale(unit).is_some() => {
-                    set(&mut gyro[axis(base).unwrap_or(0)], i, gyro_scale(unit).unwrap_or(1.0), name)?
-                }
-                (_, "ax" | "ay" | "az") if accel_scale(unit).is_some() => {
-                    set(&mut accel[axis(base).unwrap_or(0)], i, accel_scale(unit).unwrap_or(1.0), name)?
-                }
-                (_, "mx" | "my" | "mz") if mag_scale(unit).is_some() => {
-                    set(&mut mag[axis(base).unwrap_or(0)], i, mag_scale(unit).unwrap_or(1.0), name)?
-                }
+                (_, "gx" | "gy" | "gz") if gyro_scale(unit).is_some() => set(
+                    &mut gyro[axis(base).unwrap_or(0)],
+                    i,
+                    gyro_scale(unit).unwrap_or(1.0),
+                    name,
+                )?,
+                (_, "ax" | "ay" | "az") if accel_scale(unit).is_some() => set(
+                    &mut accel[axis(base).unwrap_or(0)],
+                    i,
+                    accel_scale(unit).unwrap_or(1.0),
+                    name,
+                )?,
+                (_, "mx" | "my" | "mz") if mag_scale(unit).is_some() => set(
+                    &mut mag[axis(base).unwrap_or(0)],
+                    i,
+                    mag_scale(unit).unwrap_or(1.0),
+                    name,
+                )?,
                 _ => ignored.push(name.clone()),
             }
         }
@@ -183,18 +199,31 @@ impl Layout {
                 }
                 None
             } else {
-                Some(slots.iter().map(|s| s.expect("all present")).collect::<Vec<_>>())
+                Some(
+                    slots
+                        .iter()
+                        .map(|s| s.expect("all present"))
+                        .collect::<Vec<_>>(),
+                )
             }
         };
         let quaternion = group(&q, &["qw", "qx", "qy", "qz"], &mut missing)
             .map(|v| [v[0].0, v[1].0, v[2].0, v[3].0]);
-        let ypr = group(&ypr, &["yaw", "pitch", "roll"], &mut missing).map(|v| [v[0].0, v[1].0, v[2].0]);
+        let ypr =
+            group(&ypr, &["yaw", "pitch", "roll"], &mut missing).map(|v| [v[0].0, v[1].0, v[2].0]);
         let triple = |v: Vec<(usize, f64)>| ([v[0].0, v[1].0, v[2].0], v[0].1);
         let gyro = group(&gyro, &["gx", "gy", "gz"], &mut missing).map(triple);
         let accel = group(&accel, &["ax", "ay", "az"], &mut missing).map(triple);
         let mag = group(&mag, &["mx", "my", "mz"], &mut missing).map(triple);
         if gyro.is_some() != accel.is_some() {
-            missing.push(if gyro.is_some() { "ax,ay,az" } else { "gx,gy,gz" }.to_string());
+            missing.push(
+                if gyro.is_some() {
+                    "ax,ay,az"
+                } else {
+                    "gx,gy,gz"
+                }
+                .to_string(),
+            );
         }
         if quaternion.is_none() && ypr.is_none() && gyro.is_none() && missing.is_empty() {
             missing.push("qw,qx,qy,qz or yaw,pitch,roll or gx,gy,gz,ax,ay,az".to_string());
@@ -316,7 +345,9 @@ fn read_sized(
     let world = options.world.unwrap_or(world);
     let mut take = TakeBuilder::new(path, InputFormat::ImubakeCsv, world, layout.clock.clone());
     for name in &layout.ignored {
-        take.warn(format!("line {header_line}: column `{name}` is not an imubake CSV column; ignored"));
+        take.warn(format!(
+            "line {header_line}: column `{name}` is not an imubake CSV column; ignored"
+        ));
     }
     let mut sensors = SensorTable {
         ids: Vec::new(),
@@ -341,7 +372,10 @@ fn read_sized(
         if n != layout.columns {
             take.drop_line(
                 line_no,
-                format!("expected {} comma-separated fields as in the header, found {n}", layout.columns),
+                format!(
+                    "expected {} comma-separated fields as in the header, found {n}",
+                    layout.columns
+                ),
                 line,
             );
             continue;
@@ -402,7 +436,11 @@ fn read_sized(
         let (q, ypr, imu, mag) = match result {
             Ok(values) => values,
             Err(i) => {
-                let reason = format!("column {} {}", column_name(&layout, i), number_problem(fields[i]));
+                let reason = format!(
+                    "column {} {}",
+                    column_name(&layout, i),
+                    number_problem(fields[i])
+                );
                 take.drop_line(line_no, reason, line);
                 continue;
             }
@@ -411,11 +449,21 @@ fn read_sized(
         if let Some(q) = q {
             let norm = q.norm();
             if norm < 1e-9 {
-                take.drop_line(line_no, "quaternion is zero; expected a unit quaternion qw,qx,qy,qz", line);
+                take.drop_line(
+                    line_no,
+                    "quaternion is zero; expected a unit quaternion qw,qx,qy,qz",
+                    line,
+                );
                 continue;
             }
             worst_norm_error = worst_norm_error.max((norm - 1.0).abs());
-            push(take.push_quaternion(sensor, time, UnitQuaternion::new_unchecked(q / norm), line_no, line))?;
+            push(take.push_quaternion(
+                sensor,
+                time,
+                UnitQuaternion::new_unchecked(q / norm),
+                line_no,
+                line,
+            ))?;
         }
         if let Some(ypr) = ypr {
             push(take.push_yaw_pitch_roll(sensor, time, ypr, line_no, line))?;

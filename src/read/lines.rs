@@ -9,7 +9,9 @@ const CHUNK_BYTES: usize = 1 << 20;
 
 #[derive(Debug, thiserror::Error)]
 pub enum LineError {
-    #[error("line {line} is longer than {MAX_LINE_BYTES} bytes; expected a text log with one sample per line")]
+    #[error(
+        "line {line} is longer than {MAX_LINE_BYTES} bytes; expected a text log with one sample per line"
+    )]
     TooLong { line: u64 },
     #[error(transparent)]
     Io(#[from] io::Error),

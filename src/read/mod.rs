@@ -84,7 +84,10 @@ impl FromStr for InputFormat {
             .find(|f| f.name() == s)
             .ok_or_else(|| {
                 let names: Vec<_> = InputFormat::ALL.iter().map(|f| f.name()).collect();
-                format!("unknown input format `{s}`; expected one of {}", names.join(", "))
+                format!(
+                    "unknown input format `{s}`; expected one of {}",
+                    names.join(", ")
+                )
             })
     }
 }

@@ -96,7 +96,9 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
         }
         let mut f = [&b""[..]; 8];
         split_fields(line, b',', &mut f);
-        let Some(timestamp) = std::str::from_utf8(f[0]).ok().and_then(|s| s.parse::<u64>().ok())
+        let Some(timestamp) = std::str::from_utf8(f[0])
+            .ok()
+            .and_then(|s| s.parse::<u64>().ok())
         else {
             take.drop_line(line_no, "timestamp_ms does not fit in 64 bits", line);
             continue;

@@ -11,4 +11,6 @@ pub fn looks_like(_head: &[u8]) -> bool {
 pub fn read(path: &Path, _options: &ReadOptions) -> Result<Take, ReadError> {
     Err(ReadError::format(path, "reader not written yet"))
 }
-pub fn looks_like_folder(_p: &std::path::Path) -> bool { false }
+pub fn looks_like_folder(_p: &std::path::Path) -> bool {
+    false
+}

@@ -17,6 +17,10 @@ use std::path::PathBuf;
 /// A step back in time larger than this (seconds) is a clock reset, not a late row.
 pub const CLOCK_RESET_S: f64 = 1.0;
 
+const REPEATED_TIME: &str =
+    "repeats the time of an earlier sample of the same sensor; the first is kept";
+const OUT_OF_ORDER: &str = "earlier than the previous sample of the same sensor; sorted into place";
+
 /// The unit of a source's raw time values.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ClockUnit {
@@ -24,7 +28,10 @@ pub enum ClockUnit {
     Milliseconds,
     Microseconds,
     /// A sample counter at a fixed rate, e.g. Xsens `PacketCounter` at the header's update rate.
-    Counter { name: String, rate_hz: f64 },
+    Counter {
+        name: String,
+        rate_hz: f64,
+    },
 }
 
 impl ClockUnit {
@@ -157,14 +164,12 @@ impl<T> Stream<T> {
         mut self,
         raw_start: f64,
         seconds_per_unit: f64,
-        sensor: &str,
         dropped: &mut Vec<LineReport>,
         repaired: &mut Vec<LineReport>,
     ) -> Option<Track<T>> {
         if !self.late.is_empty() {
             // Stable: late rows with equal times stay in line order, so the first is kept.
-            self.late
-                .sort_by(|a, b| a.raw_time.total_cmp(&b.raw_time));
+            self.late.sort_by(|a, b| a.raw_time.total_cmp(&b.raw_time));
             let n = self.raw_times.len() + self.late.len();
             let mut times = Vec::with_capacity(n);
             let mut values = Vec::with_capacity(n);
@@ -181,16 +186,12 @@ impl<T> Stream<T> {
                 }
                 if times.last() == Some(&late.raw_time) {
                     dropped.push(LineReport {
-                        reason: format!(
-                            "repeats the time of an earlier sample of sensor `{sensor}`; the first is kept"
-                        ),
+                        reason: REPEATED_TIME.to_string(),
                         ..late.report
                     });
                 } else {
                     repaired.push(LineReport {
-                        reason: format!(
-                            "out of order for sensor `{sensor}`; sorted into place"
-                        ),
+                        reason: OUT_OF_ORDER.to_string(),
                         ..late.report
                     });
                     times.push(late.raw_time);
@@ -237,7 +238,12 @@ pub struct TakeBuilder {
 }
 
 impl TakeBuilder {
-    pub fn new(path: impl Into<PathBuf>, format: InputFormat, world: World, clock: ClockUnit) -> Self {
+    pub fn new(
+        path: impl Into<PathBuf>,
+        format: InputFormat,
+        world: World,
+        clock: ClockUnit,
+    ) -> Self {
         let reset_units = CLOCK_RESET_S / clock.seconds_per_unit();
         TakeBuilder {
             path: path.into(),
@@ -375,14 +381,11 @@ impl TakeBuilder {
         match stream(sensor_streams).push(raw_time, value, self.reset_units, make_report) {
             Ok(Pushed::Appended) | Ok(Pushed::Late) => Ok(()),
             Ok(Pushed::Duplicate) => {
-                self.dropped.push(LineReport::new(
-                    file,
-                    line,
-                    format!(
-                        "repeats the time of the previous sample of sensor `{id_for_reason}`; the first is kept"
-                    ),
-                    raw,
-                ));
+                let report = LineReport::new(file, line, REPEATED_TIME, raw);
+                // A row carrying several sensors (a SOU line) is reported once.
+                if self.dropped.last() != Some(&report) {
+                    self.dropped.push(report);
+                }
                 Ok(())
             }
             Err((previous, report)) => Err(BuildError::ClockReset {
@@ -430,10 +433,10 @@ impl TakeBuilder {
             let id = s.id;
             let q = s
                 .orientation_q
-                .finish(raw_start, spu, &id, &mut dropped, &mut repaired);
+                .finish(raw_start, spu, &mut dropped, &mut repaired);
             let ypr = s
                 .orientation_ypr
-                .finish(raw_start, spu, &id, &mut dropped, &mut repaired);
+                .finish(raw_start, spu, &mut dropped, &mut repaired);
             let orientation = match (q, ypr) {
                 (Some(q), Some(_)) => {
                     warnings.push(format!(
@@ -447,10 +450,10 @@ impl TakeBuilder {
             };
             let inertial = s
                 .inertial
-                .finish(raw_start, spu, &id, &mut dropped, &mut repaired);
-            let magnetometer =
-                s.magnetometer
-                    .finish(raw_start, spu, &id, &mut dropped, &mut repaired);
+                .finish(raw_start, spu, &mut dropped, &mut repaired);
+            let magnetometer = s
+                .magnetometer
+                .finish(raw_start, spu, &mut dropped, &mut repaired);
             if orientation.is_some() || inertial.is_some() || magnetometer.is_some() {
                 out.push(Sensor {
                     id,
@@ -460,8 +463,12 @@ impl TakeBuilder {
                 });
             }
         }
-        dropped.sort_by(|a, b| (&a.file, a.line).cmp(&(&b.file, b.line)));
-        repaired.sort_by(|a, b| (&a.file, a.line).cmp(&(&b.file, b.line)));
+        // Stable sorts keep a line's reports in the order they were made; a row carrying several
+        // sensors is reported once.
+        for reports in [&mut dropped, &mut repaired] {
+            reports.sort_by(|a, b| (&a.file, a.line).cmp(&(&b.file, b.line)));
+            reports.dedup();
+        }
 
         if skip_seconds > 0.0 {
             let before: usize = out.iter().map(|s| s.primary_times_s().len()).sum();

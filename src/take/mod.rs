@@ -28,7 +28,10 @@ pub struct SourceInfo {
     pub start_timestamp: String,
 }
 
-fn serialize_path_lossy<S: serde::Serializer>(path: &std::path::Path, s: S) -> Result<S::Ok, S::Error> {
+fn serialize_path_lossy<S: serde::Serializer>(
+    path: &std::path::Path,
+    s: S,
+) -> Result<S::Ok, S::Error> {
     s.serialize_str(&path.to_string_lossy())
 }
 
@@ -115,7 +118,9 @@ impl OrientationTrack {
 
     fn keep_from(self, start_s: f64) -> Option<Self> {
         match self {
-            OrientationTrack::Quaternion(t) => t.keep_from(start_s).map(OrientationTrack::Quaternion),
+            OrientationTrack::Quaternion(t) => {
+                t.keep_from(start_s).map(OrientationTrack::Quaternion)
+            }
             OrientationTrack::YawPitchRollDeg(t) => {
                 t.keep_from(start_s).map(OrientationTrack::YawPitchRollDeg)
             }

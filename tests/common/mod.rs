@@ -7,7 +7,9 @@
 use std::path::{Path, PathBuf};
 
 pub fn in_ci() -> bool {
-    std::env::var("CI").map(|v| v == "true" || v == "1").unwrap_or(false)
+    std::env::var("CI")
+        .map(|v| v == "true" || v == "1")
+        .unwrap_or(false)
 }
 
 /// Skips (returns `None`, printing why) locally; panics under CI.
@@ -43,7 +45,9 @@ pub fn shared(rel: &str) -> Option<PathBuf> {
 
 /// A checked-in fixture under tests/fixtures.
 pub fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(rel)
 }
 
 /// The test venv's Python (set up by scripts/test.sh; `IMUBAKE_PYTHON` overrides).
@@ -57,7 +61,10 @@ pub fn python() -> Option<PathBuf> {
     if path.is_file() {
         Some(path)
     } else {
-        missing(&format!("test Python {} (run scripts/test.sh)", path.display()))
+        missing(&format!(
+            "test Python {} (run scripts/test.sh)",
+            path.display()
+        ))
     }
 }
 
