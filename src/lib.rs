@@ -5,7 +5,15 @@
 //! time and units are those of `conventions.md`: quaternions are Hamilton, written w, x, y, z;
 //! times are seconds on the take's clock (t = 0 at the earliest kept sample).
 
+pub mod anim;
+pub mod bvh;
+pub mod fps;
 pub mod inspect;
+pub mod mapping;
+pub mod pipeline;
 pub mod read;
+pub mod rig;
+pub mod rotation;
 pub mod take;
 pub mod world;
+pub mod write;

@@ -240,16 +240,19 @@ pub fn detect_bytes(head: &[u8]) -> Option<InputFormat> {
 }
 
 fn detect_folder(path: &Path) -> Result<InputFormat, ReadError> {
-    if xio_session::looks_like_folder(path) {
+    // A session folder, or a single x-IMU3 device folder (read as a one-device session).
+    if xio_session::looks_like_folder(path) || xio_session::is_device_folder(path) {
         return Ok(InputFormat::XioSession);
     }
     let entries = visible_files(path)?;
+    // The first file of a folder format decides; other files (notes, stray exports) are skipped
+    // by the reader with a warning.
     let mut formats = entries.iter().filter_map(|file| {
         let head = sniff(file).ok()?;
         detect_bytes(&head)
     });
-    match formats.next() {
-        Some(f @ (InputFormat::XsensDot | InputFormat::XsensMtw)) => Ok(f),
+    match formats.find(|f| matches!(f, InputFormat::XsensDot | InputFormat::XsensMtw)) {
+        Some(f) => Ok(f),
         _ => Err(ReadError::format(
             path,
             "folder is not a capture session; expected an x-IMU3 session (one sub-folder per device with \

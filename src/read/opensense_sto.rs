@@ -199,12 +199,12 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
     if data_type.is_none() {
         take.warn("the .sto header has no DataType=; columns read as w,x,y,z quaternions");
     }
-    if let Some(rate) = &data_rate {
-        if parse_f64(rate.as_bytes()).is_none_or(|r| r <= 0.0) {
-            take.warn(format!(
-                "header DataRate={rate} is not a positive number; the row times are used"
-            ));
-        }
+    if let Some(rate) = &data_rate
+        && parse_f64(rate.as_bytes()).is_none_or(|r| r <= 0.0)
+    {
+        take.warn(format!(
+            "header DataRate={rate} is not a positive number; the row times are used"
+        ));
     }
     let sensors: Vec<SensorIdx> = sensor_names.iter().map(|n| take.sensor(n)).collect();
     let expected = names.len();

@@ -1,0 +1,116 @@
+//! The animation a conversion produces: per-joint local rotations and the root position on a
+//! frame grid, for one rig.
+
+use crate::fps::Fps;
+use crate::rig::Rig;
+use nalgebra::{UnitQuaternion, Vector3};
+
+/// Keyframes on the grid t = n / fps, n = 0 .. frames − 1.
+///
+/// Invariants (checked by [`Animation::new`]): at least one frame; one rotation track per rig
+/// joint, each `frames` long; `frames` root positions; everything finite.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Animation {
+    rig: Rig,
+    fps: Fps,
+    frames: usize,
+    /// `local[joint][frame]`: q_parent_joint (the root's is q_world_root), rig world axes.
+    local: Vec<Vec<UnitQuaternion<f64>>>,
+    /// Which joints carry motion from a sensor (others keep their rest rotation).
+    animated: Vec<bool>,
+    /// Root joint position per frame, rig units, rig world (Y up).
+    root_positions: Vec<Vector3<f64>>,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum AnimationError {
+    #[error("an animation needs at least one frame")]
+    NoFrames,
+    #[error("{what}: expected {expected} entries, found {found}")]
+    Length {
+        what: String,
+        expected: usize,
+        found: usize,
+    },
+    #[error("{0} holds a value that is not finite")]
+    NonFinite(String),
+}
+
+impl Animation {
+    pub fn new(
+        rig: Rig,
+        fps: Fps,
+        local: Vec<Vec<UnitQuaternion<f64>>>,
+        animated: Vec<bool>,
+        root_positions: Vec<Vector3<f64>>,
+    ) -> Result<Animation, AnimationError> {
+        let frames = root_positions.len();
+        if frames == 0 {
+            return Err(AnimationError::NoFrames);
+        }
+        let check = |what: &str, expected: usize, found: usize| {
+            if expected == found {
+                Ok(())
+            } else {
+                Err(AnimationError::Length {
+                    what: what.to_string(),
+                    expected,
+                    found,
+                })
+            }
+        };
+        check("joint rotation tracks", rig.len(), local.len())?;
+        check("animated flags", rig.len(), animated.len())?;
+        for (j, track) in local.iter().enumerate() {
+            check(&format!("rotations of `{}`", rig.joints()[j].name), frames, track.len())?;
+            if track.iter().any(|q| !q.coords.iter().all(|v| v.is_finite())) {
+                return Err(AnimationError::NonFinite(format!("rotations of `{}`", rig.joints()[j].name)));
+            }
+        }
+        if root_positions.iter().any(|p| !p.iter().all(|v| v.is_finite())) {
+            return Err(AnimationError::NonFinite("root positions".into()));
+        }
+        Ok(Animation {
+            rig,
+            fps,
+            frames,
+            local,
+            animated,
+            root_positions,
+        })
+    }
+
+    pub fn rig(&self) -> &Rig {
+        &self.rig
+    }
+    pub fn fps(&self) -> Fps {
+        self.fps
+    }
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+    /// Seconds from the first to the last frame: (frames − 1) / fps.
+    pub fn duration_s(&self) -> f64 {
+        self.fps.frame_time_of(self.frames as u64 - 1)
+    }
+    /// `local(joint)[frame]`.
+    pub fn local(&self, joint: usize) -> &[UnitQuaternion<f64>] {
+        &self.local[joint]
+    }
+    pub fn is_animated(&self, joint: usize) -> bool {
+        self.animated[joint]
+    }
+    pub fn root_positions(&self) -> &[Vector3<f64>] {
+        &self.root_positions
+    }
+
+    /// Local rotations of every joint at one frame.
+    pub fn pose_at(&self, frame: usize) -> Vec<UnitQuaternion<f64>> {
+        self.local.iter().map(|t| t[frame]).collect()
+    }
+
+    /// World rotations of every joint at one frame.
+    pub fn world_at(&self, frame: usize) -> Vec<UnitQuaternion<f64>> {
+        self.rig.world_rotations(&self.pose_at(frame))
+    }
+}

@@ -1,0 +1,284 @@
+//! The BVH writer.
+
+use crate::fps::Fps;
+use crate::rig::{LengthUnit, Rig};
+use nalgebra::Vector3;
+use std::fmt::Write as _;
+use std::io::{self, BufWriter, Write};
+
+/// Motion to write: a rig, a frame rate, and per frame the root position and every joint's
+/// Euler angles.
+#[derive(Debug, Clone, Copy)]
+pub struct BvhMotion<'a> {
+    pub rig: &'a Rig,
+    pub fps: Fps,
+    /// The root joint's position in the world at every frame, in the rig's unit. Written as the
+    /// root's position channels, which replace its OFFSET when read (the OFFSET written is the
+    /// rig's rest offset of the root).
+    pub root_positions: &'a [Vector3<f64>],
+    /// `euler_deg[joint][frame]`: the joint's local rotation as Euler angles in degrees, in the
+    /// joint's own order (`rig.joints()[joint].order`), listed in application order, which is the
+    /// BVH channel order: for ZXY, `[z, x, y]` meaning Rz(z)·Rx(x)·Ry(y).
+    pub euler_deg: &'a [Vec<[f64; 3]>],
+}
+
+/// The factor that converts lengths in `from` to lengths in `to` (metres → centimetres: 100).
+pub fn unit_scale(from: LengthUnit, to: LengthUnit) -> f64 {
+    if from == to {
+        1.0
+    } else {
+        from.metres_per_unit() / to.metres_per_unit()
+    }
+}
+
+/// Writes `motion` as BVH in the rig's own unit. See [`write_bvh_scaled`].
+pub fn write_bvh<W: Write>(out: W, motion: &BvhMotion) -> io::Result<()> {
+    write_bvh_scaled(out, motion, 1.0)
+}
+
+/// Writes `motion` as BVH with lengths converted from the rig's unit to `units`
+/// (`--units cm` on a metre rig multiplies offsets, End Sites and root positions by 100).
+pub fn write_bvh_in<W: Write>(out: W, motion: &BvhMotion, units: LengthUnit) -> io::Result<()> {
+    write_bvh_scaled(out, motion, unit_scale(motion.rig.units(), units))
+}
+
+fn invalid(message: String) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidInput, message)
+}
+
+/// Writes `motion` as BVH with every length (offsets, End Sites, root positions) multiplied by
+/// `scale`; angles are not scaled.
+///
+/// Layout (deterministic: identical input gives identical bytes):
+///
+/// ```text
+/// HIERARCHY
+/// ROOT Hips
+/// {
+/// <tab>OFFSET 0.000000 1.000000 0.000000
+/// <tab>CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+/// <tab>JOINT Spine
+/// <tab>{
+/// <tab><tab>OFFSET ...
+/// <tab><tab>CHANNELS 3 Zrotation Xrotation Yrotation
+/// <tab><tab>End Site
+/// <tab><tab>{
+/// <tab><tab><tab>OFFSET ...
+/// <tab><tab>}
+/// <tab>}
+/// }
+/// MOTION
+/// Frames: 2
+/// Frame Time: 0.03336666666666667
+/// 0.000000 1.000000 ...
+/// ```
+///
+/// - Lines end with LF only; indentation is one tab per level.
+/// - Rotation channels are each joint's [`order`](crate::rig::Joint::order) in application order
+///   ([`EulerOrder::bvh_channels`](crate::rotation::EulerOrder::bvh_channels)); only the root has
+///   position channels.
+/// - Joints are written depth first, children in rig order; for a rig already in depth-first
+///   order (every rig read from a BVH file) the file's joint order is the rig's.
+/// - `Frame Time:` is 1/fps from the rational, written with the shortest decimal that reads back
+///   as the same `f64` (30000/1001 fps → `0.03336666666666667`), so importers that set the scene
+///   rate from it (Blender: fps 30, fps_base 1.001) recover the rate.
+/// - Offsets and motion values are written with 6 decimals (1 µm in metres, 1e-6°).
+/// - Every leaf joint gets an End Site, as every importer expects one (Blender makes a leaf
+///   bone's tail from it; without one the bone gets an arbitrary 0.1-unit tail along +Y). It is
+///   the rig's [`end_site`](crate::rig::Joint::end_site) when it has one; otherwise the End Site
+///   continues the joint's own direction from its parent (its offset, or the nearest ancestor's
+///   non-zero offset) for half that offset's length, and a leaf root gets 0.1 m along +Y. A
+///   non-leaf joint gets an End Site only when the rig gives it one.
+///
+/// Fails with [`io::ErrorKind::InvalidInput`], before writing anything, when
+/// `euler_deg.len()` is not the number of joints, when an `euler_deg[j]` does not have one entry
+/// per frame (`root_positions.len()` frames), when a value is not finite, when `scale` is not a
+/// positive number, or when a joint name is empty or contains whitespace or braces (no reader
+/// could read it back).
+pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io::Result<()> {
+    let rig = motion.rig;
+    let frames = motion.root_positions.len();
+    validate(motion, scale)?;
+
+    let joints = rig.joints();
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); joints.len()];
+    for (i, j) in joints.iter().enumerate() {
+        if let Some(p) = j.parent {
+            children[p].push(i);
+        }
+    }
+
+    let mut out = BufWriter::new(out);
+    let mut buf = String::with_capacity(256);
+    buf.push_str("HIERARCHY\n");
+
+    // Depth-first: an explicit stack of (joint, depth, entered).
+    let mut order: Vec<usize> = Vec::with_capacity(joints.len());
+    let mut stack: Vec<(usize, usize, bool)> = vec![(0, 0, false)];
+    while let Some((j, depth, entered)) = stack.pop() {
+        let joint = &joints[j];
+        if entered {
+            if let Some(end) = end_site(rig, j, &children[j]) {
+                indent(&mut buf, depth + 1);
+                buf.push_str("End Site\n");
+                indent(&mut buf, depth + 1);
+                buf.push_str("{\n");
+                indent(&mut buf, depth + 2);
+                buf.push_str("OFFSET");
+                push_vector(&mut buf, &(end * scale));
+                buf.push('\n');
+                indent(&mut buf, depth + 1);
+                buf.push_str("}\n");
+            }
+            indent(&mut buf, depth);
+            buf.push_str("}\n");
+            out.write_all(buf.as_bytes())?;
+            buf.clear();
+            continue;
+        }
+        order.push(j);
+        indent(&mut buf, depth);
+        buf.push_str(if j == 0 { "ROOT " } else { "JOINT " });
+        buf.push_str(&joint.name);
+        buf.push('\n');
+        indent(&mut buf, depth);
+        buf.push_str("{\n");
+        indent(&mut buf, depth + 1);
+        buf.push_str("OFFSET");
+        push_vector(&mut buf, &(joint.offset * scale));
+        buf.push('\n');
+        indent(&mut buf, depth + 1);
+        if j == 0 {
+            buf.push_str("CHANNELS 6 Xposition Yposition Zposition");
+        } else {
+            buf.push_str("CHANNELS 3");
+        }
+        for c in joint.order.bvh_channels() {
+            buf.push(' ');
+            buf.push_str(c);
+        }
+        buf.push('\n');
+        stack.push((j, depth, true));
+        for &c in children[j].iter().rev() {
+            stack.push((c, depth + 1, false));
+        }
+        out.write_all(buf.as_bytes())?;
+        buf.clear();
+    }
+
+    let _ = writeln!(buf, "MOTION\nFrames: {frames}\nFrame Time: {}", motion.fps.frame_time_s());
+    out.write_all(buf.as_bytes())?;
+    buf.clear();
+
+    for f in 0..frames {
+        push_vector(&mut buf, &(motion.root_positions[f] * scale));
+        for &j in &order {
+            for a in motion.euler_deg[j][f] {
+                buf.push(' ');
+                push_number(&mut buf, a);
+            }
+        }
+        buf.push('\n');
+        // `push_vector` starts with a space; drop it so lines start with a number.
+        out.write_all(&buf.as_bytes()[1..])?;
+        buf.clear();
+    }
+    out.flush()
+}
+
+fn validate(motion: &BvhMotion, scale: f64) -> io::Result<()> {
+    let rig = motion.rig;
+    let frames = motion.root_positions.len();
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(invalid(format!("BVH scale must be a positive number, got {scale}")));
+    }
+    if motion.euler_deg.len() != rig.len() {
+        return Err(invalid(format!(
+            "BVH motion has Euler angles for {} joints but rig `{}` has {} joints",
+            motion.euler_deg.len(),
+            rig.name(),
+            rig.len()
+        )));
+    }
+    for (j, (joint, angles)) in rig.joints().iter().zip(motion.euler_deg).enumerate() {
+        if angles.len() != frames {
+            return Err(invalid(format!(
+                "BVH motion: joint {j} `{}` has {} frames of Euler angles but there are {frames} root positions",
+                joint.name,
+                angles.len()
+            )));
+        }
+        if let Some(f) = angles.iter().position(|a| !a.iter().all(|v| v.is_finite())) {
+            return Err(invalid(format!(
+                "BVH motion: joint `{}` has a non-finite angle at frame {f}",
+                joint.name
+            )));
+        }
+        if joint.name.is_empty()
+            || joint
+                .name
+                .chars()
+                .any(|c| c.is_whitespace() || c == '{' || c == '}')
+        {
+            return Err(invalid(format!(
+                "BVH joint names must be non-empty without spaces or braces: `{}`",
+                joint.name
+            )));
+        }
+    }
+    if let Some(f) = motion
+        .root_positions
+        .iter()
+        .position(|p| !p.iter().all(|v| v.is_finite()))
+    {
+        return Err(invalid(format!("BVH motion: root position at frame {f} is not finite")));
+    }
+    Ok(())
+}
+
+/// The End Site written after `j`'s children, if any (see [`write_bvh_scaled`]).
+fn end_site(rig: &Rig, j: usize, children: &[usize]) -> Option<Vector3<f64>> {
+    let joints = rig.joints();
+    if let Some(e) = joints[j].end_site {
+        return Some(e);
+    }
+    if !children.is_empty() {
+        return None;
+    }
+    // Continue the bone's direction: the joint's offset from its parent, or the nearest ancestor's
+    // non-zero one (a zero-offset leaf sits on its parent's head). The root's offset is a
+    // position, not a direction, so it is not used.
+    let tiny = 1e-6 / rig.units().metres_per_unit();
+    let mut k = j;
+    while let Some(p) = joints[k].parent {
+        let offset = joints[k].offset;
+        if offset.norm() > tiny {
+            return Some(offset * 0.5);
+        }
+        k = p;
+    }
+    Some(Vector3::new(0.0, 0.1 / rig.units().metres_per_unit(), 0.0))
+}
+
+fn indent(buf: &mut String, depth: usize) {
+    for _ in 0..depth {
+        buf.push('\t');
+    }
+}
+
+/// ` x y z` (each preceded by a space).
+fn push_vector(buf: &mut String, v: &Vector3<f64>) {
+    for x in v.iter() {
+        buf.push(' ');
+        push_number(buf, *x);
+    }
+}
+
+/// A number with 6 decimals; negative zero is written as `0.000000`.
+fn push_number(buf: &mut String, v: f64) {
+    let start = buf.len();
+    let _ = write!(buf, "{v:.6}");
+    if buf[start..] == *"-0.000000" {
+        buf.remove(start);
+    }
+}

@@ -1,0 +1,463 @@
+//! Sensor-to-bone mappings (README, "Mappings"): which sensor drives which bone, how it is
+//! mounted, and the calibration window. Paper 002's Listing-2 format is accepted as a legacy mode.
+
+mod axes;
+mod legacy;
+
+pub use axes::{parse_axis, parse_mount_axes};
+pub use legacy::{EulerSource, LegacyChannel, LegacyMapping, LegacyTarget};
+
+use crate::rig::Rig;
+use crate::world::World;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use serde::de::{self, MapAccess, Visitor};
+use serde::{Deserialize, Deserializer, Serialize};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// How a sensor sits on its bone: `q_bone_sensor`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Mount {
+    /// Known: the sensor's orientation in its bone's frame.
+    Fixed(UnitQuaternion<f64>),
+    /// Solved from the calibration window.
+    Calibrate,
+}
+
+/// The pose the subject holds during calibration.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PoseRef {
+    Rest,
+    Named(String),
+    /// Frame N of a BVH rig's motion.
+    BvhFrame(usize),
+}
+
+impl PoseRef {
+    fn parse(s: &str) -> Result<PoseRef, String> {
+        if s == "rest" {
+            return Ok(PoseRef::Rest);
+        }
+        if let Some(n) = s.strip_prefix("frame:") {
+            return n
+                .trim()
+                .parse()
+                .map(PoseRef::BvhFrame)
+                .map_err(|_| format!("`{s}`: expected frame:N with N a frame number"));
+        }
+        if s.is_empty() {
+            return Err("empty pose name".into());
+        }
+        Ok(PoseRef::Named(s.to_string()))
+    }
+
+    pub fn label(&self) -> String {
+        match self {
+            PoseRef::Rest => "rest".into(),
+            PoseRef::Named(n) => n.clone(),
+            PoseRef::BvhFrame(n) => format!("frame:{n}"),
+        }
+    }
+}
+
+/// A window of the take in which the subject holds `pose`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrationWindow {
+    pub pose: PoseRef,
+    pub start_s: f64,
+    pub duration_s: f64,
+}
+
+impl Default for CalibrationWindow {
+    fn default() -> Self {
+        CalibrationWindow {
+            pose: PoseRef::Rest,
+            start_s: 0.0,
+            duration_s: 1.0,
+        }
+    }
+}
+
+/// One sensor's entry.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorMapping {
+    pub sensor: String,
+    pub bone: String,
+    pub mount: Mount,
+    /// The sensor axis that points where the body faces during calibration (sensor frame).
+    pub forward: Option<Vector3<f64>>,
+}
+
+/// A quaternion-mode mapping.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mapping {
+    pub rig: Option<String>,
+    pub world: Option<World>,
+    pub calibration: Option<CalibrationWindow>,
+    /// In file order.
+    pub sensors: Vec<SensorMapping>,
+}
+
+/// What a mapping file holds.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MappingFile {
+    Quaternion(Mapping),
+    /// Paper 002's Listing 2 (signed Euler channel copy).
+    Legacy(LegacyMapping),
+}
+
+/// A mapping problem, naming the file and the key.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}: {}{message}", .file.display(), key_prefix(.key))]
+pub struct MappingError {
+    pub file: PathBuf,
+    /// Dotted path of the offending key, e.g. `sensors.N1_0.mount`; empty for the whole file.
+    pub key: String,
+    pub message: String,
+}
+
+fn key_prefix(key: &str) -> String {
+    if key.is_empty() {
+        String::new()
+    } else {
+        format!("`{key}`: ")
+    }
+}
+
+impl MappingError {
+    pub fn new(file: &Path, key: impl Into<String>, message: impl Into<String>) -> Self {
+        MappingError {
+            file: file.to_path_buf(),
+            key: key.into(),
+            message: message.into(),
+        }
+    }
+}
+
+/// A JSON object whose duplicate keys are an error (serde_json keeps the last one silently).
+#[derive(Debug)]
+struct OrderedUniqueMap<V>(Vec<(String, V)>);
+
+impl<'de, V: Deserialize<'de>> Deserialize<'de> for OrderedUniqueMap<V> {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct V_<V>(std::marker::PhantomData<V>);
+        impl<'de, V: Deserialize<'de>> Visitor<'de> for V_<V> {
+            type Value = OrderedUniqueMap<V>;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("an object")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+                let mut out: Vec<(String, V)> = Vec::new();
+                while let Some(key) = map.next_key::<String>()? {
+                    if out.iter().any(|(k, _)| *k == key) {
+                        return Err(de::Error::custom(format!("`{key}` is mapped twice")));
+                    }
+                    let value = map.next_value()?;
+                    out.push((key, value));
+                }
+                Ok(OrderedUniqueMap(out))
+            }
+        }
+        deserializer.deserialize_map(V_(std::marker::PhantomData))
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMapping {
+    #[serde(default)]
+    rig: Option<String>,
+    #[serde(default)]
+    world: Option<String>,
+    #[serde(default)]
+    calibration: Option<RawCalibration>,
+    sensors: OrderedUniqueMap<RawSensor>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCalibration {
+    #[serde(default = "default_pose")]
+    pose: String,
+    #[serde(default)]
+    start_s: f64,
+    #[serde(default = "default_duration")]
+    duration_s: f64,
+}
+
+fn default_pose() -> String {
+    "rest".into()
+}
+
+fn default_duration() -> f64 {
+    1.0
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSensor {
+    bone: String,
+    #[serde(default = "default_mount")]
+    mount: serde_json::Value,
+    #[serde(default)]
+    forward: Option<String>,
+}
+
+fn default_mount() -> serde_json::Value {
+    serde_json::Value::String("calibrate".into())
+}
+
+fn parse_mount(value: &serde_json::Value) -> Result<Mount, String> {
+    match value {
+        serde_json::Value::String(s) if s == "calibrate" => Ok(Mount::Calibrate),
+        serde_json::Value::String(s) => parse_mount_axes(s).map(Mount::Fixed),
+        serde_json::Value::Array(items) if items.len() == 4 => {
+            let v: Option<Vec<f64>> = items.iter().map(|i| i.as_f64()).collect();
+            let v = v.ok_or("a quaternion mount needs four numbers [w, x, y, z]")?;
+            let q = Quaternion::new(v[0], v[1], v[2], v[3]);
+            let n = q.norm();
+            if !n.is_finite() || (n - 1.0).abs() > 0.01 {
+                return Err(format!(
+                    "quaternion [w, x, y, z] = {v:?} has length {n:.4}; expected a unit quaternion"
+                ));
+            }
+            Ok(Mount::Fixed(UnitQuaternion::from_quaternion(q)))
+        }
+        _ => Err(
+            "expected \"calibrate\", an axis string such as \"+y-x+z\", or a quaternion [w, x, y, z]"
+                .into(),
+        ),
+    }
+}
+
+/// Parses a mapping file's text (JSON). `file` names it in errors.
+pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingError> {
+    let value: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| MappingError::new(file, "", format!("not valid JSON: {e}")))?;
+    if legacy::looks_like(&value) {
+        return legacy::parse(&value, file).map(MappingFile::Legacy);
+    }
+    let raw: RawMapping = serde_json::from_str(text).map_err(|e| {
+        MappingError::new(
+            file,
+            "",
+            format!("{e}; expected {{\"rig\", \"world\", \"calibration\", \"sensors\": {{id: {{\"bone\", \"mount\", \"forward\"}}}}}}"),
+        )
+    })?;
+    let world = match raw.world {
+        None => None,
+        Some(w) => Some(
+            w.parse::<World>()
+                .map_err(|e| MappingError::new(file, "world", e.to_string()))?,
+        ),
+    };
+    let calibration = match raw.calibration {
+        None => None,
+        Some(c) => {
+            let pose =
+                PoseRef::parse(&c.pose).map_err(|e| MappingError::new(file, "calibration.pose", e))?;
+            if !(c.start_s.is_finite() && c.start_s >= 0.0) {
+                return Err(MappingError::new(file, "calibration.start_s", "expected seconds ≥ 0"));
+            }
+            if !(c.duration_s.is_finite() && c.duration_s >= 0.0) {
+                return Err(MappingError::new(file, "calibration.duration_s", "expected seconds ≥ 0"));
+            }
+            Some(CalibrationWindow {
+                pose,
+                start_s: c.start_s,
+                duration_s: c.duration_s,
+            })
+        }
+    };
+    let mut sensors = Vec::new();
+    for (id, s) in raw.sensors.0 {
+        let mount = parse_mount(&s.mount)
+            .map_err(|e| MappingError::new(file, format!("sensors.{id}.mount"), e))?;
+        let forward = match &s.forward {
+            None => None,
+            Some(f) => Some(parse_axis(f).map_err(|e| MappingError::new(file, format!("sensors.{id}.forward"), e))?),
+        };
+        if let Some((other, _)) = sensors
+            .iter()
+            .map(|m: &SensorMapping| (&m.sensor, &m.bone))
+            .find(|(_, bone)| **bone == s.bone)
+        {
+            return Err(MappingError::new(
+                file,
+                format!("sensors.{id}.bone"),
+                format!("bone `{}` is already driven by sensor `{other}`; one sensor per bone", s.bone),
+            ));
+        }
+        sensors.push(SensorMapping {
+            sensor: id,
+            bone: s.bone,
+            mount,
+            forward,
+        });
+    }
+    if sensors.is_empty() {
+        return Err(MappingError::new(file, "sensors", "no sensors mapped"));
+    }
+    Ok(MappingFile::Quaternion(Mapping {
+        rig: raw.rig,
+        world,
+        calibration,
+        sensors,
+    }))
+}
+
+/// Reads and parses a mapping file.
+pub fn load_mapping(path: &Path) -> Result<MappingFile, MappingError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| MappingError::new(path, "", format!("cannot read: {e}")))?;
+    parse_mapping(&text, path)
+}
+
+/// A mapping checked against a rig: bone indices resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResolvedSensor {
+    pub sensor: String,
+    pub bone: usize,
+    pub mount: Mount,
+    pub forward: Option<Vector3<f64>>,
+}
+
+impl Mapping {
+    /// Resolves bone names on `rig`; unknown bones are errors naming the key.
+    pub fn resolve(&self, rig: &Rig, file: &Path) -> Result<Vec<ResolvedSensor>, MappingError> {
+        self.sensors
+            .iter()
+            .map(|s| {
+                let bone = rig.joint_index(&s.bone).ok_or_else(|| {
+                    MappingError::new(
+                        file,
+                        format!("sensors.{}.bone", s.sensor),
+                        format!("unknown bone `{}` in rig `{}`", s.bone, rig.name()),
+                    )
+                })?;
+                Ok(ResolvedSensor {
+                    sensor: s.sensor.clone(),
+                    bone,
+                    mount: s.mount.clone(),
+                    forward: s.forward,
+                })
+            })
+            .collect()
+    }
+
+    /// The default mapping for a rig whose bones are named like the take's sensors: each sensor
+    /// drives its namesake, mounts calibrated in the rest pose over the first second.
+    pub fn by_name(rig: &Rig, sensor_ids: &[&str]) -> Option<Mapping> {
+        let sensors: Vec<SensorMapping> = sensor_ids
+            .iter()
+            .filter(|id| rig.joint_index(id).is_some())
+            .map(|id| SensorMapping {
+                sensor: id.to_string(),
+                bone: rig.joints()[rig.joint_index(id).expect("filtered")].name.clone(),
+                mount: Mount::Calibrate,
+                forward: None,
+            })
+            .collect();
+        (!sensors.is_empty()).then(|| Mapping {
+            rig: Some(rig.name().to_string()),
+            world: None,
+            calibration: Some(CalibrationWindow::default()),
+            sensors,
+        })
+    }
+}
+
+/// The resolved mapping as recorded in the sidecar.
+#[derive(Debug, Clone, Serialize)]
+pub struct MappingRecord {
+    pub file: Option<String>,
+    pub rig: String,
+    pub world: World,
+    pub calibration: Option<CalibrationRecord>,
+    pub sensors: Vec<SensorRecord>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct CalibrationRecord {
+    pub pose: String,
+    pub start_s: f64,
+    pub duration_s: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct SensorRecord {
+    pub sensor: String,
+    pub bone: String,
+    /// `"calibrate"` or `"fixed"`: where the mount came from.
+    pub mount_source: &'static str,
+    /// q_bone_sensor used, [w, x, y, z].
+    pub mount: [f64; 4],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub forward: Option<[f64; 3]>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<MappingFile, MappingError> {
+        parse_mapping(text, Path::new("m.json"))
+    }
+
+    #[test]
+    fn the_issue_example_parses() {
+        let text = r#"{
+          "rig": "mixamo",
+          "world": "enu",
+          "calibration": {"pose": "rest", "start_s": 0.0, "duration_s": 1.0},
+          "sensors": {
+            "pelvis": {"bone": "Hips", "mount": "calibrate", "forward": "+x"},
+            "N1_0":   {"bone": "RightArm", "mount": "+y-x+z"},
+            "s7":     {"bone": "LeftLeg", "mount": [0.7071, 0, 0.7071, 0]}
+          }
+        }"#;
+        let MappingFile::Quaternion(m) = parse(text).unwrap() else {
+            panic!("expected a quaternion mapping")
+        };
+        assert_eq!(m.world, Some(World::Enu));
+        assert_eq!(m.sensors.len(), 3);
+        assert_eq!(m.sensors[0].sensor, "pelvis");
+        assert_eq!(m.sensors[0].mount, Mount::Calibrate);
+        assert_eq!(m.sensors[0].forward, Some(Vector3::x()));
+        // "+y-x+z": sensor x = bone +y, sensor y = bone -x, sensor z = bone +z: 90° about z.
+        let Mount::Fixed(q) = m.sensors[1].mount else { panic!() };
+        assert!((q * Vector3::x() - Vector3::y()).norm() < 1e-12);
+        assert!((q * Vector3::y() + Vector3::x()).norm() < 1e-12);
+        let Mount::Fixed(q) = m.sensors[2].mount else { panic!() };
+        // 90° about y: x → -z.
+        assert!((q * Vector3::x() + Vector3::z()).norm() < 1e-4);
+    }
+
+    #[test]
+    fn errors_name_file_and_key() {
+        let twice = r#"{"sensors": {"a": {"bone": "Hips"}, "a": {"bone": "Spine"}}}"#;
+        let e = parse(twice).unwrap_err().to_string();
+        assert!(e.contains("m.json") && e.contains("`a` is mapped twice"), "{e}");
+        let same_bone = r#"{"sensors": {"a": {"bone": "Hips"}, "b": {"bone": "Hips"}}}"#;
+        let e = parse(same_bone).unwrap_err().to_string();
+        assert!(e.contains("`sensors.b.bone`") && e.contains("already driven by sensor `a`"), "{e}");
+        let bad_mount = r#"{"sensors": {"a": {"bone": "Hips", "mount": "+x+x+z"}}}"#;
+        let e = parse(bad_mount).unwrap_err().to_string();
+        assert!(e.contains("`sensors.a.mount`"), "{e}");
+        let left = r#"{"sensors": {"a": {"bone": "Hips", "mount": "+x+y-z"}}}"#;
+        let e = parse(left).unwrap_err().to_string();
+        assert!(e.contains("left-handed"), "{e}");
+        let bad_q = r#"{"sensors": {"a": {"bone": "Hips", "mount": [1, 1, 0, 0]}}}"#;
+        assert!(parse(bad_q).unwrap_err().to_string().contains("unit quaternion"));
+        let bad_world = r#"{"world": "xyz", "sensors": {"a": {"bone": "Hips"}}}"#;
+        assert!(parse(bad_world).unwrap_err().to_string().contains("`world`"));
+        let typo = r#"{"sensors": {"a": {"bone": "Hips", "mout": "calibrate"}}}"#;
+        assert!(parse(typo).unwrap_err().to_string().contains("mout"));
+        let rig = crate::rig::load_rig("mixamo").unwrap();
+        let MappingFile::Quaternion(m) = parse(r#"{"sensors": {"a": {"bone": "Tail"}}}"#).unwrap() else {
+            panic!()
+        };
+        let e = m.resolve(&rig, Path::new("m.json")).unwrap_err().to_string();
+        assert!(e.contains("`sensors.a.bone`") && e.contains("unknown bone `Tail`"), "{e}");
+    }
+}

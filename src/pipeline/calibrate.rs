@@ -1,0 +1,179 @@
+//! Pose calibration: the heading that turns the subject to face +Z, and the mounts
+//! (`q_bone_sensor`) of sensors marked `calibrate`, from a window in which the subject holds a
+//! known pose.
+//!
+//! With `H` the heading (a rotation about +Y) and sensor orientations already taken into the rig
+//! world (`C ⊗ q_world_sensor`), a bone's world orientation is
+//! `q_world_bone = H ⊗ q_rig_sensor ⊗ q_bone_sensor⁻¹`. A `calibrate` mount makes every bone equal
+//! its pose orientation over the window: `q_bone_sensor = q_world_bone(pose)⁻¹ ⊗ H ⊗ mean q_rig_sensor`.
+//!
+//! A static pose cannot tell the subject's heading apart from unknown mounts, so the heading comes
+//! from what can tell it: a sensor whose forward axis is declared (that axis points where the body
+//! faces), else a sensor whose mount is known (its bone's pose orientation says where the body
+//! faces), else none (the sensors' own heading is kept: north → +Z).
+
+use crate::mapping::{Mount, ResolvedSensor};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+
+/// Where the heading came from (sidecar `pipeline.heading`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum HeadingSource {
+    DeclaredForward { sensor: String },
+    KnownMount { sensor: String },
+    None,
+}
+
+impl HeadingSource {
+    pub fn label(&self) -> &'static str {
+        match self {
+            HeadingSource::DeclaredForward { .. } => "declared-forward",
+            HeadingSource::KnownMount { .. } => "mounts",
+            HeadingSource::None => "none",
+        }
+    }
+}
+
+/// The result of calibration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibration {
+    /// Rotation about +Y applied to every sensor (rig world).
+    pub heading: UnitQuaternion<f64>,
+    pub heading_source: HeadingSource,
+    /// `q_bone_sensor` per mapped sensor, in mapping order.
+    pub mounts: Vec<UnitQuaternion<f64>>,
+    pub warnings: Vec<String>,
+}
+
+/// Sign-aligned mean of unit quaternions (accurate for the small spread of a held pose).
+pub fn mean_rotation(samples: &[UnitQuaternion<f64>]) -> UnitQuaternion<f64> {
+    let first = samples[0].into_inner();
+    let mut sum = Quaternion::new(0.0, 0.0, 0.0, 0.0);
+    for q in samples {
+        let q = q.into_inner();
+        sum += if q.dot(&first) < 0.0 { -q } else { q };
+    }
+    UnitQuaternion::from_quaternion(sum)
+}
+
+/// The rotation about +Y that turns horizontal direction `d` (rig world) to +Z, or `None` when
+/// `d` is too close to vertical to have a heading.
+pub fn heading_towards_plus_z(d: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
+    let horizontal = (d.x * d.x + d.z * d.z).sqrt();
+    if horizontal < 0.25 * d.norm() {
+        return None;
+    }
+    let psi = d.x.atan2(d.z);
+    Some(UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -psi))
+}
+
+/// Solves heading and mounts.
+///
+/// `held[i]`: sensor i's mean orientation over the window, in the rig world (`C ⊗ q`).
+/// `pose_world[i]`: its bone's world orientation in the calibration pose.
+pub fn solve(
+    sensors: &[ResolvedSensor],
+    held: &[UnitQuaternion<f64>],
+    pose_world: &[UnitQuaternion<f64>],
+) -> Calibration {
+    let mut warnings = Vec::new();
+    let mut heading = None;
+    // 1. A declared forward axis.
+    for (i, s) in sensors.iter().enumerate() {
+        let Some(axis) = s.forward else { continue };
+        let facing = held[i] * axis;
+        match heading_towards_plus_z(&facing) {
+            Some(h) => {
+                heading = Some((h, HeadingSource::DeclaredForward { sensor: s.sensor.clone() }));
+                break;
+            }
+            None => warnings.push(format!(
+                "sensor `{}`: its forward axis points almost vertically during calibration; it cannot give the heading",
+                s.sensor
+            )),
+        }
+    }
+    // 2. A known mount: the bone's forward (+Z in the pose) seen through the sensor.
+    if heading.is_none() {
+        for (i, s) in sensors.iter().enumerate() {
+            let Mount::Fixed(mount) = s.mount else { continue };
+            let bone_world_unturned = held[i] * mount.inverse();
+            let facing = bone_world_unturned * (pose_world[i].inverse() * Vector3::z());
+            if let Some(h) = heading_towards_plus_z(&facing) {
+                heading = Some((h, HeadingSource::KnownMount { sensor: s.sensor.clone() }));
+                break;
+            }
+        }
+    }
+    let (heading, heading_source) = heading.unwrap_or((UnitQuaternion::identity(), HeadingSource::None));
+    let mounts = sensors
+        .iter()
+        .enumerate()
+        .map(|(i, s)| match s.mount {
+            Mount::Fixed(q) => q,
+            Mount::Calibrate => pose_world[i].inverse() * heading * held[i],
+        })
+        .collect();
+    Calibration {
+        heading,
+        heading_source,
+        mounts,
+        warnings,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rot(axis: Vector3<f64>, deg: f64) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), deg.to_radians())
+    }
+
+    fn sensor(mount: Mount, forward: Option<Vector3<f64>>) -> ResolvedSensor {
+        ResolvedSensor {
+            sensor: "s".into(),
+            bone: 0,
+            mount,
+            forward,
+        }
+    }
+
+    #[test]
+    fn declared_forward_turns_the_subject_to_face_plus_z() {
+        // The subject faces +X (rig world, before heading); the sensor's +y axis points forward.
+        let held = rot(Vector3::z(), -90.0); // maps sensor +y to +x
+        assert!((held * Vector3::y() - Vector3::x()).norm() < 1e-12);
+        let cal = solve(&[sensor(Mount::Calibrate, Some(Vector3::y()))], &[held], &[UnitQuaternion::identity()]);
+        assert_eq!(cal.heading_source.label(), "declared-forward");
+        assert!((cal.heading * Vector3::x() - Vector3::z()).norm() < 1e-12);
+        // The bone equals its pose (identity) after heading and mount.
+        let bone = cal.heading * held * cal.mounts[0].inverse();
+        assert!(bone.angle() < 1e-12);
+    }
+
+    #[test]
+    fn known_mount_gives_heading_and_none_otherwise() {
+        // Bone faces -X (turned 90° about Y from the pose, which is identity); sensor mounted
+        // with identity: held = bone orientation.
+        let held = rot(Vector3::y(), -90.0);
+        assert!((held * Vector3::z() + Vector3::x()).norm() < 1e-12);
+        let cal = solve(
+            &[sensor(Mount::Fixed(UnitQuaternion::identity()), None)],
+            &[held],
+            &[UnitQuaternion::identity()],
+        );
+        assert_eq!(cal.heading_source.label(), "mounts");
+        assert!((cal.heading * (-Vector3::x()) - Vector3::z()).norm() < 1e-12);
+        let cal = solve(&[sensor(Mount::Calibrate, None)], &[held], &[UnitQuaternion::identity()]);
+        assert_eq!(cal.heading_source, HeadingSource::None);
+        assert!(cal.heading.angle() < 1e-12);
+    }
+
+    #[test]
+    fn mean_of_sign_flipped_samples() {
+        let a = rot(Vector3::x(), 10.0);
+        let b = UnitQuaternion::new_unchecked(-rot(Vector3::x(), 20.0).into_inner());
+        let m = mean_rotation(&[a, b]);
+        assert!((m.angle().to_degrees() - 15.0).abs() < 1e-9);
+    }
+}

@@ -1,0 +1,299 @@
+//! The conversion pipeline: a take and a mapping onto a rig → an [`Animation`] on a frame grid.
+//!
+//! Stages, each a small module with a pure function:
+//! 1. [`calibrate`]: heading and mounts from the calibration window;
+//! 2. bone world orientation `q_world_bone = H ⊗ C ⊗ q_world_sensor ⊗ q_bone_sensor⁻¹`, with `C`
+//!    taking the sensors' world into the rig world ([`crate::world::World::to_rig`]);
+//! 3. [`resample`] onto the frame grid (slerp; held outside each sensor's range);
+//! 4. [`relative`]: local rotations `q_world_parent⁻¹ ⊗ q_world_bone`;
+//! 5. [`root`]: the root position; `--trim` cuts the frame range.
+//!
+//! Euler angles (with the discontinuity filter) are made by the BVH writer's caller from the
+//! animation's quaternions ([`crate::rotation::euler`]).
+
+pub mod calibrate;
+pub mod relative;
+pub mod resample;
+pub mod root;
+
+use crate::anim::{Animation, AnimationError};
+use crate::fps::Fps;
+use crate::mapping::{CalibrationWindow, Mapping, MappingError, Mount, ResolvedSensor};
+use crate::rig::Rig;
+use crate::take::{Take, Track};
+use crate::world::World;
+use calibrate::{Calibration, mean_rotation};
+use nalgebra::UnitQuaternion;
+use root::RootMode;
+use std::path::Path;
+
+/// A cut of the frame range, in seconds on the take's clock (both ends inclusive).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Trim {
+    pub start_s: f64,
+    pub end_s: f64,
+}
+
+impl std::str::FromStr for Trim {
+    type Err = String;
+    /// `start:end` in seconds; either side may be empty (`:10`, `2.5:`).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let (a, b) = s
+            .split_once(':')
+            .ok_or_else(|| format!("`{s}`: expected START:END in seconds, e.g. 2.5:10"))?;
+        let parse = |v: &str, default: f64| -> Result<f64, String> {
+            if v.trim().is_empty() {
+                return Ok(default);
+            }
+            match v.trim().parse::<f64>() {
+                Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+                _ => Err(format!("`{v}` in `{s}` is not a number of seconds ≥ 0")),
+            }
+        };
+        let trim = Trim {
+            start_s: parse(a, 0.0)?,
+            end_s: parse(b, f64::MAX)?,
+        };
+        if trim.end_s < trim.start_s {
+            return Err(format!("`{s}`: the end is before the start"));
+        }
+        Ok(trim)
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct PipelineOptions {
+    pub fps: Fps,
+    pub trim: Option<Trim>,
+    pub root: RootMode,
+}
+
+impl Default for PipelineOptions {
+    fn default() -> Self {
+        PipelineOptions {
+            fps: Fps::new(30, 1).expect("30 fps"),
+            trim: None,
+            root: RootMode::Fixed,
+        }
+    }
+}
+
+/// What the pipeline produced, and how.
+#[derive(Debug, Clone)]
+pub struct Converted {
+    pub animation: Animation,
+    /// The sensors that drove bones, in mapping order (mounts in `calibration.mounts`).
+    pub sensors: Vec<ResolvedSensor>,
+    pub calibration: Calibration,
+    /// The calibration window used, if any.
+    pub window: Option<CalibrationWindow>,
+    pub world: World,
+    /// Frame of the take's grid that became frame 0 (non-zero after `--trim`).
+    pub first_frame: usize,
+    pub warnings: Vec<String>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error(transparent)]
+    Mapping(#[from] MappingError),
+    #[error("none of the mapped sensors ({mapped}) has orientation data in the take (sensors in the take: {present}); check the mapping's sensor ids")]
+    NoSensors { mapped: String, present: String },
+    #[error("{file}: `calibration`: the window {start_s} s + {duration_s} s is outside the take, which ends at {end_s:.3} s")]
+    CalibrationOutside {
+        file: String,
+        start_s: f64,
+        duration_s: f64,
+        end_s: f64,
+    },
+    #[error("{file}: `calibration.pose`: rig `{rig}` has no pose `{pose}`; it has {known}")]
+    UnknownPose {
+        file: String,
+        rig: String,
+        pose: String,
+        known: String,
+    },
+    #[error("--trim {start_s}:{end_s} keeps no frame of the take (frames run from 0 s to {end_take_s:.3} s)")]
+    EmptyTrim {
+        start_s: f64,
+        end_s: f64,
+        end_take_s: f64,
+    },
+    #[error(transparent)]
+    Animation(#[from] AnimationError),
+}
+
+/// The mean orientation of a track over [start, start + duration]; the value interpolated at the
+/// window's middle when no sample falls inside.
+fn held_over(track: &Track<UnitQuaternion<f64>>, window: &CalibrationWindow) -> UnitQuaternion<f64> {
+    let end = window.start_s + window.duration_s;
+    let inside: Vec<UnitQuaternion<f64>> = track
+        .iter()
+        .filter(|(t, _)| *t >= window.start_s && *t <= end)
+        .map(|(_, q)| *q)
+        .collect();
+    if inside.is_empty() {
+        let mid = window.start_s + window.duration_s / 2.0;
+        let times = track.times_s();
+        let i = times.partition_point(|&t| t <= mid);
+        let values = track.values();
+        return match i {
+            0 => values[0],
+            i if i == times.len() => values[i - 1],
+            i => resample::slerp_shortest(
+                &values[i - 1],
+                &values[i],
+                (mid - times[i - 1]) / (times[i] - times[i - 1]),
+            ),
+        };
+    }
+    mean_rotation(&inside)
+}
+
+/// Runs the pipeline. `mapping_file` names the mapping in errors.
+pub fn run(
+    take: &Take,
+    rig: &Rig,
+    mapping: &Mapping,
+    mapping_file: &Path,
+    options: &PipelineOptions,
+) -> Result<Converted, PipelineError> {
+    let file = mapping_file.display().to_string();
+    let mut warnings = Vec::new();
+    let world = mapping.world.unwrap_or(take.source().world);
+    let to_rig = world.to_rig();
+    let resolved = mapping.resolve(rig, mapping_file)?;
+
+    let mut sensors = Vec::new();
+    let mut tracks = Vec::new();
+    for s in resolved {
+        let bone = &rig.joints()[s.bone].name;
+        match take.sensor(&s.sensor).map(|t| t.orientation()) {
+            None => warnings.push(format!(
+                "sensor `{}` (mapped to `{bone}`) is not in the take; `{bone}` keeps its rest rotation",
+                s.sensor
+            )),
+            Some(None) => warnings.push(format!(
+                "sensor `{}` has raw readings only and fusion is not enabled; `{bone}` keeps its rest rotation",
+                s.sensor
+            )),
+            Some(Some(o)) => {
+                tracks.push(o.to_quaternions().map(|q| to_rig * q));
+                sensors.push(s);
+            }
+        }
+    }
+    for s in take.sensors() {
+        if !mapping.sensors.iter().any(|m| m.sensor == s.id()) {
+            warnings.push(format!("sensor {} is not in the mapping; ignored", s.id()));
+        }
+    }
+    if sensors.is_empty() {
+        return Err(PipelineError::NoSensors {
+            mapped: mapping.sensors.iter().map(|s| s.sensor.as_str()).collect::<Vec<_>>().join(", "),
+            present: take.sensors().iter().map(|s| s.id()).collect::<Vec<_>>().join(", "),
+        });
+    }
+
+    // 1. Calibration.
+    let needs_window = sensors.iter().any(|s| s.mount == Mount::Calibrate);
+    let window = match (&mapping.calibration, needs_window) {
+        (Some(w), _) => Some(w.clone()),
+        (None, true) => {
+            let w = CalibrationWindow::default();
+            warnings.push(format!(
+                "the mapping has `calibrate` mounts but no `calibration`; assuming the subject holds the rig's rest pose for the first {} s",
+                w.duration_s
+            ));
+            Some(w)
+        }
+        (None, false) => None,
+    };
+    let calibration = match &window {
+        Some(w) => {
+            let end_s = take.last_time_s();
+            if w.start_s > end_s {
+                return Err(PipelineError::CalibrationOutside {
+                    file,
+                    start_s: w.start_s,
+                    duration_s: w.duration_s,
+                    end_s,
+                });
+            }
+            let pose = rig.pose(&w.pose.label()).ok_or_else(|| PipelineError::UnknownPose {
+                file: file.clone(),
+                rig: rig.name().to_string(),
+                pose: w.pose.label(),
+                known: rig.pose_names().collect::<Vec<_>>().join(", "),
+            })?;
+            let pose_world_all = rig.world_rotations(&pose.local);
+            let pose_world: Vec<_> = sensors.iter().map(|s| pose_world_all[s.bone]).collect();
+            let held: Vec<_> = tracks.iter().map(|t| held_over(t, w)).collect();
+            calibrate::solve(&sensors, &held, &pose_world)
+        }
+        None => Calibration {
+            heading: UnitQuaternion::identity(),
+            heading_source: calibrate::HeadingSource::None,
+            mounts: sensors
+                .iter()
+                .map(|s| match s.mount {
+                    Mount::Fixed(q) => q,
+                    Mount::Calibrate => UnitQuaternion::identity(),
+                })
+                .collect(),
+            warnings: Vec::new(),
+        },
+    };
+    warnings.extend(calibration.warnings.iter().cloned());
+
+    // 2. Bone world orientations on each sensor's own sample times.
+    let heading = calibration.heading;
+    let bone_tracks: Vec<Track<UnitQuaternion<f64>>> = tracks
+        .iter()
+        .zip(&calibration.mounts)
+        .map(|(t, mount)| {
+            let inv = mount.inverse();
+            t.map(|q| heading * q * inv)
+        })
+        .collect();
+
+    // 3. The frame grid, trimmed, and resampling.
+    let t_last = bone_tracks.iter().map(|t| t.last_time_s()).fold(0.0, f64::max);
+    let total = options.fps.frame_count(t_last) as usize;
+    let (first, frames) = match options.trim {
+        None => (0, total),
+        Some(trim) => {
+            let num = options.fps.num() as f64;
+            let den = options.fps.den() as f64;
+            let first = (trim.start_s * num / den - 1e-9).ceil().max(0.0) as usize;
+            let last = ((trim.end_s.min(1e12) * num / den + 1e-9).floor() as usize).min(total - 1);
+            if first > last || first >= total {
+                return Err(PipelineError::EmptyTrim {
+                    start_s: trim.start_s,
+                    end_s: trim.end_s,
+                    end_take_s: options.fps.frame_time_of(total as u64 - 1),
+                });
+            }
+            (first, last - first + 1)
+        }
+    };
+    let mut world_tracks = vec![None; rig.len()];
+    for (s, track) in sensors.iter().zip(&bone_tracks) {
+        world_tracks[s.bone] = Some(resample::resample(track, options.fps, first, frames));
+    }
+
+    // 4. Local rotations; 5. root.
+    let local = relative::to_local(rig, &world_tracks, frames);
+    let animated = world_tracks.iter().map(Option::is_some).collect();
+    let roots = root::root_positions(rig, options.root, frames);
+    let animation = Animation::new(rig.clone(), options.fps, local, animated, roots)?;
+    Ok(Converted {
+        animation,
+        sensors,
+        calibration,
+        window,
+        world,
+        first_frame: first,
+        warnings,
+    })
+}

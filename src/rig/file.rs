@@ -1,0 +1,198 @@
+//! Rig files (YAML or JSON) and the built-in rigs.
+//!
+//! ```yaml
+//! name: mixamo
+//! units: m                 # m | cm
+//! order: ZYX               # default channel order of every joint (BVH naming)
+//! joints:                  # parents before children; the first joint is the root
+//!   - {name: Hips, offset: [0, 1.0, 0]}
+//!   - {name: Spine, parent: Hips, offset: [0, 0.1, 0]}
+//!   - {name: Head, parent: Neck, offset: [0, 0.1, 0], end_site: [0, 0.15, 0], order: ZXY}
+//! poses:                   # local rotations per joint; unnamed joints keep identity
+//!   npose:
+//!     LeftArm: {axis: [0, 0, 1], angle_deg: -90}
+//!     RightArm: [0.7071068, 0, 0, 0.7071068]   # quaternion w, x, y, z
+//! ```
+
+use super::{Joint, LengthUnit, Rig, RigError};
+use crate::rotation::EulerOrder;
+use nalgebra::{Quaternion, Unit, UnitQuaternion, Vector3};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The built-in rigs: name and file text.
+const BUILTIN: [(&str, &str); 2] = [
+    ("mixamo", include_str!("../../rigs/mixamo.yaml")),
+    ("sou12", include_str!("../../rigs/sou12.yaml")),
+];
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigFile {
+    pub name: String,
+    #[serde(default)]
+    pub units: LengthUnit,
+    #[serde(default = "default_order")]
+    pub order: EulerOrder,
+    pub joints: Vec<JointEntry>,
+    #[serde(default)]
+    pub poses: BTreeMap<String, BTreeMap<String, RotationEntry>>,
+}
+
+fn default_order() -> EulerOrder {
+    EulerOrder::ZYX
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointEntry {
+    pub name: String,
+    #[serde(default)]
+    pub parent: Option<String>,
+    pub offset: [f64; 3],
+    #[serde(default)]
+    pub order: Option<EulerOrder>,
+    #[serde(default)]
+    pub end_site: Option<[f64; 3]>,
+}
+
+/// A rotation in a rig or mapping file: a quaternion `[w, x, y, z]` or an axis and an angle.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(untagged)]
+pub enum RotationEntry {
+    Quaternion([f64; 4]),
+    AxisAngle { axis: [f64; 3], angle_deg: f64 },
+}
+
+impl RotationEntry {
+    pub fn to_quaternion(&self) -> Result<UnitQuaternion<f64>, String> {
+        match self {
+            RotationEntry::Quaternion([w, x, y, z]) => {
+                let q = Quaternion::new(*w, *x, *y, *z);
+                let n = q.norm();
+                if !n.is_finite() || n < 1e-9 {
+                    return Err(format!("[{w}, {x}, {y}, {z}] is not a rotation quaternion (w, x, y, z)"));
+                }
+                Ok(UnitQuaternion::from_quaternion(q))
+            }
+            RotationEntry::AxisAngle { axis, angle_deg } => {
+                let axis = Vector3::from(*axis);
+                let unit = Unit::try_new(axis, 1e-9)
+                    .filter(|_| angle_deg.is_finite())
+                    .ok_or_else(|| format!("axis {axis:?} with angle {angle_deg}° is not a rotation"))?;
+                Ok(UnitQuaternion::from_axis_angle(&unit, angle_deg.to_radians()))
+            }
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum RigLoadError {
+    #[error("{}: cannot read: {source}", .path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: {message}", .path.display())]
+    Parse { path: PathBuf, message: String },
+    #[error("{}: {source}", .path.display())]
+    Invalid {
+        path: PathBuf,
+        #[source]
+        source: RigError,
+    },
+    #[error("unknown rig `{0}`; expected a built-in rig (mixamo, sou12) or a rig file (.yaml, .json, .bvh)")]
+    Unknown(String),
+}
+
+impl RigFile {
+    pub fn into_rig(self) -> Result<Rig, RigError> {
+        let mut index = BTreeMap::new();
+        let mut joints = Vec::with_capacity(self.joints.len());
+        for (i, j) in self.joints.iter().enumerate() {
+            let parent = match &j.parent {
+                None => None,
+                Some(p) => Some(*index.get(p.as_str()).ok_or_else(|| RigError::UnknownParent {
+                    joint: j.name.clone(),
+                    parent: p.clone(),
+                })?),
+            };
+            joints.push(Joint {
+                name: j.name.clone(),
+                parent,
+                offset: Vector3::from(j.offset),
+                order: j.order.unwrap_or(self.order),
+                end_site: j.end_site.map(Vector3::from),
+            });
+            index.insert(j.name.as_str(), i);
+        }
+        let mut rig = Rig::new(self.name, self.units, joints)?;
+        for (pose, rotations) in &self.poses {
+            let mut list = Vec::new();
+            for (joint, rotation) in rotations {
+                let q = rotation.to_quaternion().map_err(|_| RigError::PoseJoint {
+                    pose: pose.clone(),
+                    joint: joint.clone(),
+                })?;
+                list.push((joint.clone(), q));
+            }
+            rig.set_pose(pose, &list)?;
+        }
+        Ok(rig)
+    }
+}
+
+/// Parses rig text (YAML, of which JSON is a subset).
+pub fn parse_rig(text: &str, path: &Path) -> Result<Rig, RigLoadError> {
+    let file: RigFile = serde_yaml::from_str(text).map_err(|e| RigLoadError::Parse {
+        path: path.to_path_buf(),
+        message: format!("{e}; expected a rig file (README, \"Rigs\")"),
+    })?;
+    file.into_rig().map_err(|source| RigLoadError::Invalid {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Loads a rig by built-in name (`mixamo`, `sou12`) or from a `.yaml`/`.json` file.
+pub fn load_rig(name_or_path: &str) -> Result<Rig, RigLoadError> {
+    if let Some((name, text)) = BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
+        return parse_rig(text, Path::new(&format!("rigs/{name}.yaml")));
+    }
+    let path = Path::new(name_or_path);
+    if !path.exists() {
+        return Err(RigLoadError::Unknown(name_or_path.to_string()));
+    }
+    let text = std::fs::read_to_string(path).map_err(|source| RigLoadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_rig(&text, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtin_rigs_load() {
+        let m = load_rig("mixamo").unwrap();
+        assert_eq!(m.name(), "mixamo");
+        assert_eq!(m.units(), LengthUnit::Metres);
+        let s = load_rig("sou12").unwrap();
+        assert_eq!(s.name(), "sou12");
+        assert!(matches!(load_rig("nope"), Err(RigLoadError::Unknown(_))));
+    }
+
+    #[test]
+    fn schema_errors_name_the_problem() {
+        let bad = "name: x\njoints:\n  - {name: a, offset: [0,0,0]}\n  - {name: b, parent: c, offset: [0,1,0]}\n";
+        let e = parse_rig(bad, Path::new("bad.yaml")).unwrap_err().to_string();
+        assert!(e.contains("bad.yaml") && e.contains("`c`"), "{e}");
+        let typo = "name: x\njoints:\n  - {name: a, ofset: [0,0,0]}\n";
+        let e = parse_rig(typo, Path::new("t.yaml")).unwrap_err().to_string();
+        assert!(e.contains("ofset"), "{e}");
+    }
+}
