@@ -62,12 +62,25 @@ impl Animation {
         check("joint rotation tracks", rig.len(), local.len())?;
         check("animated flags", rig.len(), animated.len())?;
         for (j, track) in local.iter().enumerate() {
-            check(&format!("rotations of `{}`", rig.joints()[j].name), frames, track.len())?;
-            if track.iter().any(|q| !q.coords.iter().all(|v| v.is_finite())) {
-                return Err(AnimationError::NonFinite(format!("rotations of `{}`", rig.joints()[j].name)));
+            check(
+                &format!("rotations of `{}`", rig.joints()[j].name),
+                frames,
+                track.len(),
+            )?;
+            if track
+                .iter()
+                .any(|q| !q.coords.iter().all(|v| v.is_finite()))
+            {
+                return Err(AnimationError::NonFinite(format!(
+                    "rotations of `{}`",
+                    rig.joints()[j].name
+                )));
             }
         }
-        if root_positions.iter().any(|p| !p.iter().all(|v| v.is_finite())) {
+        if root_positions
+            .iter()
+            .any(|p| !p.iter().all(|v| v.is_finite()))
+        {
             return Err(AnimationError::NonFinite("root positions".into()));
         }
         Ok(Animation {

@@ -87,10 +87,30 @@ impl FromStr for Fps {
             return Fps::new(n, d).ok_or_else(bad);
         }
         match t {
-            "29.97" => return Ok(Fps { num: 30000, den: 1001 }),
-            "23.976" | "23.98" => return Ok(Fps { num: 24000, den: 1001 }),
-            "59.94" => return Ok(Fps { num: 60000, den: 1001 }),
-            "119.88" => return Ok(Fps { num: 120000, den: 1001 }),
+            "29.97" => {
+                return Ok(Fps {
+                    num: 30000,
+                    den: 1001,
+                });
+            }
+            "23.976" | "23.98" => {
+                return Ok(Fps {
+                    num: 24000,
+                    den: 1001,
+                });
+            }
+            "59.94" => {
+                return Ok(Fps {
+                    num: 60000,
+                    den: 1001,
+                });
+            }
+            "119.88" => {
+                return Ok(Fps {
+                    num: 120000,
+                    den: 1001,
+                });
+            }
             _ => {}
         }
         // Any other decimal exactly: digits before and after the point.
@@ -103,9 +123,20 @@ impl FromStr for Fps {
             return Err(bad());
         }
         let den = 10u64.pow(frac.len() as u32);
-        let int: u64 = if int.is_empty() { 0 } else { int.parse().map_err(|_| bad())? };
-        let frac: u64 = if frac.is_empty() { 0 } else { frac.parse().map_err(|_| bad())? };
-        let num = int.checked_mul(den).and_then(|v| v.checked_add(frac)).ok_or_else(bad)?;
+        let int: u64 = if int.is_empty() {
+            0
+        } else {
+            int.parse().map_err(|_| bad())?
+        };
+        let frac: u64 = if frac.is_empty() {
+            0
+        } else {
+            frac.parse().map_err(|_| bad())?
+        };
+        let num = int
+            .checked_mul(den)
+            .and_then(|v| v.checked_add(frac))
+            .ok_or_else(bad)?;
         Fps::new(num, den).ok_or_else(bad)
     }
 }
@@ -147,7 +178,9 @@ impl<'de> serde::Deserialize<'de> for Fps {
             // Through its shortest decimal text, so 29.97 keeps its NTSC meaning.
             Raw::Float(v) => v.to_string().parse(),
             Raw::Text(t) => t.parse(),
-            Raw::Ratio { num, den } => Fps::new(num, den).ok_or_else(|| BadFps(format!("{num}/{den}"))),
+            Raw::Ratio { num, den } => {
+                Fps::new(num, den).ok_or_else(|| BadFps(format!("{num}/{den}")))
+            }
         };
         parsed.map_err(serde::de::Error::custom)
     }

@@ -7,6 +7,8 @@
 
 pub mod anim;
 pub mod bvh;
+pub mod config;
+pub mod convert;
 pub mod fps;
 pub mod inspect;
 pub mod mapping;

@@ -79,15 +79,36 @@ mod tests {
         let close = |a: Vector3<f64>, b: [f64; 3]| (a - Vector3::from(b)).norm() < 1e-12;
         // Unit vectors written in each world: north, up, west.
         let cases = [
-            (World::Enu, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]),
-            (World::Ned, [1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, -1.0, 0.0]),
-            (World::Nwu, [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]),
+            (
+                World::Enu,
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+                [-1.0, 0.0, 0.0],
+            ),
+            (
+                World::Ned,
+                [1.0, 0.0, 0.0],
+                [0.0, 0.0, -1.0],
+                [0.0, -1.0, 0.0],
+            ),
+            (
+                World::Nwu,
+                [1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0],
+                [0.0, 1.0, 0.0],
+            ),
         ];
         for (world, north, up, west) in cases {
             let c = world.to_rig();
-            assert!(close(c * Vector3::from(north), [0.0, 0.0, 1.0]), "{world} north");
+            assert!(
+                close(c * Vector3::from(north), [0.0, 0.0, 1.0]),
+                "{world} north"
+            );
             assert!(close(c * Vector3::from(up), [0.0, 1.0, 0.0]), "{world} up");
-            assert!(close(c * Vector3::from(west), [1.0, 0.0, 0.0]), "{world} west");
+            assert!(
+                close(c * Vector3::from(west), [1.0, 0.0, 0.0]),
+                "{world} west"
+            );
         }
         let c = World::Opensim.to_rig();
         assert!(close(c * Vector3::y(), [0.0, 1.0, 0.0]));

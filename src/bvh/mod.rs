@@ -95,7 +95,10 @@ impl Channel {
     }
 
     pub fn is_position(self) -> bool {
-        matches!(self, Channel::Xposition | Channel::Yposition | Channel::Zposition)
+        matches!(
+            self,
+            Channel::Xposition | Channel::Yposition | Channel::Zposition
+        )
     }
 
     pub fn is_rotation(self) -> bool {
@@ -397,10 +400,16 @@ Frame Time: 0.5
         assert_eq!(t[1], Vector3::new(0.0, 0.0, 1.0));
         // Frame 1: root Zrot 0, Xrot 90 → Rx(90) maps +z to -y; Arm Yrot 90 is local only.
         let p = bvh.world_positions(1);
-        assert!((p[1] - Vector3::new(10.0, 19.0, 30.0)).norm() < 1e-12, "{p:?}");
+        assert!(
+            (p[1] - Vector3::new(10.0, 19.0, 30.0)).norm() < 1e-12,
+            "{p:?}"
+        );
         // Frame 0: Rz(90) leaves +z alone.
         let p = bvh.world_positions(0);
-        assert!((p[1] - Vector3::new(10.0, 20.0, 31.0)).norm() < 1e-12, "{p:?}");
+        assert!(
+            (p[1] - Vector3::new(10.0, 20.0, 31.0)).norm() < 1e-12,
+            "{p:?}"
+        );
     }
 
     #[test]
@@ -413,8 +422,14 @@ Frame Time: 0.5
             end_site: None,
         };
         assert_eq!(j(vec![]).rotation_order(), EulerOrder::ZXY);
-        assert_eq!(j(vec![Channel::Xposition]).rotation_order(), EulerOrder::ZXY);
-        assert_eq!(j(vec![Channel::Xrotation]).rotation_order(), EulerOrder::XZY);
+        assert_eq!(
+            j(vec![Channel::Xposition]).rotation_order(),
+            EulerOrder::ZXY
+        );
+        assert_eq!(
+            j(vec![Channel::Xrotation]).rotation_order(),
+            EulerOrder::XZY
+        );
         assert_eq!(
             j(vec![Channel::Yrotation, Channel::Xrotation]).rotation_order(),
             EulerOrder::YXZ
@@ -437,15 +452,22 @@ Frame Time: 0.5
         assert_eq!(e.line, 4, "{e}");
         assert!(e.message.contains("finite"), "{e}");
 
-        let good_head = "HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n CHANNELS 2 Xrotation Yrotation\n}\nMOTION\n";
-        let e = err(&format!("{good_head}Frames: 2\nFrame Time: 0.1\n1 2\n1 2 3\n"));
+        let good_head =
+            "HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n CHANNELS 2 Xrotation Yrotation\n}\nMOTION\n";
+        let e = err(&format!(
+            "{good_head}Frames: 2\nFrame Time: 0.1\n1 2\n1 2 3\n"
+        ));
         assert_eq!(e.line, 11, "{e}");
         assert!(e.message.contains("expected 2 values"), "{e}");
 
-        let e = err(&format!("{good_head}Frames: 3\nFrame Time: 0.1\n1 2\n1 2\n"));
+        let e = err(&format!(
+            "{good_head}Frames: 3\nFrame Time: 0.1\n1 2\n1 2\n"
+        ));
         assert!(e.message.contains("expected 3 frames"), "{e}");
 
-        let e = err(&format!("{good_head}Frames: 1\nFrame Time: 0.1\n1 2\n1 2\n"));
+        let e = err(&format!(
+            "{good_head}Frames: 1\nFrame Time: 0.1\n1 2\n1 2\n"
+        ));
         assert_eq!(e.line, 11, "{e}");
 
         let e = err(&format!("{good_head}Frames: 1\nFrame Time: 0.1\n1 inf\n"));
@@ -454,7 +476,9 @@ Frame Time: 0.5
         let e = err(&format!("{good_head}Frames: 1\nFrame Time: 0\n1 2\n"));
         assert_eq!(e.line, 9, "{e}");
 
-        let e = err(&format!("{good_head}Frames: 1000000000000\nFrame Time: 0.1\n1 2\n"));
+        let e = err(&format!(
+            "{good_head}Frames: 1000000000000\nFrame Time: 0.1\n1 2\n"
+        ));
         assert_eq!(e.line, 8, "{e}");
 
         let e = err("HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n}\nROOT b\n");

@@ -125,7 +125,9 @@ fn describe(expect: Expect, joints: &[BvhJoint], stack: &[Open]) -> String {
     match expect {
         Expect::Hierarchy => "expected `HIERARCHY`".into(),
         Expect::Root => "expected `ROOT <name>`".into(),
-        Expect::OpenBrace(Some(j)) => format!("expected `{{` after JOINT/ROOT `{}`", joints[j].name),
+        Expect::OpenBrace(Some(j)) => {
+            format!("expected `{{` after JOINT/ROOT `{}`", joints[j].name)
+        }
         Expect::OpenBrace(None) => "expected `{` after End Site".into(),
         Expect::JointBody | Expect::EndSiteBody => match stack.last() {
             Some(o) => format!("expected `}}` closing {}", opened(o)),
@@ -173,15 +175,22 @@ fn parse_hierarchy(lines: &mut Lines<'_>) -> Result<Vec<BvhJoint>, BvhError> {
             match expect {
                 Expect::Hierarchy => {
                     if !is(tok, "HIERARCHY") {
-                        return Err(error(n, format!("expected `HIERARCHY`, found `{}`", show(tok))));
+                        return Err(error(
+                            n,
+                            format!("expected `HIERARCHY`, found `{}`", show(tok)),
+                        ));
                     }
                     expect = Expect::Root;
                 }
                 Expect::Root => {
                     if !is(tok, "ROOT") {
-                        return Err(error(n, format!("expected `ROOT <name>`, found `{}`", show(tok))));
+                        return Err(error(
+                            n,
+                            format!("expected `ROOT <name>`, found `{}`", show(tok)),
+                        ));
                     }
-                    let name = joint_name(&toks, &mut i).ok_or_else(|| error(n, "expected a joint name after `ROOT`"))?;
+                    let name = joint_name(&toks, &mut i)
+                        .ok_or_else(|| error(n, "expected a joint name after `ROOT`"))?;
                     joints.push(BvhJoint {
                         name,
                         parent: None,
@@ -195,7 +204,11 @@ fn parse_hierarchy(lines: &mut Lines<'_>) -> Result<Vec<BvhJoint>, BvhError> {
                     if tok != b"{" {
                         return Err(error(
                             n,
-                            format!("{}, found `{}`", describe(expect, &joints, &stack), show(tok)),
+                            format!(
+                                "{}, found `{}`",
+                                describe(expect, &joints, &stack),
+                                show(tok)
+                            ),
                         ));
                     }
                     stack.push(Open {
@@ -220,28 +233,53 @@ fn parse_hierarchy(lines: &mut Lines<'_>) -> Result<Vec<BvhJoint>, BvhError> {
                     };
                     if is(tok, "OFFSET") {
                         if open.offset_seen {
-                            return Err(error(n, format!("joint `{}` has a second OFFSET", joints[j].name)));
+                            return Err(error(
+                                n,
+                                format!("joint `{}` has a second OFFSET", joints[j].name),
+                            ));
                         }
                         if open.child_seen {
-                            return Err(error(n, format!("OFFSET of joint `{}` must come before its children", joints[j].name)));
+                            return Err(error(
+                                n,
+                                format!(
+                                    "OFFSET of joint `{}` must come before its children",
+                                    joints[j].name
+                                ),
+                            ));
                         }
                         joints[j].offset = offset(&toks, &mut i, n)?;
                         open.offset_seen = true;
                     } else if is(tok, "CHANNELS") {
                         if open.channels_seen {
-                            return Err(error(n, format!("joint `{}` has a second CHANNELS line", joints[j].name)));
+                            return Err(error(
+                                n,
+                                format!("joint `{}` has a second CHANNELS line", joints[j].name),
+                            ));
                         }
                         if open.child_seen {
-                            return Err(error(n, format!("CHANNELS of joint `{}` must come before its children", joints[j].name)));
+                            return Err(error(
+                                n,
+                                format!(
+                                    "CHANNELS of joint `{}` must come before its children",
+                                    joints[j].name
+                                ),
+                            ));
                         }
                         joints[j].channels = channels(&toks, &mut i, n)?;
                         open.channels_seen = true;
                     } else if is(tok, "JOINT") {
                         if !open.offset_seen {
-                            return Err(error(n, format!("expected OFFSET of joint `{}` before its child JOINT", joints[j].name)));
+                            return Err(error(
+                                n,
+                                format!(
+                                    "expected OFFSET of joint `{}` before its child JOINT",
+                                    joints[j].name
+                                ),
+                            ));
                         }
                         open.child_seen = true;
-                        let name = joint_name(&toks, &mut i).ok_or_else(|| error(n, "expected a joint name after `JOINT`"))?;
+                        let name = joint_name(&toks, &mut i)
+                            .ok_or_else(|| error(n, "expected a joint name after `JOINT`"))?;
                         joints.push(BvhJoint {
                             name,
                             parent: Some(j),
@@ -255,7 +293,13 @@ fn parse_hierarchy(lines: &mut Lines<'_>) -> Result<Vec<BvhJoint>, BvhError> {
                             return Err(error(n, "expected `Site` after `End`"));
                         }
                         if !open.offset_seen {
-                            return Err(error(n, format!("expected OFFSET of joint `{}` before its End Site", joints[j].name)));
+                            return Err(error(
+                                n,
+                                format!(
+                                    "expected OFFSET of joint `{}` before its End Site",
+                                    joints[j].name
+                                ),
+                            ));
                         }
                         open.child_seen = true;
                         // Anything after `End Site` up to a `{` is ignored (Blender does the same).
@@ -266,7 +310,13 @@ fn parse_hierarchy(lines: &mut Lines<'_>) -> Result<Vec<BvhJoint>, BvhError> {
                         expect = Expect::OpenBrace(None);
                     } else if tok == b"}" {
                         if !open.offset_seen {
-                            return Err(error(n, format!("expected OFFSET in joint `{}` before `}}`", joints[j].name)));
+                            return Err(error(
+                                n,
+                                format!(
+                                    "expected OFFSET in joint `{}` before `}}`",
+                                    joints[j].name
+                                ),
+                            ));
                         }
                         stack.pop();
                         expect = match stack.last() {
@@ -319,24 +369,39 @@ fn parse_hierarchy(lines: &mut Lines<'_>) -> Result<Vec<BvhJoint>, BvhError> {
                 Expect::Motion => {
                     if is(tok, "MOTION") {
                         if let Some(extra) = toks.get(i) {
-                            return Err(error(n, format!("expected nothing after `MOTION`, found `{}`", show(extra))));
+                            return Err(error(
+                                n,
+                                format!("expected nothing after `MOTION`, found `{}`", show(extra)),
+                            ));
                         }
                         return Ok(joints);
                     }
                     if is(tok, "ROOT") {
-                        return Err(error(n, "expected `MOTION`: files with a second ROOT are not supported"));
+                        return Err(error(
+                            n,
+                            "expected `MOTION`: files with a second ROOT are not supported",
+                        ));
                     }
                     if tok == b"}" {
-                        return Err(error(n, "unbalanced `}`: the root joint is already closed; expected `MOTION`"));
+                        return Err(error(
+                            n,
+                            "unbalanced `}`: the root joint is already closed; expected `MOTION`",
+                        ));
                     }
-                    return Err(error(n, format!("expected `MOTION`, found `{}`", show(tok))));
+                    return Err(error(
+                        n,
+                        format!("expected `MOTION`, found `{}`", show(tok)),
+                    ));
                 }
             }
         }
     }
     Err(error(
         lines.last_line(),
-        format!("unexpected end of file: {}", describe(expect, &joints, &stack)),
+        format!(
+            "unexpected end of file: {}",
+            describe(expect, &joints, &stack)
+        ),
     ))
 }
 
@@ -358,10 +423,19 @@ fn offset(toks: &[&[u8]], i: &mut usize, n: usize) -> Result<Vector3<f64>, BvhEr
     let mut v = Vector3::zeros();
     for (axis, name) in ["x", "y", "z"].iter().enumerate() {
         let Some(tok) = toks.get(*i) else {
-            return Err(error(n, format!("expected 3 numbers after OFFSET, found {axis}")));
+            return Err(error(
+                n,
+                format!("expected 3 numbers after OFFSET, found {axis}"),
+            ));
         };
         v[axis] = number(tok).ok_or_else(|| {
-            error(n, format!("expected a finite number for OFFSET {name}, found `{}`", show(tok)))
+            error(
+                n,
+                format!(
+                    "expected a finite number for OFFSET {name}, found `{}`",
+                    show(tok)
+                ),
+            )
         })?;
         *i += 1;
     }
@@ -378,19 +452,34 @@ fn channels(toks: &[&[u8]], i: &mut usize, n: usize) -> Result<Vec<Channel>, Bvh
         .and_then(|t| t.parse().ok())
         .filter(|&c| c <= 6)
         .ok_or_else(|| {
-            error(n, format!("expected a channel count from 0 to 6 after CHANNELS, found `{}`", show(count_tok)))
+            error(
+                n,
+                format!(
+                    "expected a channel count from 0 to 6 after CHANNELS, found `{}`",
+                    show(count_tok)
+                ),
+            )
         })?;
     let listed = &toks[*i..];
     if listed.len() != count {
         return Err(error(
             n,
-            format!("CHANNELS says {count} channels but lists {}; expected {count} channels", listed.len()),
+            format!(
+                "CHANNELS says {count} channels but lists {}; expected {count} channels",
+                listed.len()
+            ),
         ));
     }
     let mut out = Vec::with_capacity(count);
     for tok in listed {
         let c = Channel::from_name(tok).ok_or_else(|| {
-            error(n, format!("expected a channel name (Xposition ... Zrotation), found `{}`", show(tok)))
+            error(
+                n,
+                format!(
+                    "expected a channel name (Xposition ... Zrotation), found `{}`",
+                    show(tok)
+                ),
+            )
         })?;
         if out.contains(&c) {
             return Err(error(n, format!("channel {c} is listed twice")));
@@ -419,37 +508,74 @@ fn strip_prefix_ci<'a>(text: &'a [u8], prefix: &str) -> Option<&'a [u8]> {
 }
 
 /// `Frames: N`, `Frame Time: t`, then the frame lines.
-fn parse_motion(lines: &mut Lines<'_>, channel_count: usize) -> Result<(usize, f64, Vec<f64>), BvhError> {
+fn parse_motion(
+    lines: &mut Lines<'_>,
+    channel_count: usize,
+) -> Result<(usize, f64, Vec<f64>), BvhError> {
     // `Frames: 12`, `Frames:\t12`, `Frames:12`, `Frames 12`: join the words and read past the
     // keyword and an optional colon.
     let Some((n, toks)) = next_nonblank(lines) else {
-        return Err(error(lines.last_line(), "unexpected end of file: expected `Frames: <count>`"));
+        return Err(error(
+            lines.last_line(),
+            "unexpected end of file: expected `Frames: <count>`",
+        ));
     };
     let joined = toks.concat();
     let frames_text = strip_prefix_ci(&joined, "frames")
         .map(|r| r.strip_prefix(b":").unwrap_or(r))
-        .ok_or_else(|| error(n, format!("expected `Frames: <count>`, found `{}`", show(&joined))))?;
+        .ok_or_else(|| {
+            error(
+                n,
+                format!("expected `Frames: <count>`, found `{}`", show(&joined)),
+            )
+        })?;
     let frame_count: u64 = std::str::from_utf8(frames_text)
         .ok()
         .filter(|t| !t.is_empty() && t.bytes().all(|b| b.is_ascii_digit()))
         .and_then(|t| t.parse().ok())
         .ok_or_else(|| {
-            error(n, format!("expected a whole number of frames after `Frames:`, found `{}`", show(frames_text)))
+            error(
+                n,
+                format!(
+                    "expected a whole number of frames after `Frames:`, found `{}`",
+                    show(frames_text)
+                ),
+            )
         })?;
     if frame_count > MAX_FRAMES {
-        return Err(error(n, format!("Frames: {frame_count} is more than the {MAX_FRAMES} frames accepted")));
+        return Err(error(
+            n,
+            format!("Frames: {frame_count} is more than the {MAX_FRAMES} frames accepted"),
+        ));
     }
     let frame_count = frame_count as usize;
 
     let Some((n, toks)) = next_nonblank(lines) else {
-        return Err(error(lines.last_line(), "unexpected end of file: expected `Frame Time: <seconds>`"));
+        return Err(error(
+            lines.last_line(),
+            "unexpected end of file: expected `Frame Time: <seconds>`",
+        ));
     };
     let joined = toks.concat();
     let time_text = strip_prefix_ci(&joined, "frametime")
         .map(|r| r.strip_prefix(b":").unwrap_or(r))
-        .ok_or_else(|| error(n, format!("expected `Frame Time: <seconds>`, found `{}`", show(&joined))))?;
+        .ok_or_else(|| {
+            error(
+                n,
+                format!(
+                    "expected `Frame Time: <seconds>`, found `{}`",
+                    show(&joined)
+                ),
+            )
+        })?;
     let frame_time_s = number(time_text).filter(|&t| t > 0.0).ok_or_else(|| {
-        error(n, format!("expected a positive frame time in seconds after `Frame Time:`, found `{}`", show(time_text)))
+        error(
+            n,
+            format!(
+                "expected a positive frame time in seconds after `Frame Time:`, found `{}`",
+                show(time_text)
+            ),
+        )
     })?;
 
     // Reserve only what the remaining bytes could hold (each value takes at least 2 bytes).
@@ -467,7 +593,9 @@ fn parse_motion(lines: &mut Lines<'_>, channel_count: usize) -> Result<(usize, f
                 if channel_count == 0 {
                     "expected empty frame lines: the hierarchy has no channels".to_string()
                 } else {
-                    format!("expected the end of the file after {frame_count} frames (`Frames: {frame_count}`), found more motion data")
+                    format!(
+                        "expected the end of the file after {frame_count} frames (`Frames: {frame_count}`), found more motion data"
+                    )
                 },
             ));
         }
@@ -482,7 +610,14 @@ fn parse_motion(lines: &mut Lines<'_>, channel_count: usize) -> Result<(usize, f
         }
         for (k, tok) in toks.iter().enumerate() {
             let v = number(tok).ok_or_else(|| {
-                error(n, format!("expected a finite number for value {} of frame {frames_read}, found `{}`", k + 1, show(tok)))
+                error(
+                    n,
+                    format!(
+                        "expected a finite number for value {} of frame {frames_read}, found `{}`",
+                        k + 1,
+                        show(tok)
+                    ),
+                )
             })?;
             values.push(v);
         }
@@ -491,7 +626,9 @@ fn parse_motion(lines: &mut Lines<'_>, channel_count: usize) -> Result<(usize, f
     if channel_count > 0 && frames_read != frame_count {
         return Err(error(
             lines.last_line(),
-            format!("unexpected end of file: expected {frame_count} frames (`Frames: {frame_count}`), found {frames_read}"),
+            format!(
+                "unexpected end of file: expected {frame_count} frames (`Frames: {frame_count}`), found {frames_read}"
+            ),
         ));
     }
     Ok((frame_count, frame_time_s, values))

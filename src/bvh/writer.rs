@@ -166,7 +166,11 @@ pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io:
         buf.clear();
     }
 
-    let _ = writeln!(buf, "MOTION\nFrames: {frames}\nFrame Time: {}", motion.fps.frame_time_s());
+    let _ = writeln!(
+        buf,
+        "MOTION\nFrames: {frames}\nFrame Time: {}",
+        motion.fps.frame_time_s()
+    );
     out.write_all(buf.as_bytes())?;
     buf.clear();
 
@@ -190,7 +194,9 @@ fn validate(motion: &BvhMotion, scale: f64) -> io::Result<()> {
     let rig = motion.rig;
     let frames = motion.root_positions.len();
     if !(scale.is_finite() && scale > 0.0) {
-        return Err(invalid(format!("BVH scale must be a positive number, got {scale}")));
+        return Err(invalid(format!(
+            "BVH scale must be a positive number, got {scale}"
+        )));
     }
     if motion.euler_deg.len() != rig.len() {
         return Err(invalid(format!(
@@ -231,7 +237,9 @@ fn validate(motion: &BvhMotion, scale: f64) -> io::Result<()> {
         .iter()
         .position(|p| !p.iter().all(|v| v.is_finite()))
     {
-        return Err(invalid(format!("BVH motion: root position at frame {f} is not finite")));
+        return Err(invalid(format!(
+            "BVH motion: root position at frame {f} is not finite"
+        )));
     }
     Ok(())
 }

@@ -1,5 +1,6 @@
 //! Command-line interface: one module per subcommand.
 
+mod convert;
 mod inspect;
 
 use clap::{Args, Parser, Subcommand};
@@ -20,6 +21,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Convert captures into keyframed BVH and glTF on a rig, with a JSON sidecar.
+    Convert(convert::ConvertArgs),
     /// Summarise a capture: time frame, nodes, sample rates, gaps, dropped lines.
     Inspect(inspect::InspectArgs),
 }
@@ -31,11 +34,11 @@ pub struct ReadArgs {
     #[arg(long, value_name = "FORMAT", value_parser = parse_format)]
     input_format: Option<InputFormat>,
     /// Drop the first N lines of the log (fixed-length cleaning).
-    #[arg(long, value_name = "N", default_value_t = 0)]
-    skip_lines: u64,
+    #[arg(long, value_name = "N")]
+    skip_lines: Option<u64>,
     /// Drop samples in the first S seconds; t = 0 moves to the earliest kept sample.
-    #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = parse_seconds)]
-    skip_seconds: f64,
+    #[arg(long, value_name = "S", value_parser = parse_seconds)]
+    skip_seconds: Option<f64>,
     /// The sensors' world frame, overriding the format's (enu, ned, nwu, opensim).
     #[arg(long, value_name = "WORLD")]
     world: Option<World>,
@@ -43,11 +46,24 @@ pub struct ReadArgs {
 
 impl ReadArgs {
     pub fn options(&self) -> ReadOptions {
-        ReadOptions {
-            format: self.input_format,
-            skip_lines: self.skip_lines,
-            skip_seconds: self.skip_seconds,
-            world: self.world,
+        let mut options = ReadOptions::default();
+        self.apply(&mut options);
+        options
+    }
+
+    /// Overrides `options` (e.g. from a config file) with the flags given.
+    pub fn apply(&self, options: &mut ReadOptions) {
+        if self.input_format.is_some() {
+            options.format = self.input_format;
+        }
+        if let Some(n) = self.skip_lines {
+            options.skip_lines = n;
+        }
+        if let Some(s) = self.skip_seconds {
+            options.skip_seconds = s;
+        }
+        if self.world.is_some() {
+            options.world = self.world;
         }
     }
 }
@@ -65,6 +81,7 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
+        Command::Convert(args) => convert::run(args),
         Command::Inspect(args) => inspect::run(args),
     }
 }

@@ -24,7 +24,11 @@ fn parse_signed_axes(s: &str) -> Result<Vec<Vector3<f64>>, String> {
                 out.push(v);
             }
             ' ' => {}
-            _ => return Err(format!("`{s}`: unexpected `{c}`; expected axes such as +y-x+z")),
+            _ => {
+                return Err(format!(
+                    "`{s}`: unexpected `{c}`; expected axes such as +y-x+z"
+                ));
+            }
         }
     }
     if sign.is_some() {
@@ -45,14 +49,18 @@ pub fn parse_mount_axes(s: &str) -> Result<UnitQuaternion<f64>, String> {
     let m = Matrix3::from_columns(&[axes[0], axes[1], axes[2]]);
     let det = m.determinant();
     if det.abs() < 0.5 {
-        return Err(format!("`{s}`: an axis is repeated; each of x, y, z must appear once"));
+        return Err(format!(
+            "`{s}`: an axis is repeated; each of x, y, z must appear once"
+        ));
     }
     if det < 0.0 {
         return Err(format!(
             "`{s}`: the axes are left-handed (a mirror, not a rotation); flip the sign of one axis"
         ));
     }
-    Ok(UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m)))
+    Ok(UnitQuaternion::from_rotation_matrix(
+        &Rotation3::from_matrix_unchecked(m),
+    ))
 }
 
 #[cfg(test)]

@@ -109,7 +109,8 @@ pub fn parse(value: &Value, file: &Path) -> Result<LegacyMapping, MappingError> 
             let target = text("target")?.to_string();
             let mut channels = Vec::with_capacity(3);
             for axis in ["X", "Y", "Z"] {
-                let c = parse_channel(text(axis)?).map_err(|e| MappingError::new(file, key(axis), e))?;
+                let c = parse_channel(text(axis)?)
+                    .map_err(|e| MappingError::new(file, key(axis), e))?;
                 channels.push(c);
             }
             if targets.iter().any(|t: &LegacyTarget| t.target == target) {
@@ -146,9 +147,15 @@ mod tests {
         assert_eq!(m.targets[0].node, "N1_0");
         assert_eq!(m.targets[1].node, "N1_1");
         assert_eq!(m.targets[0].channels[1].sign, -1.0);
-        assert_eq!(m.targets[0].channels[1].source, EulerSource { angle: 2, mpu: 1 });
+        assert_eq!(
+            m.targets[0].channels[1].source,
+            EulerSource { angle: 2, mpu: 1 }
+        );
         assert_eq!(m.targets[1].channels[0].sign, 1.0);
-        let bad: Value = serde_json::from_str(r#"{"N1": {"MPU1": {"target": "A", "X": "+yaw3", "Y": "+yaw1", "Z": "+yaw1"}}}"#).unwrap();
+        let bad: Value = serde_json::from_str(
+            r#"{"N1": {"MPU1": {"target": "A", "X": "+yaw3", "Y": "+yaw1", "Z": "+yaw1"}}}"#,
+        )
+        .unwrap();
         let e = parse(&bad, Path::new("l.json")).unwrap_err().to_string();
         assert!(e.contains("`N1.MPU1.X`"), "{e}");
     }

@@ -254,13 +254,21 @@ pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingErro
     let calibration = match raw.calibration {
         None => None,
         Some(c) => {
-            let pose =
-                PoseRef::parse(&c.pose).map_err(|e| MappingError::new(file, "calibration.pose", e))?;
+            let pose = PoseRef::parse(&c.pose)
+                .map_err(|e| MappingError::new(file, "calibration.pose", e))?;
             if !(c.start_s.is_finite() && c.start_s >= 0.0) {
-                return Err(MappingError::new(file, "calibration.start_s", "expected seconds ≥ 0"));
+                return Err(MappingError::new(
+                    file,
+                    "calibration.start_s",
+                    "expected seconds ≥ 0",
+                ));
             }
             if !(c.duration_s.is_finite() && c.duration_s >= 0.0) {
-                return Err(MappingError::new(file, "calibration.duration_s", "expected seconds ≥ 0"));
+                return Err(MappingError::new(
+                    file,
+                    "calibration.duration_s",
+                    "expected seconds ≥ 0",
+                ));
             }
             Some(CalibrationWindow {
                 pose,
@@ -275,7 +283,10 @@ pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingErro
             .map_err(|e| MappingError::new(file, format!("sensors.{id}.mount"), e))?;
         let forward = match &s.forward {
             None => None,
-            Some(f) => Some(parse_axis(f).map_err(|e| MappingError::new(file, format!("sensors.{id}.forward"), e))?),
+            Some(f) => Some(
+                parse_axis(f)
+                    .map_err(|e| MappingError::new(file, format!("sensors.{id}.forward"), e))?,
+            ),
         };
         if let Some((other, _)) = sensors
             .iter()
@@ -285,7 +296,10 @@ pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingErro
             return Err(MappingError::new(
                 file,
                 format!("sensors.{id}.bone"),
-                format!("bone `{}` is already driven by sensor `{other}`; one sensor per bone", s.bone),
+                format!(
+                    "bone `{}` is already driven by sensor `{other}`; one sensor per bone",
+                    s.bone
+                ),
             ));
         }
         sensors.push(SensorMapping {
@@ -353,7 +367,9 @@ impl Mapping {
             .filter(|id| rig.joint_index(id).is_some())
             .map(|id| SensorMapping {
                 sensor: id.to_string(),
-                bone: rig.joints()[rig.joint_index(id).expect("filtered")].name.clone(),
+                bone: rig.joints()[rig.joint_index(id).expect("filtered")]
+                    .name
+                    .clone(),
                 mount: Mount::Calibrate,
                 forward: None,
             })
@@ -425,10 +441,14 @@ mod tests {
         assert_eq!(m.sensors[0].mount, Mount::Calibrate);
         assert_eq!(m.sensors[0].forward, Some(Vector3::x()));
         // "+y-x+z": sensor x = bone +y, sensor y = bone -x, sensor z = bone +z: 90° about z.
-        let Mount::Fixed(q) = m.sensors[1].mount else { panic!() };
+        let Mount::Fixed(q) = m.sensors[1].mount else {
+            panic!()
+        };
         assert!((q * Vector3::x() - Vector3::y()).norm() < 1e-12);
         assert!((q * Vector3::y() + Vector3::x()).norm() < 1e-12);
-        let Mount::Fixed(q) = m.sensors[2].mount else { panic!() };
+        let Mount::Fixed(q) = m.sensors[2].mount else {
+            panic!()
+        };
         // 90° about y: x → -z.
         assert!((q * Vector3::x() + Vector3::z()).norm() < 1e-4);
     }
@@ -437,10 +457,16 @@ mod tests {
     fn errors_name_file_and_key() {
         let twice = r#"{"sensors": {"a": {"bone": "Hips"}, "a": {"bone": "Spine"}}}"#;
         let e = parse(twice).unwrap_err().to_string();
-        assert!(e.contains("m.json") && e.contains("`a` is mapped twice"), "{e}");
+        assert!(
+            e.contains("m.json") && e.contains("`a` is mapped twice"),
+            "{e}"
+        );
         let same_bone = r#"{"sensors": {"a": {"bone": "Hips"}, "b": {"bone": "Hips"}}}"#;
         let e = parse(same_bone).unwrap_err().to_string();
-        assert!(e.contains("`sensors.b.bone`") && e.contains("already driven by sensor `a`"), "{e}");
+        assert!(
+            e.contains("`sensors.b.bone`") && e.contains("already driven by sensor `a`"),
+            "{e}"
+        );
         let bad_mount = r#"{"sensors": {"a": {"bone": "Hips", "mount": "+x+x+z"}}}"#;
         let e = parse(bad_mount).unwrap_err().to_string();
         assert!(e.contains("`sensors.a.mount`"), "{e}");
@@ -448,16 +474,33 @@ mod tests {
         let e = parse(left).unwrap_err().to_string();
         assert!(e.contains("left-handed"), "{e}");
         let bad_q = r#"{"sensors": {"a": {"bone": "Hips", "mount": [1, 1, 0, 0]}}}"#;
-        assert!(parse(bad_q).unwrap_err().to_string().contains("unit quaternion"));
+        assert!(
+            parse(bad_q)
+                .unwrap_err()
+                .to_string()
+                .contains("unit quaternion")
+        );
         let bad_world = r#"{"world": "xyz", "sensors": {"a": {"bone": "Hips"}}}"#;
-        assert!(parse(bad_world).unwrap_err().to_string().contains("`world`"));
+        assert!(
+            parse(bad_world)
+                .unwrap_err()
+                .to_string()
+                .contains("`world`")
+        );
         let typo = r#"{"sensors": {"a": {"bone": "Hips", "mout": "calibrate"}}}"#;
         assert!(parse(typo).unwrap_err().to_string().contains("mout"));
         let rig = crate::rig::load_rig("mixamo").unwrap();
-        let MappingFile::Quaternion(m) = parse(r#"{"sensors": {"a": {"bone": "Tail"}}}"#).unwrap() else {
+        let MappingFile::Quaternion(m) = parse(r#"{"sensors": {"a": {"bone": "Tail"}}}"#).unwrap()
+        else {
             panic!()
         };
-        let e = m.resolve(&rig, Path::new("m.json")).unwrap_err().to_string();
-        assert!(e.contains("`sensors.a.bone`") && e.contains("unknown bone `Tail`"), "{e}");
+        let e = m
+            .resolve(&rig, Path::new("m.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`sensors.a.bone`") && e.contains("unknown bone `Tail`"),
+            "{e}"
+        );
     }
 }

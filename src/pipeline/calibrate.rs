@@ -95,16 +95,24 @@ pub fn solve(
     // 2. A known mount: the bone's forward (+Z in the pose) seen through the sensor.
     if heading.is_none() {
         for (i, s) in sensors.iter().enumerate() {
-            let Mount::Fixed(mount) = s.mount else { continue };
+            let Mount::Fixed(mount) = s.mount else {
+                continue;
+            };
             let bone_world_unturned = held[i] * mount.inverse();
             let facing = bone_world_unturned * (pose_world[i].inverse() * Vector3::z());
             if let Some(h) = heading_towards_plus_z(&facing) {
-                heading = Some((h, HeadingSource::KnownMount { sensor: s.sensor.clone() }));
+                heading = Some((
+                    h,
+                    HeadingSource::KnownMount {
+                        sensor: s.sensor.clone(),
+                    },
+                ));
                 break;
             }
         }
     }
-    let (heading, heading_source) = heading.unwrap_or((UnitQuaternion::identity(), HeadingSource::None));
+    let (heading, heading_source) =
+        heading.unwrap_or((UnitQuaternion::identity(), HeadingSource::None));
     let mounts = sensors
         .iter()
         .enumerate()
@@ -143,7 +151,11 @@ mod tests {
         // The subject faces +X (rig world, before heading); the sensor's +y axis points forward.
         let held = rot(Vector3::z(), -90.0); // maps sensor +y to +x
         assert!((held * Vector3::y() - Vector3::x()).norm() < 1e-12);
-        let cal = solve(&[sensor(Mount::Calibrate, Some(Vector3::y()))], &[held], &[UnitQuaternion::identity()]);
+        let cal = solve(
+            &[sensor(Mount::Calibrate, Some(Vector3::y()))],
+            &[held],
+            &[UnitQuaternion::identity()],
+        );
         assert_eq!(cal.heading_source.label(), "declared-forward");
         assert!((cal.heading * Vector3::x() - Vector3::z()).norm() < 1e-12);
         // The bone equals its pose (identity) after heading and mount.
@@ -164,7 +176,11 @@ mod tests {
         );
         assert_eq!(cal.heading_source.label(), "mounts");
         assert!((cal.heading * (-Vector3::x()) - Vector3::z()).norm() < 1e-12);
-        let cal = solve(&[sensor(Mount::Calibrate, None)], &[held], &[UnitQuaternion::identity()]);
+        let cal = solve(
+            &[sensor(Mount::Calibrate, None)],
+            &[held],
+            &[UnitQuaternion::identity()],
+        );
         assert_eq!(cal.heading_source, HeadingSource::None);
         assert!(cal.heading.angle() < 1e-12);
     }

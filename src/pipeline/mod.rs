@@ -97,9 +97,13 @@ pub struct Converted {
 pub enum PipelineError {
     #[error(transparent)]
     Mapping(#[from] MappingError),
-    #[error("none of the mapped sensors ({mapped}) has orientation data in the take (sensors in the take: {present}); check the mapping's sensor ids")]
+    #[error(
+        "none of the mapped sensors ({mapped}) has orientation data in the take (sensors in the take: {present}); check the mapping's sensor ids"
+    )]
     NoSensors { mapped: String, present: String },
-    #[error("{file}: `calibration`: the window {start_s} s + {duration_s} s is outside the take, which ends at {end_s:.3} s")]
+    #[error(
+        "{file}: `calibration`: the window {start_s} s + {duration_s} s is outside the take, which ends at {end_s:.3} s"
+    )]
     CalibrationOutside {
         file: String,
         start_s: f64,
@@ -113,7 +117,9 @@ pub enum PipelineError {
         pose: String,
         known: String,
     },
-    #[error("--trim {start_s}:{end_s} keeps no frame of the take (frames run from 0 s to {end_take_s:.3} s)")]
+    #[error(
+        "--trim {start_s}:{end_s} keeps no frame of the take (frames run from 0 s to {end_take_s:.3} s)"
+    )]
     EmptyTrim {
         start_s: f64,
         end_s: f64,
@@ -125,7 +131,10 @@ pub enum PipelineError {
 
 /// The mean orientation of a track over [start, start + duration]; the value interpolated at the
 /// window's middle when no sample falls inside.
-fn held_over(track: &Track<UnitQuaternion<f64>>, window: &CalibrationWindow) -> UnitQuaternion<f64> {
+fn held_over(
+    track: &Track<UnitQuaternion<f64>>,
+    window: &CalibrationWindow,
+) -> UnitQuaternion<f64> {
     let end = window.start_s + window.duration_s;
     let inside: Vec<UnitQuaternion<f64>> = track
         .iter()
@@ -190,8 +199,18 @@ pub fn run(
     }
     if sensors.is_empty() {
         return Err(PipelineError::NoSensors {
-            mapped: mapping.sensors.iter().map(|s| s.sensor.as_str()).collect::<Vec<_>>().join(", "),
-            present: take.sensors().iter().map(|s| s.id()).collect::<Vec<_>>().join(", "),
+            mapped: mapping
+                .sensors
+                .iter()
+                .map(|s| s.sensor.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+            present: take
+                .sensors()
+                .iter()
+                .map(|s| s.id())
+                .collect::<Vec<_>>()
+                .join(", "),
         });
     }
 
@@ -220,12 +239,14 @@ pub fn run(
                     end_s,
                 });
             }
-            let pose = rig.pose(&w.pose.label()).ok_or_else(|| PipelineError::UnknownPose {
-                file: file.clone(),
-                rig: rig.name().to_string(),
-                pose: w.pose.label(),
-                known: rig.pose_names().collect::<Vec<_>>().join(", "),
-            })?;
+            let pose = rig
+                .pose(&w.pose.label())
+                .ok_or_else(|| PipelineError::UnknownPose {
+                    file: file.clone(),
+                    rig: rig.name().to_string(),
+                    pose: w.pose.label(),
+                    known: rig.pose_names().collect::<Vec<_>>().join(", "),
+                })?;
             let pose_world_all = rig.world_rotations(&pose.local);
             let pose_world: Vec<_> = sensors.iter().map(|s| pose_world_all[s.bone]).collect();
             let held: Vec<_> = tracks.iter().map(|t| held_over(t, w)).collect();
@@ -258,7 +279,10 @@ pub fn run(
         .collect();
 
     // 3. The frame grid, trimmed, and resampling.
-    let t_last = bone_tracks.iter().map(|t| t.last_time_s()).fold(0.0, f64::max);
+    let t_last = bone_tracks
+        .iter()
+        .map(|t| t.last_time_s())
+        .fold(0.0, f64::max);
     let total = options.fps.frame_count(t_last) as usize;
     let (first, frames) = match options.trim {
         None => (0, total),

@@ -53,7 +53,10 @@ mod tests {
         world[arm] = Some(vec![a; 2]);
         let local = to_local(&rig, &world, 2);
         assert!(local[hips][1].angle_to(&h) < 1e-12);
-        assert!(local[spine][0].angle() < 1e-12, "unmapped spine keeps its rest rotation");
+        assert!(
+            local[spine][0].angle() < 1e-12,
+            "unmapped spine keeps its rest rotation"
+        );
         // LeftArm's parents (LeftShoulder, Spine2, Spine1, Spine) are unmapped: its world is
         // hips ⊗ local, so local = h⁻¹ ⊗ a.
         assert!(local[arm][0].angle_to(&(h.inverse() * a)) < 1e-12);

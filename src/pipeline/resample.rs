@@ -7,7 +7,11 @@ use nalgebra::{Quaternion, UnitQuaternion};
 
 /// Spherical linear interpolation along the shorter arc; `u` in [0, 1]. Unlike nalgebra's
 /// `slerp` it never panics (rotations 180° apart take a well-defined path).
-pub fn slerp_shortest(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>, u: f64) -> UnitQuaternion<f64> {
+pub fn slerp_shortest(
+    a: &UnitQuaternion<f64>,
+    b: &UnitQuaternion<f64>,
+    u: f64,
+) -> UnitQuaternion<f64> {
     let qa = a.into_inner();
     let mut qb = b.into_inner();
     let mut dot = qa.dot(&qb);

@@ -72,7 +72,9 @@ impl RotationEntry {
                 let q = Quaternion::new(*w, *x, *y, *z);
                 let n = q.norm();
                 if !n.is_finite() || n < 1e-9 {
-                    return Err(format!("[{w}, {x}, {y}, {z}] is not a rotation quaternion (w, x, y, z)"));
+                    return Err(format!(
+                        "[{w}, {x}, {y}, {z}] is not a rotation quaternion (w, x, y, z)"
+                    ));
                 }
                 Ok(UnitQuaternion::from_quaternion(q))
             }
@@ -80,8 +82,13 @@ impl RotationEntry {
                 let axis = Vector3::from(*axis);
                 let unit = Unit::try_new(axis, 1e-9)
                     .filter(|_| angle_deg.is_finite())
-                    .ok_or_else(|| format!("axis {axis:?} with angle {angle_deg}° is not a rotation"))?;
-                Ok(UnitQuaternion::from_axis_angle(&unit, angle_deg.to_radians()))
+                    .ok_or_else(|| {
+                        format!("axis {axis:?} with angle {angle_deg}° is not a rotation")
+                    })?;
+                Ok(UnitQuaternion::from_axis_angle(
+                    &unit,
+                    angle_deg.to_radians(),
+                ))
             }
         }
     }
@@ -103,7 +110,9 @@ pub enum RigLoadError {
         #[source]
         source: RigError,
     },
-    #[error("unknown rig `{0}`; expected a built-in rig (mixamo, sou12) or a rig file (.yaml, .json, .bvh)")]
+    #[error(
+        "unknown rig `{0}`; expected a built-in rig (mixamo, sou12) or a rig file (.yaml, .json, .bvh)"
+    )]
     Unknown(String),
 }
 
@@ -114,10 +123,14 @@ impl RigFile {
         for (i, j) in self.joints.iter().enumerate() {
             let parent = match &j.parent {
                 None => None,
-                Some(p) => Some(*index.get(p.as_str()).ok_or_else(|| RigError::UnknownParent {
-                    joint: j.name.clone(),
-                    parent: p.clone(),
-                })?),
+                Some(p) => Some(
+                    *index
+                        .get(p.as_str())
+                        .ok_or_else(|| RigError::UnknownParent {
+                            joint: j.name.clone(),
+                            parent: p.clone(),
+                        })?,
+                ),
             };
             joints.push(Joint {
                 name: j.name.clone(),
@@ -189,10 +202,14 @@ mod tests {
     #[test]
     fn schema_errors_name_the_problem() {
         let bad = "name: x\njoints:\n  - {name: a, offset: [0,0,0]}\n  - {name: b, parent: c, offset: [0,1,0]}\n";
-        let e = parse_rig(bad, Path::new("bad.yaml")).unwrap_err().to_string();
+        let e = parse_rig(bad, Path::new("bad.yaml"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("bad.yaml") && e.contains("`c`"), "{e}");
         let typo = "name: x\njoints:\n  - {name: a, ofset: [0,0,0]}\n";
-        let e = parse_rig(typo, Path::new("t.yaml")).unwrap_err().to_string();
+        let e = parse_rig(typo, Path::new("t.yaml"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("ofset"), "{e}");
     }
 }

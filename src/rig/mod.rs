@@ -5,7 +5,7 @@
 //! the local rotation of each joint. Rig files are YAML or JSON (schema in README, "Rigs"); any
 //! BVH file's hierarchy serves as a rig too.
 
-mod file;
+pub mod file;
 
 pub use file::{RigFile, load_rig};
 
@@ -98,7 +98,11 @@ fn strip_prefix(name: &str) -> &str {
 }
 
 impl Rig {
-    pub fn new(name: impl Into<String>, units: LengthUnit, joints: Vec<Joint>) -> Result<Rig, RigError> {
+    pub fn new(
+        name: impl Into<String>,
+        units: LengthUnit,
+        joints: Vec<Joint>,
+    ) -> Result<Rig, RigError> {
         if joints.is_empty() {
             return Err(RigError::NoJoints);
         }
@@ -162,7 +166,9 @@ impl Rig {
     pub fn joint_index(&self, name: &str) -> Option<usize> {
         self.joints.iter().position(|j| j.name == name).or_else(|| {
             let bare = strip_prefix(name);
-            self.joints.iter().position(|j| strip_prefix(&j.name) == bare)
+            self.joints
+                .iter()
+                .position(|j| strip_prefix(&j.name) == bare)
         })
     }
 
@@ -275,21 +281,34 @@ mod tests {
 
     #[test]
     fn validates_hierarchy() {
-        assert_eq!(Rig::new("x", LengthUnit::Metres, vec![]), Err(RigError::NoJoints));
+        assert_eq!(
+            Rig::new("x", LengthUnit::Metres, vec![]),
+            Err(RigError::NoJoints)
+        );
         let dup = vec![joint("a", None, [0.0; 3]), joint("a", Some(0), [0.0; 3])];
         assert_eq!(
             Rig::new("x", LengthUnit::Metres, dup),
             Err(RigError::DuplicateJoint("a".into()))
         );
-        let forward = vec![joint("a", None, [0.0; 3]), joint("b", Some(2), [0.0; 3]), joint("c", Some(0), [0.0; 3])];
-        assert!(matches!(Rig::new("x", LengthUnit::Metres, forward), Err(RigError::UnknownParent { .. })));
+        let forward = vec![
+            joint("a", None, [0.0; 3]),
+            joint("b", Some(2), [0.0; 3]),
+            joint("c", Some(0), [0.0; 3]),
+        ];
+        assert!(matches!(
+            Rig::new("x", LengthUnit::Metres, forward),
+            Err(RigError::UnknownParent { .. })
+        ));
         let two_roots = vec![joint("a", None, [0.0; 3]), joint("b", None, [0.0; 3])];
         assert_eq!(
             Rig::new("x", LengthUnit::Metres, two_roots),
             Err(RigError::SecondRoot("b".into()))
         );
         let nan = vec![joint("a", None, [f64::NAN, 0.0, 0.0])];
-        assert!(matches!(Rig::new("x", LengthUnit::Metres, nan), Err(RigError::NonFinite(_))));
+        assert!(matches!(
+            Rig::new("x", LengthUnit::Metres, nan),
+            Err(RigError::NonFinite(_))
+        ));
     }
 
     #[test]
@@ -298,7 +317,11 @@ mod tests {
         let rig = Rig::new(
             "t",
             LengthUnit::Metres,
-            vec![joint("root", None, [0.0, 1.0, 0.0]), joint("arm", Some(0), [1.0, 0.0, 0.0]), joint("hand", Some(1), [0.5, 0.0, 0.0])],
+            vec![
+                joint("root", None, [0.0, 1.0, 0.0]),
+                joint("arm", Some(0), [1.0, 0.0, 0.0]),
+                joint("hand", Some(1), [0.5, 0.0, 0.0]),
+            ],
         )
         .unwrap();
         // Rotate the root 90° about +Y: +x goes to -z.

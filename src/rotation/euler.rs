@@ -21,17 +21,18 @@
 //! `mat3_normalized_to_compatible_eulO`; `mathutils.Quaternion.to_euler` calls them through
 //! `quat_to_eulO` / `quat_to_compatible_eulO`), done here in `f64` instead of Blender's `f32`:
 //!
-//! 1. Build the rotation matrix. With Blender's axis triple `(i, j, k)` (the Blender order's
-//!    letters, so `i` is the axis applied *last*) and `cy = hypot(R[i][i], R[j][i])` (`R[row][col]`),
-//!    the two solutions are
+//! 1. Build the rotation matrix `R` (`R[row][col]`; Blender's column-major `mat[c][r]`). With
+//!    Blender's axis triple `(i, j, k)` (the letters of the Blender order, i.e. ours reversed:
+//!    `i = axes()[2]`, `k = axes()[0]`) and `cy = hypot(R[i][i], R[j][i])`, the two solutions are
 //!    `e1 = (atan2(R[k][j], R[k][k]), atan2(-R[k][i], cy), atan2(R[j][i], R[i][i]))` and
 //!    `e2 = (atan2(-R[k][j], -R[k][k]), atan2(-R[k][i], -cy), atan2(-R[j][i], -R[i][i]))`
 //!    (per axis i, j, k), negated for odd permutations. `e1` has the middle angle in [-π/2, π/2];
 //!    `e2` is the same rotation as `(a + π, π − b, c + π)`. No `asin`, so no clamping is needed
 //!    and nothing can become NaN for a unit quaternion.
-//! 2. At gimbal lock, `cy <= GIMBAL_LOCK_EPSILON` (Blender's `EULER_HYPOT_EPSILON`, 3.75e-5), the
-//!    last-applied angle is set to 0 and the first-applied one takes the whole rotation about the
-//!    (then shared) axis: `e1 = e2 = (atan2(-R[j][k], R[j][j]), atan2(-R[k][i], cy), 0)`.
+//! 2. At gimbal lock, `cy <= GIMBAL_LOCK_EPSILON` (Blender's `EULER_HYPOT_EPSILON`, 3.75e-5),
+//!    Blender sets the angle about `k` to 0 — our **first** angle, `angles[0]` — and the last one,
+//!    `angles[2]` (about `i`), takes the whole rotation about the (then shared) axis:
+//!    `e1 = e2 = (atan2(-R[j][k], R[j][j]), atan2(-R[k][i], cy), 0)` per axis (i, j, k).
 //!    This costs at most about `2·cy` ≤ 7.5e-5 rad (0.004°) of rotation error inside that band
 //!    (tested), and is what Blender shows there; outside the band the conversion is exact to
 //!    about 1e-15.
@@ -55,7 +56,7 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 pub use super::quat::{angle_between, make_hemisphere_continuous};
 
 /// Blender's `EULER_HYPOT_EPSILON`: below this value of `cos(middle angle)` a rotation is treated
-/// as gimbal locked (last-applied angle 0). See the module documentation.
+/// as gimbal locked (first angle, `angles[0]`, set to 0). See the module documentation.
 pub const GIMBAL_LOCK_EPSILON: f64 = 3.75e-5;
 
 /// The quaternion of intrinsic Euler angles in application order:
@@ -73,7 +74,8 @@ pub fn to_quaternion(angles: [f64; 3], order: EulerOrder) -> UnitQuaternion<f64>
 }
 
 /// The principal Euler angles (application order) of `q`: middle angle in [-π/2, π/2], first and
-/// last in (-π, π]. At gimbal lock (see [`GIMBAL_LOCK_EPSILON`]) the last angle is 0.
+/// last in (-π, π]. At gimbal lock (see [`GIMBAL_LOCK_EPSILON`]) the first angle is 0 and the
+/// last one carries the rotation about the shared axis.
 ///
 /// This is Blender's first solution `eul1`; it never returns NaN for a finite quaternion.
 pub fn from_quaternion(q: &UnitQuaternion<f64>, order: EulerOrder) -> [f64; 3] {
@@ -142,7 +144,7 @@ pub fn to_blender_xyz(angles: [f64; 3], order: EulerOrder) -> [f64; 3] {
 fn two_solutions(q: &UnitQuaternion<f64>, order: EulerOrder) -> ([f64; 3], [f64; 3]) {
     let m: Matrix3<f64> = q.to_rotation_matrix().into_inner();
     let axes = order.axes();
-    // Blender's (i, j, k) are its own order string's axes, i.e. ours reversed: i is applied last.
+    // Blender's (i, j, k) are its own order string's axes, i.e. ours reversed.
     let (i, j, k) = (axes[2], axes[1], axes[0]);
     // Odd permutations of (x, y, z) (Blender's `parity`) negate all angles.
     let parity_odd = j != (i + 1) % 3;
@@ -315,7 +317,7 @@ mod tests {
                     let q = to_quaternion([a, b, c], order);
                     let e = from_quaternion(&q, order);
                     assert!(e.iter().all(|v| v.is_finite()));
-                    assert_eq!(e[2], 0.0, "{order}: last angle is 0 at gimbal lock");
+                    assert_eq!(e[0], 0.0, "{order}: first angle is 0 at gimbal lock");
                     assert!((e[1] - b).abs() < 1e-7, "{order} {e:?}");
                     let back = to_quaternion(e, order);
                     assert!(rot_err(&q, &back) < 1e-12, "{order} {e:?}");
@@ -327,7 +329,7 @@ mod tests {
         }
     }
 
-    /// Inside Blender's gimbal-lock band the last angle is dropped; the rotation error is
+    /// Inside Blender's gimbal-lock band the first angle is dropped; the rotation error is
     /// bounded by about 2·cos(middle angle).
     #[test]
     fn near_gimbal_lock_error_is_bounded() {
@@ -379,19 +381,25 @@ mod tests {
 
     #[test]
     fn compatible_eul_pi_flip() {
-        // After the 2π correction an angle sits exactly at the ±π boundary (−π − ε from
-        // rounding): the pi flip moves it by one more turn only if the others are within 90°.
+        // Just past the ±π boundary, the 2π correction lands inside (−π, π].
         let mut e = [-PI - 1e-9, 0.1, -0.1];
-        let old = [0.0, 0.0, 0.0];
-        // First loop: d = -π - 1e-9 < -π → + floor(0.5 + 0.5000000002)·2π = + 2π → π - 1e-9.
-        compatible_eul(&mut e, &old);
+        compatible_eul(&mut e, &[0.0, 0.0, 0.0]);
         assert!((e[0] - (PI - 1e-9)).abs() < 1e-12, "{e:?}");
         // Large differences are wrapped to the nearest turn.
         let mut e = [10.0, -10.0, 0.5];
         compatible_eul(&mut e, &[0.0, 0.0, 0.0]);
-        assert!((e[0] - (10.0 - TAU)).abs() < 1e-12);
-        assert!((e[1] - (-10.0 + TAU)).abs() < 1e-12);
+        assert!((e[0] - (10.0 - 2.0 * TAU)).abs() < 1e-12, "{e:?}");
+        assert!((e[1] - (-10.0 + 2.0 * TAU)).abs() < 1e-12, "{e:?}");
         assert_eq!(e[2], 0.5);
+        // 19π (f64) minus 3 turns rounds to −3.1415926535897967, still beyond −π: the pi flip
+        // adds one more turn because the other two angles are within 90°...
+        let mut e = [19.0 * PI, 0.1, -0.1];
+        compatible_eul(&mut e, &[0.0, 0.0, 0.0]);
+        assert!(e[0] > 0.0 && (e[0] - PI).abs() < 1e-14, "{e:?}");
+        // ... and does not when one of them is not.
+        let mut e = [19.0 * PI, 0.1, -2.0];
+        compatible_eul(&mut e, &[0.0, 0.0, 0.0]);
+        assert!(e[0] < -PI && (e[0] + PI).abs() < 1e-14, "{e:?}");
     }
 
     #[test]
@@ -411,7 +419,10 @@ mod tests {
                 .collect();
             let out = filter_track(&track, order);
             for (n, e) in out.iter().enumerate() {
-                assert!((e[0] - n as f64 * 0.07).abs() < 1e-9, "{order} frame {n}: {e:?}");
+                assert!(
+                    (e[0] - n as f64 * 0.07).abs() < 1e-9,
+                    "{order} frame {n}: {e:?}"
+                );
                 assert!((e[1] - 0.3).abs() < 1e-9 && (e[2] + 0.2).abs() < 1e-9);
             }
         }
@@ -509,7 +520,10 @@ mod tests {
                     r.min(PI - r)
                 };
                 let margin = FRAC_PI_2 - (b + step);
-                prop_assume!(margin > 0.2);
+                if margin < 0.05 {
+                    // Near gimbal lock Euler angles legitimately move fast (or jump at lock).
+                    continue;
+                }
                 let bound = 2.0 * step / margin.sin() + 1e-9;
                 for k in 0..3 {
                     let jump = (out[n][k] - out[n - 1][k]).abs();

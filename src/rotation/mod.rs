@@ -2,6 +2,9 @@
 //! hemisphere continuity and resampling.
 
 pub mod euler;
+pub mod quat;
+
+pub use quat::{angle_between, make_hemisphere_continuous};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -68,7 +71,8 @@ impl EulerOrder {
 
     /// The BVH channel names in order: ZXY → ["Zrotation", "Xrotation", "Yrotation"].
     pub fn bvh_channels(self) -> [&'static str; 3] {
-        self.axes().map(|a| ["Xrotation", "Yrotation", "Zrotation"][a])
+        self.axes()
+            .map(|a| ["Xrotation", "Yrotation", "Zrotation"][a])
     }
 }
 
@@ -85,6 +89,8 @@ impl FromStr for EulerOrder {
         EulerOrder::ALL
             .into_iter()
             .find(|o| o.name() == upper)
-            .ok_or_else(|| format!("unknown Euler order `{s}`; expected one of XYZ, XZY, YXZ, YZX, ZXY, ZYX"))
+            .ok_or_else(|| {
+                format!("unknown Euler order `{s}`; expected one of XYZ, XZY, YXZ, YZX, ZXY, ZYX")
+            })
     }
 }

@@ -3,6 +3,7 @@
 //! place).
 
 pub mod gltf;
+pub mod sidecar;
 
 use std::fs;
 use std::io::{self, Write};
@@ -19,7 +20,10 @@ pub fn temp_path(path: &Path) -> PathBuf {
 
 /// Writes a file atomically: readers see either the old file or the complete new one, never a
 /// partial one. The data is flushed to disk before the rename.
-pub fn write_atomic(path: &Path, write: impl FnOnce(&mut dyn Write) -> io::Result<()>) -> io::Result<()> {
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> io::Result<()> {
     let tmp = temp_path(path);
     let result = (|| {
         let file = fs::File::create(&tmp)?;
@@ -52,7 +56,11 @@ mod tests {
             Err(io::Error::other("boom"))
         });
         assert!(err.is_err());
-        assert_eq!(fs::read(&path).unwrap(), b"hello", "the old file is untouched");
+        assert_eq!(
+            fs::read(&path).unwrap(),
+            b"hello",
+            "the old file is untouched"
+        );
         assert!(!temp_path(&path).exists());
     }
 }

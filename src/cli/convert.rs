@@ -1,0 +1,151 @@
+//! `imubake convert <input>... --out <dir> [options]`.
+
+use super::ReadArgs;
+use anyhow::Context;
+use clap::Args;
+use imubake::config::Config;
+use imubake::convert::{ConvertSettings, OutputFormat, convert, take_stem};
+use imubake::fps::Fps;
+use imubake::pipeline::Trim;
+use imubake::rig::LengthUnit;
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct ConvertArgs {
+    /// Capture files or session folders; each is one take.
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    /// Output folder (created if missing).
+    #[arg(long, short)]
+    out: PathBuf,
+    /// YAML settings (the same keys as these flags); flags override it.
+    #[arg(long, value_name = "YAML")]
+    config: Option<PathBuf>,
+    /// Sensor-to-bone mapping (JSON); default: sensors drive the bones named like them.
+    #[arg(long, value_name = "JSON")]
+    mapping: Option<PathBuf>,
+    /// Target rig: a built-in name (mixamo, sou12) or a rig file (.yaml, .json).
+    #[arg(long, value_name = "NAME|FILE")]
+    rig: Option<String>,
+    /// Frame rate: 24, 25, 29.97 (= 30000/1001), 30, 60, 2000/7, ... [default: 30]
+    #[arg(long, value_name = "RATE")]
+    fps: Option<Fps>,
+    /// Output formats, comma-separated: bvh, glb, gltf [default: bvh,glb]
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    format: Option<Vec<OutputFormat>>,
+    /// BVH length unit: m or cm (glTF is always metres) [default: m]
+    #[arg(long, value_parser = parse_units)]
+    units: Option<LengthUnit>,
+    /// Keep only START:END seconds of the take (either side optional).
+    #[arg(long, value_name = "START:END")]
+    trim: Option<Trim>,
+    /// Print the sidecar as JSON on stdout (an array for several inputs).
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    read: ReadArgs,
+}
+
+fn parse_units(s: &str) -> Result<LengthUnit, String> {
+    match s {
+        "m" => Ok(LengthUnit::Metres),
+        "cm" => Ok(LengthUnit::Centimetres),
+        _ => Err(format!("`{s}`: expected m or cm")),
+    }
+}
+
+impl ConvertArgs {
+    fn settings(&self) -> anyhow::Result<ConvertSettings> {
+        let mut settings = match &self.config {
+            Some(path) => Config::load(path)?.to_settings(),
+            None => ConvertSettings::default(),
+        };
+        self.read.apply(&mut settings.read);
+        if self.mapping.is_some() {
+            settings.mapping = self.mapping.clone();
+        }
+        if self.rig.is_some() {
+            settings.rig = self.rig.clone();
+        }
+        if let Some(fps) = self.fps {
+            settings.pipeline.fps = fps;
+        }
+        if let Some(f) = &self.format {
+            settings.formats = f.clone();
+        }
+        if let Some(u) = self.units {
+            settings.units = u;
+        }
+        if self.trim.is_some() {
+            settings.pipeline.trim = self.trim;
+        }
+        Ok(settings)
+    }
+}
+
+pub fn run(args: ConvertArgs) -> anyhow::Result<ExitCode> {
+    let mut stems: HashMap<String, &PathBuf> = HashMap::new();
+    for input in &args.inputs {
+        if let Some(other) = stems.insert(take_stem(input), input) {
+            eprintln!(
+                "error: {} and {} would both write `{}.*`: rename one, or convert them into different --out folders",
+                other.display(),
+                input.display(),
+                take_stem(input)
+            );
+            return Ok(ExitCode::from(2));
+        }
+    }
+    let settings = args.settings()?;
+    let mut sidecars = Vec::new();
+    let mut failed = 0;
+    for input in &args.inputs {
+        match convert(input, &args.out, &settings) {
+            Ok(outcome) => {
+                for w in &outcome.sidecar.warnings {
+                    eprintln!("warning: {}: {w}", input.display());
+                }
+                if !args.json {
+                    let outputs: Vec<_> = outcome
+                        .sidecar
+                        .outputs
+                        .iter()
+                        .map(|o| o.path.as_str())
+                        .collect();
+                    println!(
+                        "{} → {} ({} frames at {} fps, {})",
+                        input.display(),
+                        args.out.display(),
+                        outcome.sidecar.frames,
+                        outcome.sidecar.fps,
+                        outputs.join(", ")
+                    );
+                }
+                sidecars.push(outcome.sidecar);
+            }
+            Err(e) => {
+                failed += 1;
+                eprintln!("error: {e}");
+            }
+        }
+    }
+    if args.json {
+        let mut stdout = std::io::stdout().lock();
+        if args.inputs.len() == 1 {
+            if let Some(s) = sidecars.first() {
+                serde_json::to_writer_pretty(&mut stdout, s)?;
+            }
+        } else {
+            serde_json::to_writer_pretty(&mut stdout, &sidecars)?;
+        }
+        writeln!(stdout).context("writing to stdout")?;
+    }
+    Ok(if failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
+}

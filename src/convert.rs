@@ -1,0 +1,434 @@
+//! One take from capture to outputs: read → pipeline → Euler filter → BVH / glTF → sidecar
+//! (written last, so its appearance means the take is complete).
+
+use crate::anim::Animation;
+use crate::bvh::{BvhMotion, write_bvh_in};
+use crate::inspect::SensorSummaries;
+use crate::mapping::{
+    CalibrationRecord, Mapping, MappingError, MappingFile, MappingRecord, Mount, SensorRecord,
+    load_mapping,
+};
+use crate::pipeline::{self, Converted, PipelineError, PipelineOptions};
+use crate::read::{ReadError, ReadOptions, read_take};
+use crate::rig::file::RigLoadError;
+use crate::rig::{LengthUnit, Rig, load_rig};
+use crate::rotation::euler::filter_track;
+use crate::take::Take;
+use crate::write::gltf::{GltfWriteError, to_glb, to_gltf};
+use crate::write::sidecar::{
+    OutputRecord, PipelineRecord, RigRecord, Sidecar, SourceRecord, TrimRecord,
+};
+use crate::write::write_atomic;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::io::{self, Read};
+use std::path::{Path, PathBuf};
+
+/// An output file format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputFormat {
+    Bvh,
+    Glb,
+    /// `.gltf` JSON with a `.bin` buffer beside it.
+    Gltf,
+}
+
+impl OutputFormat {
+    pub fn name(self) -> &'static str {
+        match self {
+            OutputFormat::Bvh => "bvh",
+            OutputFormat::Glb => "glb",
+            OutputFormat::Gltf => "gltf",
+        }
+    }
+}
+
+impl std::str::FromStr for OutputFormat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "bvh" => Ok(OutputFormat::Bvh),
+            "glb" => Ok(OutputFormat::Glb),
+            "gltf" => Ok(OutputFormat::Gltf),
+            _ => Err(format!(
+                "unknown output format `{s}`; expected bvh, glb or gltf"
+            )),
+        }
+    }
+}
+
+/// Everything a conversion needs besides the input and the output folder.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConvertSettings {
+    pub read: ReadOptions,
+    /// A mapping file; without one, sensors drive the rig's bones of the same name.
+    pub mapping: Option<PathBuf>,
+    /// A built-in rig name or a rig file; default: the mapping's `rig`, else `mixamo`.
+    pub rig: Option<String>,
+    pub pipeline: PipelineOptions,
+    pub formats: Vec<OutputFormat>,
+    /// Length unit of the BVH output (glTF is always metres).
+    pub units: LengthUnit,
+}
+
+impl Default for ConvertSettings {
+    fn default() -> Self {
+        ConvertSettings {
+            read: ReadOptions::default(),
+            mapping: None,
+            rig: None,
+            pipeline: PipelineOptions::default(),
+            formats: vec![OutputFormat::Bvh, OutputFormat::Glb],
+            units: LengthUnit::Metres,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConvertError {
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    #[error(transparent)]
+    Mapping(#[from] MappingError),
+    #[error(transparent)]
+    Rig(#[from] RigLoadError),
+    #[error("{}: {source}", .input.display())]
+    Pipeline {
+        input: PathBuf,
+        #[source]
+        source: PipelineError,
+    },
+    #[error(
+        "{}: no mapping given and rig `{rig}` has no bone named like the take's sensors ({sensors}). \
+         Hint: pass --mapping (see mappings/), or --rig sou12 for paper-002 SOU logs",
+        .input.display()
+    )]
+    NoMapping {
+        input: PathBuf,
+        rig: String,
+        sensors: String,
+    },
+    #[error("{}: cannot write: {source}", .path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+    #[error("{}: {source}", .path.display())]
+    Gltf {
+        path: PathBuf,
+        #[source]
+        source: GltfWriteError,
+    },
+    #[error("{}: the legacy paper-002 mapping format is not supported by convert yet; use a quaternion mapping (README, \"Mappings\")", .0.display())]
+    LegacyMapping(PathBuf),
+}
+
+/// The name outputs of `input` are written under: the file name without its extension, or the
+/// folder name of a session folder.
+pub fn take_stem(input: &Path) -> String {
+    let name = if input.is_dir() {
+        input.file_name()
+    } else {
+        input.file_stem()
+    };
+    name.map(|n| n.to_string_lossy().into_owned())
+        .filter(|n| !n.is_empty() && n != "." && n != "..")
+        .unwrap_or_else(|| "take".to_string())
+}
+
+/// SHA-256 of a file, or of a folder's files (sorted relative paths and contents).
+pub fn source_sha256(path: &Path) -> io::Result<String> {
+    let mut hasher = Sha256::new();
+    if path.is_dir() {
+        let mut files = Vec::new();
+        collect_files(path, path, &mut files)?;
+        files.sort();
+        for rel in files {
+            hasher.update(rel.to_string_lossy().as_bytes());
+            hasher.update([0u8]);
+            hash_file(&path.join(&rel), &mut hasher)?;
+        }
+    } else {
+        hash_file(path, &mut hasher)?;
+    }
+    Ok(hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}
+
+fn hash_file(path: &Path, hasher: &mut Sha256) -> io::Result<()> {
+    let mut file = std::fs::File::open(path)?;
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = file.read(&mut buf)?;
+        if n == 0 {
+            return Ok(());
+        }
+        hasher.update(&buf[..n]);
+    }
+}
+
+fn collect_files(root: &Path, dir: &Path, out: &mut Vec<PathBuf>) -> io::Result<()> {
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let path = entry.path();
+        if entry.file_name().to_string_lossy().starts_with('.') {
+            continue;
+        }
+        if path.is_dir() {
+            collect_files(root, &path, out)?;
+        } else {
+            out.push(path.strip_prefix(root).unwrap_or(&path).to_path_buf());
+        }
+    }
+    Ok(())
+}
+
+/// The mapping to use and the file it came from (for messages and the sidecar).
+fn resolve_mapping(
+    input: &Path,
+    take: &Take,
+    settings: &ConvertSettings,
+) -> Result<(Mapping, Option<PathBuf>, Rig), ConvertError> {
+    let file_mapping = match &settings.mapping {
+        Some(path) => match load_mapping(path)? {
+            MappingFile::Quaternion(m) => Some((m, path.clone())),
+            MappingFile::Legacy(_) => return Err(ConvertError::LegacyMapping(path.clone())),
+        },
+        None => None,
+    };
+    let rig_name = settings
+        .rig
+        .clone()
+        .or_else(|| file_mapping.as_ref().and_then(|(m, _)| m.rig.clone()))
+        .unwrap_or_else(|| "mixamo".to_string());
+    let rig = load_rig(&rig_name)?;
+    match file_mapping {
+        Some((m, path)) => Ok((m, Some(path), rig)),
+        None => {
+            let ids: Vec<&str> = take.sensors().iter().map(|s| s.id()).collect();
+            let mapping = Mapping::by_name(&rig, &ids).ok_or_else(|| ConvertError::NoMapping {
+                input: input.to_path_buf(),
+                rig: rig_name.clone(),
+                sensors: ids.join(", "),
+            })?;
+            Ok((mapping, None, rig))
+        }
+    }
+}
+
+/// Euler angles in degrees, `[joint][frame]`, each joint in its own channel order, with the
+/// discontinuity filter applied.
+pub fn euler_degrees(animation: &Animation) -> Vec<Vec<[f64; 3]>> {
+    animation
+        .rig()
+        .joints()
+        .iter()
+        .enumerate()
+        .map(|(j, joint)| {
+            filter_track(animation.local(j), joint.order)
+                .into_iter()
+                .map(|a| a.map(f64::to_degrees))
+                .collect()
+        })
+        .collect()
+}
+
+/// What a conversion wrote.
+#[derive(Debug, Clone)]
+pub struct ConvertOutcome {
+    pub sidecar: Sidecar,
+    pub sidecar_path: PathBuf,
+}
+
+fn mapping_record(
+    converted: &Converted,
+    rig: &Rig,
+    mapping: &Mapping,
+    file: Option<&Path>,
+) -> MappingRecord {
+    MappingRecord {
+        file: file.map(|f| f.to_string_lossy().into_owned()),
+        rig: rig.name().to_string(),
+        world: converted.world,
+        calibration: converted.window.as_ref().map(|w| CalibrationRecord {
+            pose: w.pose.label(),
+            start_s: w.start_s,
+            duration_s: w.duration_s,
+        }),
+        sensors: converted
+            .sensors
+            .iter()
+            .zip(&converted.calibration.mounts)
+            .map(|(s, q)| SensorRecord {
+                sensor: s.sensor.clone(),
+                bone: rig.joints()[s.bone].name.clone(),
+                mount_source: match s.mount {
+                    Mount::Calibrate => "calibrate",
+                    Mount::Fixed(_) => "fixed",
+                },
+                mount: [q.w, q.i, q.j, q.k],
+                forward: mapping
+                    .sensors
+                    .iter()
+                    .find(|m| m.sensor == s.sensor)
+                    .and_then(|m| m.forward)
+                    .map(|v| [v.x, v.y, v.z]),
+            })
+            .collect(),
+    }
+}
+
+/// Converts one take into `out_dir`.
+pub fn convert(
+    input: &Path,
+    out_dir: &Path,
+    settings: &ConvertSettings,
+) -> Result<ConvertOutcome, ConvertError> {
+    // Hash the source on the second core while the first parses it.
+    let (take, sha256) = std::thread::scope(|scope| {
+        let hasher = scope.spawn(|| source_sha256(input));
+        let take = read_take(input, &settings.read);
+        let sha = hasher
+            .join()
+            .unwrap_or_else(|_| Err(io::Error::other("hashing thread panicked")));
+        (take, sha)
+    });
+    let take = take?;
+    let sha256 = sha256.map_err(|e| ReadError::Io {
+        path: input.to_path_buf(),
+        source: e,
+    })?;
+    let (mapping, mapping_path, rig) = resolve_mapping(input, &take, settings)?;
+    let mapping_name = mapping_path
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("(sensors matched to bones by name)"));
+    let converted = pipeline::run(&take, &rig, &mapping, &mapping_name, &settings.pipeline)
+        .map_err(|source| ConvertError::Pipeline {
+            input: input.to_path_buf(),
+            source,
+        })?;
+    let animation = &converted.animation;
+
+    std::fs::create_dir_all(out_dir).map_err(|source| ConvertError::Write {
+        path: out_dir.to_path_buf(),
+        source,
+    })?;
+    let stem = take_stem(input);
+    let mut outputs = Vec::new();
+    let write_err = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ConvertError::Write { path, source }
+    };
+    for format in &settings.formats {
+        match format {
+            OutputFormat::Bvh => {
+                let path = out_dir.join(format!("{stem}.bvh"));
+                let euler = euler_degrees(animation);
+                let motion = BvhMotion {
+                    rig: animation.rig(),
+                    fps: animation.fps(),
+                    root_positions: animation.root_positions(),
+                    euler_deg: &euler,
+                };
+                write_atomic(&path, |w| write_bvh_in(w, &motion, settings.units))
+                    .map_err(write_err(&path))?;
+                outputs.push(OutputRecord {
+                    format: "bvh",
+                    path: format!("{stem}.bvh"),
+                });
+            }
+            OutputFormat::Glb => {
+                let path = out_dir.join(format!("{stem}.glb"));
+                let bytes = to_glb(animation, &stem).map_err(|source| ConvertError::Gltf {
+                    path: path.clone(),
+                    source,
+                })?;
+                write_atomic(&path, |w| w.write_all(&bytes)).map_err(write_err(&path))?;
+                outputs.push(OutputRecord {
+                    format: "glb",
+                    path: format!("{stem}.glb"),
+                });
+            }
+            OutputFormat::Gltf => {
+                let path = out_dir.join(format!("{stem}.gltf"));
+                let bin_name = format!("{stem}.bin");
+                let bin_path = out_dir.join(&bin_name);
+                let (json, bin) =
+                    to_gltf(animation, &stem, &bin_name).map_err(|source| ConvertError::Gltf {
+                        path: path.clone(),
+                        source,
+                    })?;
+                // The buffer first, so a .gltf never points at a missing .bin.
+                write_atomic(&bin_path, |w| w.write_all(&bin)).map_err(write_err(&bin_path))?;
+                write_atomic(&path, |w| w.write_all(json.as_bytes())).map_err(write_err(&path))?;
+                outputs.push(OutputRecord {
+                    format: "gltf",
+                    path: format!("{stem}.gltf"),
+                });
+            }
+        }
+    }
+
+    let mut warnings = take.warnings().to_vec();
+    warnings.extend(converted.warnings.iter().cloned());
+    let heading_sensor = match &converted.calibration.heading_source {
+        pipeline::calibrate::HeadingSource::DeclaredForward { sensor }
+        | pipeline::calibrate::HeadingSource::KnownMount { sensor } => Some(sensor.clone()),
+        pipeline::calibrate::HeadingSource::None => None,
+    };
+    let h = converted.calibration.heading;
+    let sidecar = Sidecar {
+        imubake_version: env!("CARGO_PKG_VERSION"),
+        source: SourceRecord {
+            path: input.to_string_lossy().into_owned(),
+            sha256,
+            format: take.source().format,
+            world: converted.world,
+            start_timestamp: take.source().start_timestamp.clone(),
+        },
+        fps: animation.fps(),
+        frames: animation.frames(),
+        duration_s: animation.duration_s(),
+        rig: RigRecord {
+            name: rig.name().to_string(),
+            units: settings.units.name(),
+            bones: rig.len(),
+        },
+        mapping: mapping_record(&converted, &rig, &mapping, mapping_path.as_deref()),
+        pipeline: PipelineRecord {
+            fusion: None,
+            smoothing: None,
+            root: settings.pipeline.root.label(),
+            heading: converted.calibration.heading_source.label(),
+            heading_sensor,
+            heading_deg: (h.scaled_axis().y).to_degrees(),
+            trim: settings.pipeline.trim.map(|t| TrimRecord {
+                start_s: t.start_s,
+                end_s: (t.end_s < f64::MAX).then_some(t.end_s),
+                first_frame: converted.first_frame,
+            }),
+            mode: "quaternion",
+        },
+        outputs,
+        sensors: SensorSummaries::of(&take),
+        dropped_lines: take.dropped_lines().to_vec(),
+        repaired_lines: take.repaired_lines().to_vec(),
+        warnings,
+    };
+    let sidecar_path = out_dir.join(format!("{stem}.imubake.json"));
+    let json = serde_json::to_vec_pretty(&sidecar).expect("the sidecar serialises");
+    write_atomic(&sidecar_path, |w| {
+        w.write_all(&json)?;
+        w.write_all(b"\n")
+    })
+    .map_err(write_err(&sidecar_path))?;
+    Ok(ConvertOutcome {
+        sidecar,
+        sidecar_path,
+    })
+}

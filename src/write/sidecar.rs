@@ -1,0 +1,75 @@
+//! The sidecar `<stem>.imubake.json` (conventions.md): exactly what was done to a take. Its
+//! field names are a contract read by the Blender add-on and scripts.
+
+use crate::fps::Fps;
+use crate::inspect::SensorSummaries;
+use crate::mapping::MappingRecord;
+use crate::take::LineReport;
+use serde::Serialize;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Sidecar {
+    pub imubake_version: &'static str,
+    pub source: SourceRecord,
+    pub fps: Fps,
+    pub frames: usize,
+    /// (frames − 1) / fps.
+    pub duration_s: f64,
+    pub rig: RigRecord,
+    pub mapping: MappingRecord,
+    pub pipeline: PipelineRecord,
+    pub outputs: Vec<OutputRecord>,
+    pub sensors: SensorSummaries,
+    pub dropped_lines: Vec<LineReport>,
+    pub repaired_lines: Vec<LineReport>,
+    pub warnings: Vec<String>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct SourceRecord {
+    pub path: String,
+    pub sha256: String,
+    pub format: crate::read::InputFormat,
+    /// The world the sensors were read in (the mapping's `world` when it overrides the format's).
+    pub world: crate::world::World,
+    pub start_timestamp: String,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RigRecord {
+    pub name: String,
+    /// Length unit of the written BVH (glTF is always metres).
+    pub units: &'static str,
+    pub bones: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct PipelineRecord {
+    pub fusion: Option<String>,
+    pub smoothing: Option<serde_json::Value>,
+    pub root: &'static str,
+    pub heading: &'static str,
+    /// The sensor whose forward axis or mount gave the heading.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heading_sensor: Option<String>,
+    /// Heading applied about +Y, degrees.
+    pub heading_deg: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub trim: Option<TrimRecord>,
+    /// `"quaternion"`, or `"legacy-euler"` for paper 002's Listing-2 mappings.
+    pub mode: &'static str,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct TrimRecord {
+    pub start_s: f64,
+    pub end_s: Option<f64>,
+    /// Frame of the untrimmed grid that became frame 0.
+    pub first_frame: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct OutputRecord {
+    pub format: &'static str,
+    pub path: String,
+}
