@@ -63,10 +63,8 @@ impl Config {
                 .map_err(|e| err(format!("{e}; see README, \"Configuration\"")))?
         };
         let base = path.parent().unwrap_or(Path::new(""));
-        if let Some(m) = &config.mapping {
-            if m.is_relative() {
-                config.mapping = Some(base.join(m));
-            }
+        if let Some(m) = config.mapping.as_ref().filter(|m| m.is_relative()) {
+            config.mapping = Some(base.join(m));
         }
         if let Some(r) = &config.rig {
             let p = Path::new(r);
@@ -90,10 +88,8 @@ impl Config {
             f.parse::<InputFormat>()
                 .map_err(|e| format!("`input_format`: {e}"))?;
         }
-        if let Some(s) = self.skip_seconds {
-            if !(s.is_finite() && s >= 0.0) {
-                return Err("`skip_seconds`: expected seconds ≥ 0".into());
-            }
+        if self.skip_seconds.is_some_and(|s| !(s.is_finite() && s >= 0.0)) {
+            return Err("`skip_seconds`: expected seconds ≥ 0".into());
         }
         if self.formats.as_ref().is_some_and(Vec::is_empty) {
             return Err("`formats`: name at least one of bvh, glb, gltf".into());
@@ -103,9 +99,11 @@ impl Config {
 
     /// Settings from this file over the defaults.
     pub fn to_settings(&self) -> ConvertSettings {
-        let mut s = ConvertSettings::default();
-        s.mapping = self.mapping.clone();
-        s.rig = self.rig.clone();
+        let mut s = ConvertSettings {
+            mapping: self.mapping.clone(),
+            rig: self.rig.clone(),
+            ..ConvertSettings::default()
+        };
         if let Some(fps) = self.fps {
             s.pipeline.fps = fps;
         }

@@ -16,6 +16,7 @@ pub mod pipeline;
 pub mod read;
 pub mod rig;
 pub mod rotation;
+pub mod simulate;
 pub mod take;
 pub mod world;
 pub mod write;

@@ -342,7 +342,11 @@ fn structural_errors() {
         (with(7, None), 7, "expected `{`"),
         // A missing `}` of Prop (line 22): every later `}` closes one level too low, so MOTION
         // comes while the root is still open.
-        (with(22, None), 37, "in joint `Pelvis`, found `MOTION`"),
+        (
+            with(22, None),
+            37,
+            "expected `}` closing joint `Pelvis` (opened at line 3)",
+        ),
         // An extra `}` after the root.
         (
             good.replace("}\nMOTION", "}\n}\nMOTION"),
@@ -382,6 +386,7 @@ fn structural_errors() {
     ];
     for (text, line, expected) in cases {
         let err = bvh::parse(text.as_bytes()).expect_err(expected);
+        eprintln!("{err}");
         assert_eq!(err.line, line, "{err}");
         assert!(
             err.message.contains(expected),
@@ -415,4 +420,50 @@ fn huge_frame_claim_does_not_allocate() {
     assert_eq!(bvh.frame_count(), 100_000_000);
     assert!(bvh.values().is_empty());
     assert!(bvh.frame(99_999_999).is_empty());
+}
+
+/// 3,000 nested joints (the written file indents each level, so it grows quadratically): neither
+/// the reader nor the writer recurses, so nothing overflows.
+#[test]
+fn deep_nesting() {
+    let depth = 3_000;
+    let mut text = String::from("HIERARCHY\n");
+    for i in 0..depth {
+        text.push_str(if i == 0 { "ROOT j0\n{\n" } else { "" });
+        if i > 0 {
+            text.push_str(&format!("JOINT j{i}\n{{\n"));
+        }
+        text.push_str("OFFSET 0 1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n");
+    }
+    text.push_str("End Site\n{\nOFFSET 0 1 0\n}\n");
+    text.push_str(&"}\n".repeat(depth));
+    text.push_str("MOTION\nFrames: 1\nFrame Time: 0.1\n");
+    text.push_str(&"0 0 0 ".repeat(depth));
+    text.push('\n');
+    let bvh = bvh::parse(text.as_bytes()).unwrap();
+    assert_eq!(bvh.joints().len(), depth);
+    assert_eq!(bvh.joints()[depth - 1].parent, Some(depth - 2));
+    let p = bvh.world_positions(0);
+    assert_eq!(p[depth - 1], Vector3::new(0.0, depth as f64, 0.0));
+
+    let rig = bvh.to_rig("deep", LengthUnit::Metres).unwrap();
+    let roots = vec![Vector3::new(0.0, 1.0, 0.0)];
+    let angles = vec![vec![[0.0; 3]]; depth];
+    let mut out = Vec::new();
+    bvh::write_bvh(
+        &mut out,
+        &bvh::BvhMotion {
+            rig: &rig,
+            fps: imubake::fps::Fps::new(10, 1).unwrap(),
+            root_positions: &roots,
+            euler_deg: &angles,
+        },
+    )
+    .unwrap();
+    assert_eq!(bvh::parse(&out).unwrap().joints().len(), depth);
+
+    // Unclosed: the error names the innermost open joint.
+    let cut = text.split("}\n}\n}\nMOTION").next().unwrap();
+    let err = bvh::parse(cut.as_bytes()).unwrap_err();
+    assert!(err.message.contains("expected `}` closing joint"), "{err}");
 }

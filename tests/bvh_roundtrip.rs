@@ -109,7 +109,7 @@ fn real_files_round_trip() {
 /// Euler angles (degrees) of `q` in `order`, listed in application order, by nalgebra's
 /// general extraction (Shuster & Markley), independent of the writer.
 fn euler_of(q: &UnitQuaternion<f64>, order: EulerOrder) -> [f64; 3] {
-    let axes = order.axes().map(|a| Vector3::<f64>::ith_axis(a));
+    let axes = order.axes().map(Vector3::<f64>::ith_axis);
     let r: Rotation3<f64> = q.to_rotation_matrix();
     let (angles, _) = r.euler_angles_ordered(axes, false);
     angles.map(f64::to_degrees)

@@ -8,7 +8,8 @@ mod common;
 use common::{missing, python};
 use imubake::anim::Animation;
 use imubake::fps::Fps;
-use imubake::rig::load_rig;
+use imubake::rig::{Joint, LengthUnit, Rig, load_rig};
+use imubake::rotation::EulerOrder;
 use imubake::write::gltf::{to_glb, to_gltf};
 use nalgebra::{Unit, UnitQuaternion, Vector3};
 use std::path::{Path, PathBuf};
@@ -143,6 +144,42 @@ fn validator_finds_nothing_in_glb_and_gltf() {
     let one = dir.path().join("still.glb");
     std::fs::write(&one, to_glb(&still, "still").unwrap()).unwrap();
     assert_clean(&validate(&one, &modules));
+
+    // 300 joints (JOINTS_0 as UNSIGNED_SHORT), a chain in centimetres without end sites, every
+    // joint animated.
+    let joints = (0..300usize)
+        .map(|i| Joint {
+            name: format!("j{i}"),
+            parent: i.checked_sub(1),
+            offset: if i == 0 {
+                Vector3::new(0.0, 100.0, 0.0)
+            } else {
+                Vector3::new(0.0, 1.0, 0.5)
+            },
+            order: EulerOrder::ZXY,
+            end_site: None,
+        })
+        .collect();
+    let rig = Rig::new("chain", LengthUnit::Centimetres, joints).unwrap();
+    let fps = Fps::new(60, 1).unwrap();
+    let local = (0..300)
+        .map(|j| {
+            (0..40)
+                .map(|n| UnitQuaternion::from_euler_angles(0.01 * j as f64, 0.3 * n as f64, 0.0))
+                .collect()
+        })
+        .collect();
+    let chain = Animation::new(
+        rig,
+        fps,
+        local,
+        vec![true; 300],
+        vec![Vector3::new(0.0, 100.0, 0.0); 40],
+    )
+    .unwrap();
+    let long = dir.path().join("chain.glb");
+    std::fs::write(&long, to_glb(&chain, "chain").unwrap()).unwrap();
+    assert_clean(&validate(&long, &modules));
 }
 
 #[test]
@@ -258,12 +295,4 @@ fn blender_imports_an_armature_that_follows_forward_kinematics() {
         bones.len(),
         frames.len()
     );
-}
-
-#[test]
-fn zz_tmp_dump() {
-    std::fs::write("/tmp/spin.glb", to_glb(&take(), "spin").unwrap()).unwrap();
-    let (j, b) = to_gltf(&take(), "spin", "spin.bin").unwrap();
-    std::fs::write("/tmp/spin.gltf", j).unwrap();
-    std::fs::write("/tmp/spin.bin", b).unwrap();
 }

@@ -20,11 +20,15 @@
 //!   frame time that is not a positive number, a motion line whose number of values is not the
 //!   number of channels of the hierarchy, more or fewer frame lines than `Frames:` says, and
 //!   any number that is not finite (`nan`, `inf`, overflowing exponents).
-//! - bounded: nothing is allocated from a count read in the file; `Frames:` above
-//!   100,000,000 is refused outright, and every value stored was read from the text.
+//! - bounded: no allocation is sized by a count read in the file beyond what the input's
+//!   length can hold; `Frames:` above [`MAX_FRAMES`] (100,000,000) is refused outright, and every
+//!   value stored was read from the text. Nothing recurses, so deep nesting cannot overflow the
+//!   stack. No input makes [`parse`] panic (property-tested on arbitrary bytes and mutations).
 //!
 //! Position channels **replace** the joint's OFFSET component by component
-//! ([`Bvh::joint_translations`]); for the root this is Blender's reading (conventions.md, Units).
+//! ([`Bvh::joint_translations`]). This is Blender's reading (its importer keys
+//! `position − OFFSET` as the bone's location), and for the root it is the rule of
+//! conventions.md (Units): the root's position channels are its world position.
 //! Rotation channels are intrinsic and composed in file order: `Zrotation Xrotation Yrotation`
 //! with values z, x, y degrees is Rz(z)·Rx(x)·Ry(y) ([`Bvh::local_rotations`]).
 //!
@@ -32,7 +36,8 @@
 //!
 //! The writer takes a [`Rig`], a rational frame rate, root positions and per-joint Euler angles
 //! ([`BvhMotion`]) and writes a file that Blender, `bvh_anim` and this reader read back; see
-//! [`writer`](write_bvh) for the exact layout and [`write_bvh_in`] for writing centimetres.
+//! [`write_bvh_scaled`] for the exact layout, the End Sites it adds and the checks it makes, and
+//! [`write_bvh_in`] for writing another unit (`--units cm`: lengths × 100 from a metre rig).
 
 mod reader;
 mod writer;

@@ -166,7 +166,7 @@ fn parse_hierarchy(lines: &mut Lines<'_>) -> Result<Vec<BvhJoint>, BvhError> {
     let mut stack: Vec<Open> = Vec::new();
     let mut expect = Expect::Hierarchy;
 
-    while let Some((n, line)) = lines.next() {
+    for (n, line) in lines.by_ref() {
         let toks = tokens(line);
         let mut i = 0;
         while i < toks.len() {
@@ -323,6 +323,15 @@ fn parse_hierarchy(lines: &mut Lines<'_>) -> Result<Vec<BvhJoint>, BvhError> {
                             None => Expect::Motion,
                             Some(_) => Expect::JointBody,
                         };
+                    } else if is(tok, "MOTION") {
+                        let open_line = open.line;
+                        return Err(error(
+                            n,
+                            format!(
+                                "expected `}}` closing joint `{}` (opened at line {open_line}) before MOTION: a `}}` is missing",
+                                joints[j].name
+                            ),
+                        ));
                     } else {
                         return Err(error(
                             n,

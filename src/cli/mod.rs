@@ -2,6 +2,7 @@
 
 mod convert;
 mod inspect;
+mod simulate;
 
 use clap::{Args, Parser, Subcommand};
 use imubake::read::{InputFormat, ReadOptions};
@@ -25,6 +26,8 @@ enum Command {
     Convert(convert::ConvertArgs),
     /// Summarise a capture: time frame, nodes, sample rates, gaps, dropped lines.
     Inspect(inspect::InspectArgs),
+    /// Simulate the capture a mapping's sensors would record from BVH motion (tests, samples).
+    Simulate(simulate::SimulateArgs),
 }
 
 /// Flags shared by every command that reads captures.
@@ -83,5 +86,6 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Convert(args) => convert::run(args),
         Command::Inspect(args) => inspect::run(args),
+        Command::Simulate(args) => simulate::run(args),
     }
 }

@@ -34,14 +34,18 @@
 //!    `angles[2]` (about `i`), takes the whole rotation about the (then shared) axis:
 //!    `e1 = e2 = (atan2(-R[j][k], R[j][j]), atan2(-R[k][i], cy), 0)` per axis (i, j, k).
 //!    This costs at most about `2·cy` ≤ 7.5e-5 rad (0.004°) of rotation error inside that band
-//!    (tested), and is what Blender shows there; outside the band the conversion is exact to
-//!    about 1e-15.
+//!    (tested), and is what Blender shows there; outside the band the rotation error is about
+//!    1e-16 / cy (≤ 3e-12 rad). Angles of exactly −π (from `atan2(-0.0, -1.0)` or a negated π)
+//!    are reported as +π, and −0.0 as 0.0.
 //! 3. [`compatible`]: each solution is moved by `compatible_eul` towards `previous` — every angle
 //!    further than π from its previous value is shifted by the nearest multiple of 2π
 //!    (`floor(d / 2π + 0.5)`), then Blender's "pi flip": an angle still more than π away while
-//!    the two others are within π/2 is shifted by one more 2π towards `previous` (in exact
-//!    arithmetic this only fires at the ±π rounding boundary) — and the solution with the smaller
-//!    sum of absolute differences to `previous` wins, `e1` on a tie.
+//!    the two others are within π/2 is moved by one more turn to the other side of `previous`
+//!    (in f64 this only fires when rounding leaves the corrected difference a hair beyond ±π)
+//!    — and the solution with the smaller sum of absolute differences to `previous` wins, `e1`
+//!    on a tie. Blender's `pi_thresh` is `float(π)`, slightly above π, so in `f32` the flip also
+//!    fires for a difference of exactly π (a half turn with `previous` 0 comes out as −π there,
+//!    +π here): both answers are then exactly equally close, and only such ties can differ.
 //!
 //! Differences from `mathutils`: everything is `f64` (Blender computes and stores `f32`); and
 //! [`from_quaternion`] returns the principal solution `e1`, whereas Blender's
@@ -168,10 +172,13 @@ fn two_solutions(q: &UnitQuaternion<f64>, order: EulerOrder) -> ([f64; 3], [f64;
         e1[k] = 0.0;
         e2 = e1;
     }
-    if parity_odd {
-        for v in e1.iter_mut().chain(e2.iter_mut()) {
+    for v in e1.iter_mut().chain(e2.iter_mut()) {
+        if parity_odd {
             *v = -*v;
         }
+        // atan2(-0.0, -1.0) is -π and negation turns π into -π: report +π so that the
+        // principal range is (-π, π] whatever the sign of a zero; and no -0.0 in outputs.
+        *v = if *v == -PI { PI } else { *v + 0.0 };
     }
     // Per-axis (x, y, z) storage → application order.
     (from_blender_xyz(e1, order), from_blender_xyz(e2, order))
@@ -181,7 +188,8 @@ fn two_solutions(q: &UnitQuaternion<f64>, order: EulerOrder) -> ([f64; 3], [f64;
 /// "pi flip". The operation treats the three angles symmetrically, so it is the same in
 /// application order as in Blender's per-axis order.
 fn compatible_eul(eul: &mut [f64; 3], old: &[f64; 3]) {
-    // Blender: `pi_thresh = float(M_PI)`, `pi_x2 = 2 * float(M_PI)`.
+    // Blender uses `pi_thresh = float(M_PI)` and `pi_x2 = 2 * float(M_PI)` (f32); here the f64
+    // π and 2π, so that exact-π differences are not flipped (see the module documentation).
     let mut deul = [0.0; 3];
     for n in 0..3 {
         deul[n] = eul[n] - old[n];
@@ -400,6 +408,40 @@ mod tests {
         let mut e = [19.0 * PI, 0.1, -2.0];
         compatible_eul(&mut e, &[0.0, 0.0, 0.0]);
         assert!(e[0] < -PI && (e[0] + PI).abs() < 1e-14, "{e:?}");
+    }
+
+    #[test]
+    fn ties_keep_the_principal_solution() {
+        // Identity with previous (π/2, π/2, π/2): (0, 0, 0) and (π, π, π) are both 3π/2 away;
+        // Blender keeps the first solution on a tie (`d1 > d2` picks the second only).
+        for order in EulerOrder::ALL {
+            let q = UnitQuaternion::identity();
+            let e = compatible(&q, order, [FRAC_PI_2; 3]);
+            assert_eq!(e, [0.0; 3], "{order}");
+            let e = from_quaternion_blender(&q, order);
+            assert_eq!(e, [0.0; 3], "{order}");
+        }
+    }
+
+    #[test]
+    fn half_turns_give_plus_pi() {
+        for order in EulerOrder::ALL {
+            for axis in 0..3 {
+                let mut v = [0.0; 4];
+                v[axis + 1] = 1.0;
+                let q = UnitQuaternion::new_unchecked(Quaternion::new(v[0], v[1], v[2], v[3]));
+                let e = from_quaternion(&q, order);
+                assert!(
+                    e.iter().all(|a| *a == 0.0 || *a == PI),
+                    "{order} {axis}: {e:?}"
+                );
+                assert!(
+                    e.iter().all(|a| a.is_sign_positive()),
+                    "{order} {axis}: {e:?}"
+                );
+                assert!(rot_err(&q, &to_quaternion(e, order)) < 1e-15);
+            }
+        }
     }
 
     #[test]

@@ -22,6 +22,7 @@
 //! `names` feature, which this crate does not enable.
 
 use crate::anim::Animation;
+use crate::rotation::euler::make_hemisphere_continuous;
 use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -195,21 +196,22 @@ fn min_max<const N: usize>(items: &[[f32; N]]) -> (Value, Value) {
     (arr(min), arr(max))
 }
 
-/// Keys on one hemisphere: each quaternion's sign is flipped when its dot product with the
-/// previous written key is negative, so LINEAR interpolation takes the short way. Returned in
-/// glTF order x, y, z, w.
-fn hemisphere_continuous(track: &[UnitQuaternion<f64>]) -> Vec<[f32; 4]> {
-    let mut prev: Option<nalgebra::Vector4<f64>> = None;
+/// The keys of one rotation track in glTF order x, y, z, w, each on the previous key's
+/// hemisphere (sign flipped when its dot product with the previous key is negative), so LINEAR
+/// interpolation takes the short way.
+fn rotation_keys(track: &[UnitQuaternion<f64>]) -> Vec<[f32; 4]> {
+    let mut track = track.to_vec();
+    make_hemisphere_continuous(&mut track);
+    // nalgebra stores a quaternion's coordinates as (i, j, k, w) = glTF's x, y, z, w.
     track
         .iter()
         .map(|q| {
-            // nalgebra stores a quaternion's coordinates as (i, j, k, w) = glTF's x, y, z, w.
-            let mut c = q.coords;
-            if prev.is_some_and(|p| p.dot(&c) < 0.0) {
-                c = -c;
-            }
-            prev = Some(c);
-            [c.x as f32, c.y as f32, c.z as f32, c.w as f32]
+            [
+                q.coords.x as f32,
+                q.coords.y as f32,
+                q.coords.z as f32,
+                q.coords.w as f32,
+            ]
         })
         .collect()
 }
@@ -282,20 +284,15 @@ fn bone_mesh(anim: &Animation, rest: &[Vector3<f64>], metres: f64) -> BoneMesh {
         if let Some(end) = joint.end_site {
             push_bone(&mut mesh, j as u16, head, head + end * metres);
         } else if leaf {
-            // No end site: continue the joint's own direction by half its offset (at least 5 cm;
-            // straight up for a zero offset), so the leaf still shows.
+            // No end site: continue the joint's own direction by half its offset (at least 5 cm),
+            // so the leaf still shows; a lone root or a zero offset gets 10 cm straight up.
             let offset = joint.offset * metres;
-            let dir = if offset.norm() > 1e-9 && joint.parent.is_some() {
-                offset.normalize()
+            let tail = if offset.norm() > 1e-9 && joint.parent.is_some() {
+                head + offset.normalize() * (0.5 * offset.norm()).max(0.05)
             } else {
-                Vector3::y()
+                head + Vector3::y() * 0.1
             };
-            push_bone(
-                &mut mesh,
-                j as u16,
-                head,
-                head + dir * (0.5 * offset.norm()).max(0.05),
-            );
+            push_bone(&mut mesh, j as u16, head, tail);
         }
     }
     mesh
@@ -577,7 +574,7 @@ fn document(
         T::Vec3,
     );
     for j in (0..joints.len()).filter(|&j| j == 0 || anim.is_animated(j)) {
-        let keys = hemisphere_continuous(anim.local(j));
+        let keys = rotation_keys(anim.local(j));
         channel(
             &mut root,
             &mut bin,
@@ -848,6 +845,59 @@ mod tests {
         let (glb_doc, glb_bin) = chunks(&to_glb(&anim, "a").unwrap());
         assert_eq!(&glb_bin[..bin1.len()], &bin1[..]);
         assert_eq!(doc["accessors"], glb_doc["accessors"]);
+    }
+
+    #[test]
+    fn centimetre_rigs_are_written_in_metres() {
+        let anim = spinning(30);
+        let rig = anim.rig();
+        let joints = rig
+            .joints()
+            .iter()
+            .map(|j| crate::rig::Joint {
+                offset: j.offset * 100.0,
+                end_site: j.end_site.map(|e| e * 100.0),
+                ..j.clone()
+            })
+            .collect();
+        let cm_rig =
+            crate::rig::Rig::new("mixamo", crate::rig::LengthUnit::Centimetres, joints).unwrap();
+        let cm = Animation::new(
+            cm_rig,
+            anim.fps(),
+            (0..rig.len()).map(|j| anim.local(j).to_vec()).collect(),
+            (0..rig.len()).map(|j| anim.is_animated(j)).collect(),
+            anim.root_positions().iter().map(|p| p * 100.0).collect(),
+        )
+        .unwrap();
+        let (m_doc, m_bin) = chunks(&to_glb(&anim, "t").unwrap());
+        let (cm_doc, cm_bin) = chunks(&to_glb(&cm, "t").unwrap());
+        for (a, b) in m_doc["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(cm_doc["nodes"].as_array().unwrap())
+        {
+            for c in 0..3 {
+                let (a, b) = (
+                    a["translation"][c].as_f64().unwrap_or(0.0),
+                    b["translation"][c].as_f64().unwrap_or(0.0),
+                );
+                assert!((a - b).abs() < 1e-6, "{a} {b}");
+            }
+        }
+        // Every float in the buffer (IBMs, mesh, times, translations, rotations) agrees.
+        assert_eq!(m_bin.len(), cm_bin.len());
+        for (a, b) in m_bin.chunks_exact(4).zip(cm_bin.chunks_exact(4)) {
+            let (a, b) = (
+                f32::from_le_bytes(a.try_into().unwrap()),
+                f32::from_le_bytes(b.try_into().unwrap()),
+            );
+            assert!(
+                (a - b).abs() < 1e-6 || a.to_bits() == b.to_bits(),
+                "{a} {b}"
+            );
+        }
     }
 
     #[test]

@@ -17,8 +17,10 @@ object's slot (`action.layers[i].strips[j].channelbag(slot).fcurves`).
 import json
 import sys
 
-import addon_utils
 import bpy
+
+# Importable only once bpy is loaded.
+import addon_utils  # noqa: E402
 
 
 def channelbag_fcurves(obj):

@@ -34,8 +34,8 @@ Contents of each file (all lists are JSON arrays)
     * principal[n]: the principal solution (middle angle in [-pi/2, pi/2]) of quats[n]. mathutils'
       own Quaternion.to_euler(order) picks, of the two solutions, the one with the smaller sum of
       |angles|; when that one has |middle| > pi/2 the script converts it to the other one,
-      (a + pi, pi - b, c + pi) wrapped to (-pi, pi], and checks with mathutils that it is the same
-      rotation.
+      (a + pi, pi - b, c + pi) wrapped to (-pi, pi], and checks with mathutils'
+      Euler.to_quaternion() that it is the same rotation as mathutils' answer.
     * chain[0] = principal[0]; chain[n] = quats[n].to_euler(order, <chain[n-1] as a mathutils Euler>),
       i.e. Blender's discontinuity filter, fed with its own previous (float32) output.
   Kinds: smooth random motion (one with random quaternion sign flips, which must not matter),
@@ -49,8 +49,11 @@ Contents of each file (all lists are JSON arrays)
   choice) and the principal solution.
 - compat_pairs: random quaternion q, random previous angles in [-12, 12] rad (float32) and
   q.to_euler(order, previous) ("expected").
+- boundary_pairs: like compat_pairs, but exact ties: half turns about each axis with previous
+  at 0 or +-0.1, and the identity with previous (+-pi/2, +-pi/2, +-pi/2).
 - threshold_band: quaternions whose middle angle is 90 degrees minus delta (delta from 0 to 1e-3)
-  around Blender's gimbal-lock threshold, with "cy" = cos(middle) in float64 and principal.
+  around Blender's gimbal-lock threshold, with "cy" = |cos(middle)| computed in float64 from
+  the exact float32 quaternion, and the principal solution.
 - to_quaternion: random angles (float32, in [-7, 7] rad, beyond +-pi on purpose) and
   Euler(..., blender_order).to_quaternion() as [w, x, y, z] (sign as mathutils returns it).
 """
@@ -62,8 +65,7 @@ import random
 import struct
 import sys
 
-import bpy  # noqa: F401  (mathutils ships inside the bpy module)
-import mathutils
+import bpy  # mathutils ships inside the bpy module
 from mathutils import Euler, Quaternion
 
 SEED = 20240611
@@ -168,7 +170,7 @@ def cos_middle(q, order):
     For R = R_a0 R_a1 R_a2 the entry R[a0][a2] is +-sin(middle), so cos = sqrt(1 - R[a0][a2]^2),
     computed stably as the hypot of the other two entries of column a2.
     """
-    m = rotation_matrix(q)
+    m = rotation_matrix([f32(c) for c in q])  # the exact float32 values, not their decimals
     a0, a2 = AXIS[order[0]], AXIS[order[2]]
     rest = [m[r][a2] for r in range(3) if r != a0]
     return math.hypot(rest[0], rest[1])
@@ -298,18 +300,14 @@ def through_lock(rng, order, frames):
 
 
 def near_lock(rng, order, frames):
-    """Middle angle peaks at 89.9 degrees, then (second half) dips to -89.99 degrees."""
+    """Middle angle follows a sine peaking at 89.9 degrees (frame frames/4) and dipping to
+    -89.99 degrees (frame 3 frames/4); frames should be a multiple of 4."""
     a0, c0 = rng.uniform(-2, 2), rng.uniform(-2, 2)
     da, dc = rng.uniform(-0.04, 0.04), rng.uniform(-0.04, 0.04)
-    half = frames // 2
     out = []
     for n in range(frames):
-        if n < half:
-            peak, t = math.radians(89.9), n - half // 2
-            b = peak - 0.0008 * t * t
-        else:
-            peak, t = math.radians(89.99), n - half - half // 2
-            b = -(peak - 0.0008 * t * t)
+        s = math.sin(2.0 * math.pi * n / frames)
+        b = s * (math.radians(89.9) if s > 0 else math.radians(89.99))
         out.append(euler_q(order, [a0 + da * n, b, c0 + dc * n]))
     return out
 
@@ -325,7 +323,7 @@ def make_order(order, rng):
         trajectory_record("long_spin_first_axis", spin_first_axis(rng, order, 100), order),
         trajectory_record("tumble", tumble(rng, 60), order),
         trajectory_record("through_gimbal_lock", through_lock(rng, order, 50), order),
-        trajectory_record("near_gimbal_lock", near_lock(rng, order, 50), order),
+        trajectory_record("near_gimbal_lock", near_lock(rng, order, 48), order),
     ]
 
     singles = []
@@ -340,6 +338,20 @@ def make_order(order, rng):
         previous = [short32(rng.uniform(-12.0, 12.0)) for _ in range(3)]
         e = mu_quat(q).to_euler(blender, Euler(to_blender_xyz(previous, order), blender))
         compat_pairs.append({"quat": q, "previous": previous, "expected": to_ours(e, order)})
+
+    # Exact ties at the +-pi boundary and between the two solutions. Blender's compatible_eul
+    # compares in float32 with pi_thresh = float(pi) > pi, so e.g. a half turn about an axis
+    # with previous 0 comes out as -pi there (its "pi flip" fires); in float64 it is +pi. Both
+    # are equally close to previous: the Rust test accepts either and reports the tie.
+    boundary_pairs = []
+    half_turns = [[0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+    previous_list = [[0.0, 0.0, 0.0], [0.1, -0.1, 0.1], [-0.1, 0.1, -0.1]]
+    cases = [(q, prev) for q in half_turns for prev in previous_list]
+    cases.append(([1.0, 0.0, 0.0, 0.0], [short32(math.pi / 2)] * 3))
+    cases.append(([1.0, 0.0, 0.0, 0.0], [short32(-math.pi / 2)] * 3))
+    for q, previous in cases:
+        e = mu_quat(q).to_euler(blender, Euler(to_blender_xyz(previous, order), blender))
+        boundary_pairs.append({"quat": q, "previous": previous, "expected": to_ours(e, order)})
 
     threshold_band = []
     for delta in [0.0, 1e-7, 1e-6, 1e-5, 3.0e-5, 3.6e-5, 3.75e-5, 3.9e-5, 4.5e-5, 1e-4, 1e-3]:
@@ -364,6 +376,7 @@ def make_order(order, rng):
         "trajectories": trajectories,
         "singles": singles,
         "compat_pairs": compat_pairs,
+        "boundary_pairs": boundary_pairs,
         "threshold_band": threshold_band,
         "to_quaternion": to_quaternion,
     }

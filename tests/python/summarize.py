@@ -122,21 +122,26 @@ def xsens_mtw(folder):
 
 
 def xio_session(folder):
-    series = {}
+    """Per device: the quaternion stream; the take's clock spans every stream of every device."""
+    series, bounds = {}, []
     for device in sorted(os.listdir(folder)):
-        quats = os.path.join(folder, device, "Quaternion.csv")
-        if not os.path.isfile(quats):
-            continue
-        with open(quats, newline="") as f:
-            rows = list(csv.reader(f))[1:]
         name = re.sub(r"\s+[0-9A-F]{8}\s+\([^)]*\)$", "", device)
-        series[name] = [int(r[0]) / 1e6 for r in rows if r]
-    return series, []
+        for stream in ("Quaternion.csv", "Inertial.csv", "Magnetometer.csv"):
+            path = os.path.join(folder, device, stream)
+            if not os.path.isfile(path):
+                continue
+            with open(path, newline="") as f:
+                times = [int(r[0]) / 1e6 for r in list(csv.reader(f))[1:] if r]
+            bounds += [min(times), max(times)]
+            if stream == "Quaternion.csv":
+                series[name] = times
+    return series, [], bounds
 
 
-def summarize(series, dropped):
-    start = min(min(t) for t in series.values())
-    end = max(max(t) for t in series.values())
+def summarize(series, dropped, bounds=()):
+    """bounds: extra times (other streams) that the take's clock also spans."""
+    start = min([min(t) for t in series.values()] + list(bounds))
+    end = max([max(t) for t in series.values()] + list(bounds))
     sensors = {}
     for node, times in series.items():
         t = np.array(times, dtype=np.float64)

@@ -1,0 +1,449 @@
+//! `simulate`: the inverse of `convert`, for tests and samples. From BVH motion and a mapping,
+//! the capture the mapping's sensors would have recorded.
+//!
+//! The simulated body: bone `b` driven by source joint `J` has the world orientation
+//! `B_b(t) = W_J(t) ⊗ P_b` (rig world), where `W_J(t)` is the source joint's world rotation
+//! relative to the source's rest pose and `P_b` the bone's orientation in the mapping's
+//! calibration pose. So the subject holds the calibration pose while the source is at rest, and
+//! every bone's rotation since the calibration pose is the source joint's rotation since rest.
+//!
+//! Timeline: the calibration pose held for `hold_s`, a blend over `blend_s` from rest into the
+//! first source frame, then the source frames. A sensor reads
+//! `q_world_sensor = C⁻¹ ⊗ H ⊗ B_b(t) ⊗ q_bone_sensor ⊗ noise`, with `C` the world → rig rotation,
+//! `H` a heading about +Y, `q_bone_sensor` the mount (random where the mapping says `calibrate`,
+//! but consistent with a declared `forward` axis), sampled at its own instants (offset and
+//! jitter; timestamps are the true instants at the output's precision), with optional dropouts.
+
+use crate::bvh::Bvh;
+use crate::mapping::{Mapping, Mount};
+use crate::pipeline::resample::slerp_shortest;
+use crate::rig::{LengthUnit, Rig};
+use crate::rotation::EulerOrder;
+use crate::rotation::euler::from_quaternion;
+use crate::world::World;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use serde::Serialize;
+use std::fmt::Write as _;
+
+/// The capture format to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CaptureFormat {
+    /// imubake CSV with quaternions.
+    Csv,
+    /// Paper 002's SOU log (NED yaw/pitch/roll, ms timestamps) with debug text at the top.
+    Sou,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimulateOptions {
+    /// Source frames `first ..= last` (default: all).
+    pub first_frame: usize,
+    pub last_frame: Option<usize>,
+    pub rate_hz: f64,
+    /// Standard deviation of each sample's timing jitter, seconds (clipped to ±40 % of a period).
+    pub jitter_s: f64,
+    /// Orientation noise: the RMS angle, degrees, of a random rotation applied to every sample
+    /// (sensor frame; each rotation-vector component is normal with σ = noise / √3).
+    pub noise_deg: f64,
+    /// Probability that a sample is lost.
+    pub dropout: f64,
+    /// Heading about +Y in degrees; `None` draws one at random.
+    pub heading_deg: Option<f64>,
+    pub seed: u64,
+    pub hold_s: f64,
+    pub blend_s: f64,
+    pub format: CaptureFormat,
+    /// Target bone → source joint names where they differ (others match by name, `mixamorig:`
+    /// ignored).
+    pub bone_map: Vec<(String, String)>,
+}
+
+impl Default for SimulateOptions {
+    fn default() -> Self {
+        SimulateOptions {
+            first_frame: 0,
+            last_frame: None,
+            rate_hz: 100.0,
+            jitter_s: 0.0005,
+            noise_deg: 0.0,
+            dropout: 0.0,
+            heading_deg: None,
+            seed: 1,
+            hold_s: 2.0,
+            blend_s: 1.0,
+            format: CaptureFormat::Csv,
+            bone_map: Vec::new(),
+        }
+    }
+}
+
+/// What was simulated, for checking a conversion against it.
+#[derive(Debug, Clone, Serialize)]
+pub struct Truth {
+    pub world: World,
+    pub heading_deg: f64,
+    /// Take time at which source frame `first_frame` plays.
+    pub motion_start_s: f64,
+    pub first_frame: usize,
+    pub last_frame: usize,
+    pub source_frame_time_s: f64,
+    pub sensors: Vec<SensorTruth>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct SensorTruth {
+    pub sensor: String,
+    pub bone: String,
+    pub source_joint: String,
+    /// q_bone_sensor [w, x, y, z].
+    pub mount: [f64; 4],
+    pub samples: usize,
+}
+
+#[derive(Debug, Clone)]
+pub struct Simulated {
+    /// The capture file's text.
+    pub text: String,
+    pub truth: Truth,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimulateError {
+    #[error("bone `{bone}` (sensor `{sensor}`) has no source joint in the BVH; add it to --bone-map (BONE=JOINT)")]
+    NoSourceJoint { sensor: String, bone: String },
+    #[error("unknown bone `{0}` in the mapping's rig")]
+    UnknownBone(String),
+    #[error("the BVH has no frames in {first}..={last} (it has {frames})")]
+    Frames { first: usize, last: usize, frames: usize },
+    #[error("the mapping's calibration pose `{0}` is not defined by the rig")]
+    Pose(String),
+    #[error("--as sou needs sensors named <SOU>_0 and <SOU>_1 in pairs; `{0}` has no partner")]
+    SouPairs(String),
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// A small deterministic generator (SplitMix64), so the same seed gives the same capture on
+/// every machine.
+struct Rng(u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn normal(&mut self) -> f64 {
+        let u1 = self.uniform().max(1e-300);
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    }
+    /// A uniformly random rotation (Shoemake).
+    fn rotation(&mut self) -> UnitQuaternion<f64> {
+        let (u1, u2, u3) = (self.uniform(), self.uniform(), self.uniform());
+        let tau = 2.0 * std::f64::consts::PI;
+        let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+        UnitQuaternion::from_quaternion(Quaternion::new(
+            a * (tau * u2).sin(),
+            a * (tau * u2).cos(),
+            b * (tau * u3).sin(),
+            b * (tau * u3).cos(),
+        ))
+    }
+}
+
+/// The source motion, interpolated in time.
+struct Source {
+    /// Local rotations of every frame in range, `[frame][joint]` (frames before `first` empty).
+    locals: Vec<Vec<UnitQuaternion<f64>>>,
+    rig: Rig,
+    first: usize,
+    last: usize,
+}
+
+impl Source {
+    /// The world rotation of `joint` given each joint's local rotation: the product down its
+    /// chain from the root (only the chain is evaluated).
+    fn chain(&self, joint: usize, local: impl Fn(usize) -> UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+        let mut q = local(joint);
+        let mut j = joint;
+        while let Some(p) = self.rig.joints()[j].parent {
+            q = local(p) * q;
+            j = p;
+        }
+        q
+    }
+
+    /// World rotation of `joint` at `frame` (fractional: slerp of local rotations).
+    fn world_at(&self, joint: usize, frame: f64) -> UnitQuaternion<f64> {
+        let f = frame.clamp(self.first as f64, self.last as f64);
+        let k = (f.floor() as usize).min(self.last);
+        let u = f - k as f64;
+        let a = &self.locals[k];
+        if u > 0.0 && k < self.last {
+            let b = &self.locals[k + 1];
+            self.chain(joint, |j| slerp_shortest(&a[j], &b[j], u))
+        } else {
+            self.chain(joint, |j| a[j])
+        }
+    }
+}
+
+/// Simulates the capture. `rig` is the mapping's target rig (for the calibration pose).
+pub fn simulate(bvh: &Bvh, rig: &Rig, mapping: &Mapping, options: &SimulateOptions) -> Result<Simulated, SimulateError> {
+    if !(options.rate_hz.is_finite() && options.rate_hz > 0.0 && options.rate_hz <= 10_000.0) {
+        return Err(SimulateError::Invalid(format!("rate {} Hz is not in (0, 10000]", options.rate_hz)));
+    }
+    if !(0.0..1.0).contains(&options.dropout) {
+        return Err(SimulateError::Invalid(format!("dropout {} is not in [0, 1)", options.dropout)));
+    }
+    let frames = bvh.frame_count();
+    let last = options.last_frame.unwrap_or(frames.saturating_sub(1)).min(frames.saturating_sub(1));
+    if frames == 0 || options.first_frame > last {
+        return Err(SimulateError::Frames {
+            first: options.first_frame,
+            last,
+            frames,
+        });
+    }
+    let source = Source {
+        locals: (0..=last)
+            .map(|f| if f < options.first_frame { Vec::new() } else { bvh.local_rotations(f) })
+            .collect(),
+        rig: bvh
+            .to_rig("source", LengthUnit::Centimetres)
+            .map_err(|e| SimulateError::Invalid(format!("the BVH is not a valid rig: {e}")))?,
+        first: options.first_frame,
+        last,
+    };
+    let mut rng = Rng(options.seed);
+    let world = match options.format {
+        CaptureFormat::Sou => World::Ned,
+        CaptureFormat::Csv => mapping.world.unwrap_or(World::Enu),
+    };
+    let heading_deg = options.heading_deg.unwrap_or_else(|| rng.uniform() * 360.0 - 180.0);
+    let heading = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), heading_deg.to_radians());
+    let from_rig = world.to_rig().inverse();
+    let pose_name = mapping.calibration.as_ref().map_or("rest".to_string(), |c| c.pose.label());
+    let pose = rig.pose(&pose_name).ok_or(SimulateError::Pose(pose_name))?;
+    let pose_world = rig.world_rotations(&pose.local);
+
+    // Sensors: bone, source joint, mount.
+    struct Sim {
+        sensor: String,
+        bone: String,
+        joint: usize,
+        pose: UnitQuaternion<f64>,
+        mount: UnitQuaternion<f64>,
+    }
+    let mut sims = Vec::new();
+    for s in &mapping.sensors {
+        let bone = rig.joint_index(&s.bone).ok_or_else(|| SimulateError::UnknownBone(s.bone.clone()))?;
+        let bone_name = rig.joints()[bone].name.clone();
+        let source_name = options
+            .bone_map
+            .iter()
+            .find(|(target, _)| rig.joint_index(target) == Some(bone))
+            .map(|(_, src)| src.clone())
+            .unwrap_or_else(|| bone_name.clone());
+        let joint = source.rig.joint_index(&source_name).ok_or_else(|| SimulateError::NoSourceJoint {
+            sensor: s.sensor.clone(),
+            bone: bone_name.clone(),
+        })?;
+        let p = pose_world[bone];
+        let mount = match (&s.mount, s.forward) {
+            (Mount::Fixed(q), _) => *q,
+            (Mount::Calibrate, Some(axis)) => {
+                // The declared axis must point where the body faces (+Z) in the pose:
+                // P ⊗ mount ⊗ axis = +Z. Any rotation about +Z keeps that true.
+                let to_z = UnitQuaternion::rotation_between(&axis, &Vector3::z())
+                    .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
+                let spin = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rng.uniform() * std::f64::consts::TAU);
+                p.inverse() * spin * to_z
+            }
+            (Mount::Calibrate, None) => rng.rotation(),
+        };
+        sims.push(Sim {
+            sensor: s.sensor.clone(),
+            bone: bone_name,
+            joint,
+            pose: p,
+            mount,
+        });
+    }
+
+    let frame_time = bvh.frame_time_s();
+    let motion_start = options.hold_s + options.blend_s;
+    let end_s = motion_start + (last - options.first_frame) as f64 * frame_time;
+    let first_local = &source.locals[options.first_frame];
+    // World rotation of a source joint at take time t.
+    let world_at = |joint: usize, t: f64| -> UnitQuaternion<f64> {
+        if t < options.hold_s {
+            UnitQuaternion::identity()
+        } else if t < motion_start {
+            let u = (t - options.hold_s) / options.blend_s;
+            let u = u * u * (3.0 - 2.0 * u); // smoothstep: no jerk at either end
+            source.chain(joint, |j| slerp_shortest(&UnitQuaternion::identity(), &first_local[j], u))
+        } else {
+            source.world_at(joint, options.first_frame as f64 + (t - motion_start) / frame_time)
+        }
+    };
+
+    // Sampling instants per sensor (SOU nodes share their unit's instants).
+    let quantum = match options.format {
+        CaptureFormat::Csv => 1e-6,
+        CaptureFormat::Sou => 1e-3,
+    };
+    let period = 1.0 / options.rate_hz;
+    let instants = |rng: &mut Rng| -> Vec<f64> {
+        let offset = rng.uniform() * period;
+        let mut out = Vec::new();
+        let mut i = 0u64;
+        loop {
+            let nominal = offset + i as f64 * period;
+            if nominal > end_s {
+                break;
+            }
+            let jitter = (rng.normal() * options.jitter_s).clamp(-0.4 * period, 0.4 * period);
+            let t = ((nominal + jitter).max(0.0) / quantum).round() * quantum;
+            if out.last().is_none_or(|&prev| t > prev) && rng.uniform() >= options.dropout {
+                out.push(t);
+            }
+            i += 1;
+        }
+        out
+    };
+    let unit_of = |id: &str| id.rsplit_once('_').map(|(u, _)| u.to_string());
+    let mut times: Vec<Vec<f64>> = Vec::with_capacity(sims.len());
+    for (i, s) in sims.iter().enumerate() {
+        let shared = match options.format {
+            CaptureFormat::Sou => {
+                let unit = unit_of(&s.sensor);
+                sims[..i]
+                    .iter()
+                    .position(|o| unit.is_some() && unit_of(&o.sensor) == unit)
+                    .map(|k| times[k].clone())
+            }
+            CaptureFormat::Csv => None,
+        };
+        let t = shared.unwrap_or_else(|| instants(&mut rng));
+        times.push(t);
+    }
+
+    // Orientations.
+    let noise_sigma = options.noise_deg.to_radians() / 3f64.sqrt();
+    let mut rows: Vec<(f64, usize, UnitQuaternion<f64>)> = Vec::new();
+    for (i, s) in sims.iter().enumerate() {
+        for &t in &times[i] {
+            let w = world_at(s.joint, t);
+            let body = w * s.pose;
+            let mut q = from_rig * heading * body * s.mount;
+            if noise_sigma > 0.0 {
+                let v = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * noise_sigma;
+                q *= UnitQuaternion::from_scaled_axis(v);
+            }
+            rows.push((t, i, q));
+        }
+    }
+    rows.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+
+    let text = match options.format {
+        CaptureFormat::Csv => {
+            let mut out = String::with_capacity(rows.len() * 64);
+            let _ = writeln!(
+                out,
+                "# imubake simulate: frames {}..={} of the BVH, heading {heading_deg:.3} deg, seed {}",
+                options.first_frame, last, options.seed
+            );
+            let _ = writeln!(out, "# world: {world}");
+            out.push_str("time_s,sensor,qw,qx,qy,qz\n");
+            for (t, i, q) in &rows {
+                let _ = writeln!(out, "{t:.6},{},{:.9},{:.9},{:.9},{:.9}", sims[*i].sensor, q.w, q.i, q.j, q.k);
+            }
+            out
+        }
+        CaptureFormat::Sou => sou_text(&sims.iter().map(|s| s.sensor.clone()).collect::<Vec<_>>(), &rows)?,
+    };
+    let truth = Truth {
+        world,
+        heading_deg,
+        motion_start_s: motion_start,
+        first_frame: options.first_frame,
+        last_frame: last,
+        source_frame_time_s: frame_time,
+        sensors: sims
+            .iter()
+            .enumerate()
+            .map(|(i, s)| SensorTruth {
+                sensor: s.sensor.clone(),
+                bone: s.bone.clone(),
+                source_joint: source.rig.joints()[s.joint].name.clone(),
+                mount: [s.mount.w, s.mount.i, s.mount.j, s.mount.k],
+                samples: times[i].len(),
+            })
+            .collect(),
+    };
+    Ok(Simulated { text, truth })
+}
+
+/// A SOU log: debug text, then `ms,SOU,yaw1,pitch1,roll1,yaw2,pitch2,roll2` per instant.
+fn sou_text(ids: &[String], rows: &[(f64, usize, UnitQuaternion<f64>)]) -> Result<String, SimulateError> {
+    let mut units: Vec<(String, Option<usize>, Option<usize>)> = Vec::new();
+    for (i, id) in ids.iter().enumerate() {
+        let (unit, node) = id.rsplit_once('_').ok_or_else(|| SimulateError::SouPairs(id.clone()))?;
+        let slot = match units.iter().position(|u| u.0 == unit) {
+            Some(k) => k,
+            None => {
+                units.push((unit.to_string(), None, None));
+                units.len() - 1
+            }
+        };
+        match node {
+            "0" => units[slot].1 = Some(i),
+            "1" => units[slot].2 = Some(i),
+            _ => return Err(SimulateError::SouPairs(id.clone())),
+        }
+    }
+    let mut out = String::from("[    1.802] usb 1-1.2: new full-speed USB device\nCalibrating MPU9250 ... keep still\n");
+    let ypr = |q: &UnitQuaternion<f64>| {
+        let a = from_quaternion(q, EulerOrder::ZYX).map(f64::to_degrees);
+        [a[0].rem_euclid(360.0), a[1], a[2]]
+    };
+    if let Some((unit, n0, _)) = units.iter().find(|(_, n0, n1)| n0.is_none() || n1.is_none()) {
+        let present = if n0.is_some() { 0 } else { 1 };
+        return Err(SimulateError::SouPairs(format!("{unit}_{present}")));
+    }
+    // Rows come sorted by time; both nodes of a unit share instants.
+    let mut k = 0;
+    while k < rows.len() {
+        let t = rows[k].0;
+        let mut at_t = Vec::new();
+        while k < rows.len() && rows[k].0 == t {
+            at_t.push(&rows[k]);
+            k += 1;
+        }
+        for (unit, n0, n1) in &units {
+            let find = |n: Option<usize>| at_t.iter().find(|r| Some(r.1) == n).map(|r| ypr(&r.2));
+            if let (Some(a), Some(b)) = (find(*n0), find(*n1)) {
+                let _ = writeln!(
+                    out,
+                    "{},{unit},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
+                    (t * 1000.0).round() as u64,
+                    a[0],
+                    a[1],
+                    a[2],
+                    b[0],
+                    b[1],
+                    b[2]
+                );
+            }
+        }
+    }
+    Ok(out)
+}

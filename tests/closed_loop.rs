@@ -1,0 +1,165 @@
+//! Closed loop on real motion: `simulate` a 16-sensor capture (paper 000's layout) from real BVH
+//! motion at a random heading, `convert` it, and compare every mapped bone's world rotation since
+//! the calibration pose with the source joint's world rotation since rest, computed independently
+//! with scipy (tests/python/bvh_world_rotations.py).
+
+mod common;
+
+use common::{imubake_bin, python, shared};
+use imubake::pipeline::calibrate::mean_rotation;
+use imubake::rotation::angle_between;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+
+const MAPPING: &str = "mappings/paper000_16imu_mixamo.json";
+const OUT_FPS: f64 = 60.0;
+
+fn run(cmd: &mut Command) {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{:?}\n{}{}",
+        cmd,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+struct Loop {
+    /// RMS error per bone, degrees.
+    rms_deg: Vec<(String, f64)>,
+    /// Angle between the hips' forward direction during calibration and +Z, degrees.
+    facing_error_deg: f64,
+    heading_deg: f64,
+}
+
+fn closed_loop(bvh_rel: &str, frames: Option<&str>, bone_map: &str, noise_deg: f64, seed: u64) -> Option<Loop> {
+    let bvh = shared(bvh_rel)?;
+    let py = python()?;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("capture.csv");
+    let truth_path = dir.path().join("truth.json");
+    let mut sim = Command::new(imubake_bin());
+    sim.arg("simulate")
+        .arg(&bvh)
+        .arg("--mapping")
+        .arg(root.join(MAPPING))
+        .arg("--output")
+        .arg(&capture)
+        .arg("--truth")
+        .arg(&truth_path)
+        .args(["--bone-map", bone_map, "--seed", &seed.to_string(), "--noise-deg", &noise_deg.to_string()]);
+    if let Some(f) = frames {
+        sim.args(["--frames", f]);
+    }
+    run(&mut sim);
+    let out_dir = dir.path().join("out");
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&capture)
+        .arg("--mapping")
+        .arg(root.join(MAPPING))
+        .arg("--out")
+        .arg(&out_dir)
+        .args(["--fps", "60", "--format", "bvh"]));
+    let truth: Value = serde_json::from_slice(&std::fs::read(&truth_path).unwrap()).unwrap();
+    let output = imubake::bvh::parse(&std::fs::read(out_dir.join("capture.bvh")).unwrap()).unwrap();
+    let out_rig = output.to_rig("out", imubake::rig::LengthUnit::Metres).unwrap();
+    let world_out = |frame: usize| out_rig.world_rotations(&output.local_rotations(frame));
+
+    // Output frames during the motion, with the source's fractional frame at each.
+    let motion_start = truth["motion_start_s"].as_f64().unwrap();
+    let first = truth["first_frame"].as_u64().unwrap() as f64;
+    let last = truth["last_frame"].as_u64().unwrap() as f64;
+    let frame_time = truth["source_frame_time_s"].as_f64().unwrap();
+    let mut compared = Vec::new();
+    for k in 0..output.frame_count() {
+        let t = k as f64 / OUT_FPS;
+        let f = first + (t - motion_start) / frame_time;
+        if t >= motion_start && f <= last {
+            compared.push((k, f));
+        }
+    }
+    assert!(compared.len() > 300, "{} frames to compare", compared.len());
+    let sensors = truth["sensors"].as_array().unwrap();
+    let joints: Vec<&str> = sensors.iter().map(|s| s["source_joint"].as_str().unwrap()).collect();
+    let frame_list: Vec<String> = compared.iter().map(|(_, f)| format!("{f:.9}")).collect();
+    let script = root.join("tests/python/bvh_world_rotations.py");
+    let out = Command::new(py)
+        .arg(script)
+        .arg(&bvh)
+        .arg(joints.join(","))
+        .arg(frame_list.join(","))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let expected: Value = serde_json::from_slice(&out.stdout).unwrap();
+
+    // The calibration reference: the mean over the middle of the 2 s hold.
+    let hold: Vec<Vec<UnitQuaternion<f64>>> =
+        ((0.5 * OUT_FPS) as usize..(1.5 * OUT_FPS) as usize).map(world_out).collect();
+    let calib: Vec<UnitQuaternion<f64>> = (0..out_rig.len())
+        .map(|j| mean_rotation(&hold.iter().map(|w| w[j]).collect::<Vec<_>>()))
+        .collect();
+    let mut rms_deg = Vec::new();
+    for s in sensors {
+        let bone = s["bone"].as_str().unwrap();
+        let joint = s["source_joint"].as_str().unwrap();
+        let b = out_rig.joint_index(bone).unwrap();
+        let mut sum = 0.0;
+        for (i, (k, _)) in compared.iter().enumerate() {
+            let q = &expected[joint][i];
+            let w = UnitQuaternion::from_quaternion(Quaternion::new(
+                q[0].as_f64().unwrap(),
+                q[1].as_f64().unwrap(),
+                q[2].as_f64().unwrap(),
+                q[3].as_f64().unwrap(),
+            ));
+            let since_calibration = world_out(*k)[b] * calib[b].inverse();
+            sum += angle_between(&since_calibration, &w).to_degrees().powi(2);
+        }
+        rms_deg.push((bone.to_string(), (sum / compared.len() as f64).sqrt()));
+    }
+    let hips = out_rig.joint_index("Hips").unwrap();
+    let forward = calib[hips] * Vector3::z();
+    Some(Loop {
+        rms_deg,
+        facing_error_deg: forward.x.atan2(forward.z).to_degrees().abs(),
+        heading_deg: truth["heading_deg"].as_f64().unwrap(),
+    })
+}
+
+fn check(result: Option<Loop>, limit_deg: f64) {
+    let Some(result) = result else {
+        return;
+    };
+    eprintln!("heading {:.1}°: {:?}", result.heading_deg, result.rms_deg);
+    assert_eq!(result.rms_deg.len(), 16);
+    for (bone, rms) in &result.rms_deg {
+        assert!(*rms < limit_deg, "{bone}: {rms:.3}° RMS ≥ {limit_deg}°");
+    }
+    assert!(result.facing_error_deg < 2.0, "faces {:.2}° off +Z", result.facing_error_deg);
+}
+
+#[test]
+fn pymo_walk_without_noise() {
+    check(closed_loop("bvh/pymo_walk.bvh", None, "Spine2=Spine", 0.0, 11), 0.5);
+}
+
+#[test]
+fn pymo_walk_with_noise() {
+    check(closed_loop("bvh/pymo_walk.bvh", None, "Spine2=Spine", 0.5, 12), 2.0);
+}
+
+#[test]
+fn cmu_without_noise() {
+    check(closed_loop("bvh/cmu_01_01.bvh", Some("1:"), "Spine2=Spine1", 0.0, 13), 0.5);
+}
+
+#[test]
+fn cmu_with_noise() {
+    check(closed_loop("bvh/cmu_01_01.bvh", Some("1:"), "Spine2=Spine1", 0.5, 14), 2.0);
+}
