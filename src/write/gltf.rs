@@ -17,9 +17,8 @@
 //!
 //! Output is deterministic: identical input gives byte-identical files.
 //!
-//! Object names (nodes = joint names, animation = take name, ...) are inserted into the JSON
-//! after `gltf-json` serialises the document, because the crate only has `name` fields with its
-//! `names` feature, which this crate does not enable.
+//! Objects are named (nodes = joint names, animation and scene = take name, skin = rig name), so
+//! importers show them (gltf-json's `names` feature).
 
 use crate::anim::Animation;
 use crate::rotation::euler::make_hemisphere_continuous;
@@ -140,6 +139,7 @@ impl Bin {
             target: target.map(Valid),
             extensions: None,
             extras: Default::default(),
+            name: None,
         })
     }
 
@@ -172,6 +172,7 @@ impl Bin {
             max,
             normalized: false,
             sparse: None,
+            name: None,
         })
     }
 }
@@ -319,12 +320,12 @@ fn strictly_increasing(times: &[f32]) -> Result<(), GltfWriteError> {
     }
 }
 
-/// The glTF document (with names inserted) and its binary buffer.
+/// The glTF document and its binary buffer.
 fn document(
     anim: &Animation,
     name: &str,
     buffer_uri: Option<String>,
-) -> Result<(Value, Vec<u8>), GltfWriteError> {
+) -> Result<(json::Root, Vec<u8>), GltfWriteError> {
     use json::accessor::{ComponentType as C, Type as T};
     use json::buffer::Target;
 
@@ -346,8 +347,6 @@ fn document(
         ..Default::default()
     };
     let mut bin = Bin { data: Vec::new() };
-    // Names by (top-level array, index), inserted after serialisation.
-    let mut names: Vec<(&str, usize, String)> = Vec::new();
 
     // Joint nodes: node i is joint i.
     for (j, joint) in joints.iter().enumerate() {
@@ -359,9 +358,9 @@ fn document(
         root.push(json::Node {
             translation: Some([t.x as f32, t.y as f32, t.z as f32]),
             children: (!children.is_empty()).then_some(children),
+            name: Some(joint.name.clone()),
             ..Default::default()
         });
-        names.push(("nodes", j, joint.name.clone()));
     }
 
     // Skin.
@@ -390,8 +389,8 @@ fn document(
         skeleton: Some(json::Index::new(0)),
         extensions: None,
         extras: Default::default(),
+        name: Some(rig.name().to_string()),
     });
-    names.push(("skins", skin.value(), rig.name().to_string()));
 
     // Bone mesh.
     let mesh = bone_mesh(anim, &rest, metres);
@@ -479,9 +478,9 @@ fn document(
             roughness_factor: json::material::StrengthFactor(0.6),
             ..Default::default()
         },
+        name: Some("bone".to_string()),
         ..Default::default()
     });
-    names.push(("materials", material.value(), "bone".to_string()));
     let mut attributes = BTreeMap::new();
     attributes.insert(Valid(json::mesh::Semantic::Positions), position);
     attributes.insert(Valid(json::mesh::Semantic::Normals), normal);
@@ -500,26 +499,22 @@ fn document(
         weights: None,
         extensions: None,
         extras: Default::default(),
+        name: Some(format!("{} bones", rig.name())),
     });
-    names.push((
-        "meshes",
-        mesh_index.value(),
-        format!("{} bones", rig.name()),
-    ));
     let mesh_node = root.push(json::Node {
         mesh: Some(mesh_index),
         skin: Some(skin),
+        name: Some(format!("{} bones", rig.name())),
         ..Default::default()
     });
-    names.push(("nodes", mesh_node.value(), format!("{} bones", rig.name())));
 
     let scene = root.push(json::Scene {
         nodes: vec![json::Index::new(0), mesh_node],
         extensions: None,
         extras: Default::default(),
+        name: Some(name.to_string()),
     });
     root.scene = Some(scene);
-    names.push(("scenes", scene.value(), name.to_string()));
 
     // Animation.
     let input = {
@@ -584,13 +579,13 @@ fn document(
             T::Vec4,
         );
     }
-    let animation = root.push(json::Animation {
+    root.push(json::Animation {
         channels,
         samplers,
         extensions: None,
         extras: Default::default(),
+        name: Some(name.to_string()),
     });
-    names.push(("animations", animation.value(), name.to_string()));
 
     let data = bin.data;
     root.push(json::Buffer {
@@ -598,16 +593,9 @@ fn document(
         uri: buffer_uri,
         extensions: None,
         extras: Default::default(),
+        name: None,
     });
-
-    // Serialise to text first, so f32 fields keep their shortest f32 spelling, then add names.
-    let mut doc: Value = serde_json::from_str(&serde_json::to_string(&root)?)?;
-    for (array, index, name) in names {
-        if let Some(Value::Object(obj)) = doc.get_mut(array).and_then(|a| a.get_mut(index)) {
-            obj.insert("name".to_string(), Value::String(name));
-        }
-    }
-    Ok((doc, data))
+    Ok((root, data))
 }
 
 #[cfg(test)]

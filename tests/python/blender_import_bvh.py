@@ -1,14 +1,15 @@
 """Import BVH files with Blender's own importer and report what Blender made of them.
 
-Usage: python blender_import_bvh.py OUT.json FILE.bvh [FILE.bvh ...]
+Usage: python blender_import_bvh.py [--frames N,N,...] OUT.json FILE.bvh [FILE.bvh ...]
 
 Run with the test venv's Python, where `bpy` is Blender (5.0.1) as a module. For each file:
 factory settings (empty scene), `bpy.ops.import_anim.bvh(update_scene_fps=True,
 update_scene_duration=True)` with the importer's default axes (-Z forward, Y up: BVH Y-up is
 turned into Blender Z-up), then it records the scene rate (fps, fps_base), the frame range, the
 armature's bones, the keyframe count of every F-curve of the action, and at every keyed frame
-each pose bone's head position and rotation matrix in world space. The JSON goes to OUT.json
-(Blender prints its own messages on stdout).
+each pose bone's head position and rotation matrix in world space. With `--frames`, poses are
+reported only at those Blender frames (our frame n is Blender frame n + 1), which keeps long takes
+cheap. The JSON goes to OUT.json (Blender prints its own messages on stdout).
 
 Blender 5.0 removed `Action.fcurves`: F-curves live in the layered action's channelbag for the
 object's slot (`action.layers[i].strips[j].channelbag(slot).fcurves`).
@@ -36,7 +37,7 @@ def channelbag_fcurves(obj):
     return fcurves
 
 
-def import_one(path):
+def import_one(path, pose_frames=None):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     if not hasattr(bpy.types, "IMPORT_ANIM_OT_bvh"):
         addon_utils.enable("io_anim_bvh", default_set=True)
@@ -66,9 +67,10 @@ def import_one(path):
             }
         )
 
-    keyed = sorted({int(round(p.co[0])) for fc in fcurves for p in fc.keyframe_points})
+    if pose_frames is None:
+        pose_frames = sorted({int(round(p.co[0])) for fc in fcurves for p in fc.keyframe_points})
     frames = []
-    for frame in keyed:
+    for frame in pose_frames:
         scene.frame_set(frame)
         bones = {}
         for pb in arm.pose.bones:
@@ -94,8 +96,13 @@ def import_one(path):
 
 
 def main():
-    out_path = sys.argv[1]
-    results = [import_one(p) for p in sys.argv[2:]]
+    args = sys.argv[1:]
+    pose_frames = None
+    if args and args[0] == "--frames":
+        pose_frames = [int(f) for f in args[1].split(",") if f]
+        args = args[2:]
+    out_path = args[0]
+    results = [import_one(p, pose_frames) for p in args[1:]]
     with open(out_path, "w") as f:
         json.dump({"blender": bpy.app.version_string, "files": results}, f)
 

@@ -1,12 +1,13 @@
 #!/usr/bin/env python3
 """Imports a glTF/GLB file with real Blender (the `bpy` module) and reports what came in.
 
-usage: blender_import_gltf.py FILE QUERY_JSON
+usage: blender_import_gltf.py FILE [FILE ...] QUERY_JSON
   QUERY_JSON: {"bones": [names], "times": [seconds]}: the pose bones whose world-space head
-  positions to report, at the given animation times (glTF key times).
+  positions to report, at the given animation times (glTF key times), in every file.
 
-prints one JSON line (the last line of stdout):
-  {"blender", "armatures", "armature", "bones": [names], "skinned_meshes": [{"name", "parent",
+Each file is imported into a fresh empty scene. Prints one JSON line per file, in the order
+given, as the last lines of stdout (after anything the importer prints):
+  {"path", "blender", "armatures", "armature", "bones": [names], "skinned_meshes": [{"name", "parent",
    "armature"}], "empties", "actions": [names],
    "action", "frame_range": [start, end], "scene_fps": [fps, fps_base], "frames_per_second",
    "heads": [{"time", "frame", "bones": {name: [x, y, z]}}]}
@@ -26,8 +27,7 @@ import sys
 import bpy
 
 
-def main():
-    path, query = sys.argv[1], json.loads(sys.argv[2])
+def import_one(path, query):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.import_scene.gltf(filepath=path)
     scene = bpy.context.scene
@@ -42,6 +42,7 @@ def main():
         if o.type == "MESH" and any(m.type == "ARMATURE" for m in o.modifiers)
     ]
     out = {
+        "path": path,
         "blender": bpy.app.version_string,
         "armatures": len(arms),
         "bones": [],
@@ -55,8 +56,7 @@ def main():
         "heads": [],
     }
     if len(arms) != 1:
-        print(json.dumps(out))
-        return
+        return out
     arm = arms[0]
     out["bones"] = [b.name for b in arm.data.bones]
     anim = arm.animation_data
@@ -78,7 +78,15 @@ def main():
             pb = evaluated.pose.bones[name]
             heads[name] = list(evaluated.matrix_world @ pb.head)
         out["heads"].append({"time": t, "frame": frame, "bones": heads})
-    print(json.dumps(out))
+    return out
+
+
+def main():
+    *paths, query = sys.argv[1:]
+    query = json.loads(query)
+    results = [import_one(path, query) for path in paths]
+    for out in results:
+        print(json.dumps(out))
 
 
 main()
