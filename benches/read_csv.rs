@@ -8,61 +8,32 @@
 //!   cargo bench --bench read_csv                     # the full 60-minute log
 //!   IMUBAKE_BENCH_MINUTES=5 cargo bench --bench read_csv
 
+mod common;
+
+use common::{RATE_HZ, minutes_from_env, reset_peak, status_kib, write_log};
 use imubake::read::{ReadOptions, read_take};
-use std::io::{BufWriter, Write};
 use std::time::Instant;
 
-const SENSORS: usize = 16;
-const RATE_HZ: usize = 100;
-
-fn write_log(path: &std::path::Path, minutes: usize) -> std::io::Result<u64> {
-    let mut out = BufWriter::with_capacity(1 << 20, std::fs::File::create(path)?);
-    writeln!(out, "time_s,sensor,qw,qx,qy,qz")?;
-    let frames = minutes * 60 * RATE_HZ;
-    for i in 0..frames {
-        for s in 0..SENSORS {
-            // Sensors sample asynchronously: each is offset by 0.3 ms.
-            let t = i as f64 / RATE_HZ as f64 + s as f64 * 0.0003;
-            let angle = 0.01 * i as f64 + s as f64;
-            let (half_sin, half_cos) = (angle / 2.0).sin_cos();
-            let axis = [0.6, 0.0, 0.8];
-            writeln!(
-                out,
-                "{t:.4},s{s:02},{:.6},{:.6},{:.6},{:.6}",
-                half_cos,
-                axis[0] * half_sin,
-                axis[1] * half_sin,
-                axis[2] * half_sin
-            )?;
-        }
-    }
-    out.flush()?;
-    Ok(std::fs::metadata(path)?.len())
-}
-
-fn status_kib(field: &str) -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with(field))?;
-    line.split_whitespace().nth(1)?.parse().ok()
-}
+const SENSORS: [&str; 16] = [
+    "s00", "s01", "s02", "s03", "s04", "s05", "s06", "s07", "s08", "s09", "s10", "s11", "s12",
+    "s13", "s14", "s15",
+];
 
 fn main() {
-    let minutes: usize = std::env::var("IMUBAKE_BENCH_MINUTES")
-        .ok()
-        .and_then(|m| m.parse().ok())
-        .unwrap_or(60);
+    let minutes = minutes_from_env();
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("bench.csv");
-    let bytes = write_log(&path, minutes).expect("write the log");
-    let rows = minutes * 60 * RATE_HZ * SENSORS;
+    let bytes = write_log(&path, minutes, &SENSORS).expect("write the log");
+    let rows = minutes * 60 * RATE_HZ * SENSORS.len();
     println!(
-        "log: {minutes} min, {SENSORS} sensors at {RATE_HZ} Hz = {rows} rows, {:.1} MB",
+        "log: {minutes} min, {} sensors at {RATE_HZ} Hz = {rows} rows, {:.1} MB",
+        SENSORS.len(),
         bytes as f64 / 1e6
     );
     let options = ReadOptions::default();
 
     // Peak memory of one read, measured first so earlier runs' freed pages do not hide it.
-    let _ = std::fs::write("/proc/self/clear_refs", "5");
+    reset_peak();
     let base_kib = status_kib("VmRSS:").unwrap_or(0);
     let take = read_take(&path, &options).expect("read");
     let peak_kib = status_kib("VmHWM:").unwrap_or(0);

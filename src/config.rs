@@ -88,7 +88,10 @@ impl Config {
             f.parse::<InputFormat>()
                 .map_err(|e| format!("`input_format`: {e}"))?;
         }
-        if self.skip_seconds.is_some_and(|s| !(s.is_finite() && s >= 0.0)) {
+        if self
+            .skip_seconds
+            .is_some_and(|s| !(s.is_finite() && s >= 0.0))
+        {
             return Err("`skip_seconds`: expected seconds ≥ 0".into());
         }
         if self.formats.as_ref().is_some_and(Vec::is_empty) {

@@ -5,9 +5,10 @@ use crate::anim::Animation;
 use crate::bvh::{BvhMotion, write_bvh_in};
 use crate::inspect::SensorSummaries;
 use crate::mapping::{
-    CalibrationRecord, Mapping, MappingError, MappingFile, MappingRecord, Mount, SensorRecord,
-    load_mapping,
+    CalibrationRecord, LegacyMapping, LegacyTargetRecord, Mapping, MappingError, MappingFile,
+    MappingRecord, Mount, SensorRecord, load_mapping,
 };
+use crate::pipeline::legacy::LegacyAnimation;
 use crate::pipeline::{self, Converted, PipelineError, PipelineOptions};
 use crate::read::{ReadError, ReadOptions, read_take};
 use crate::rig::file::RigLoadError;
@@ -121,8 +122,6 @@ pub enum ConvertError {
         #[source]
         source: GltfWriteError,
     },
-    #[error("{}: the legacy paper-002 mapping format is not supported by convert yet; use a quaternion mapping (README, \"Mappings\")", .0.display())]
-    LegacyMapping(PathBuf),
 }
 
 /// The name outputs of `input` are written under: the file name without its extension, or the
@@ -193,14 +192,8 @@ fn resolve_mapping(
     input: &Path,
     take: &Take,
     settings: &ConvertSettings,
+    file_mapping: Option<(Mapping, PathBuf)>,
 ) -> Result<(Mapping, Option<PathBuf>, Rig), ConvertError> {
-    let file_mapping = match &settings.mapping {
-        Some(path) => match load_mapping(path)? {
-            MappingFile::Quaternion(m) => Some((m, path.clone())),
-            MappingFile::Legacy(_) => return Err(ConvertError::LegacyMapping(path.clone())),
-        },
-        None => None,
-    };
     let rig_name = settings
         .rig
         .clone()
@@ -280,6 +273,7 @@ fn mapping_record(
                     .map(|v| [v.x, v.y, v.z]),
             })
             .collect(),
+        legacy: None,
     }
 }
 
@@ -303,7 +297,16 @@ pub fn convert(
         path: input.to_path_buf(),
         source: e,
     })?;
-    let (mapping, mapping_path, rig) = resolve_mapping(input, &take, settings)?;
+    let file_mapping = match &settings.mapping {
+        Some(path) => match load_mapping(path)? {
+            MappingFile::Quaternion(m) => Some((m, path.clone())),
+            MappingFile::Legacy(m) => {
+                return convert_legacy(input, out_dir, settings, &take, sha256, &m, path);
+            }
+        },
+        None => None,
+    };
+    let (mapping, mapping_path, rig) = resolve_mapping(input, &take, settings, file_mapping)?;
     let mapping_name = mapping_path
         .clone()
         .unwrap_or_else(|| PathBuf::from("(sensors matched to bones by name)"));
@@ -312,70 +315,21 @@ pub fn convert(
             input: input.to_path_buf(),
             source,
         })?;
-    let animation = &converted.animation;
-
-    std::fs::create_dir_all(out_dir).map_err(|source| ConvertError::Write {
-        path: out_dir.to_path_buf(),
-        source,
-    })?;
-    let stem = take_stem(input);
-    let mut outputs = Vec::new();
-    let write_err = |path: &Path| {
-        let path = path.to_path_buf();
-        move |source| ConvertError::Write { path, source }
-    };
-    for format in &settings.formats {
-        match format {
-            OutputFormat::Bvh => {
-                let path = out_dir.join(format!("{stem}.bvh"));
-                let euler = euler_degrees(animation);
-                let motion = BvhMotion {
-                    rig: animation.rig(),
-                    fps: animation.fps(),
-                    root_positions: animation.root_positions(),
-                    euler_deg: &euler,
-                };
-                write_atomic(&path, |w| write_bvh_in(w, &motion, settings.units))
-                    .map_err(write_err(&path))?;
-                outputs.push(OutputRecord {
-                    format: "bvh",
-                    path: format!("{stem}.bvh"),
-                });
-            }
-            OutputFormat::Glb => {
-                let path = out_dir.join(format!("{stem}.glb"));
-                let bytes = to_glb(animation, &stem).map_err(|source| ConvertError::Gltf {
-                    path: path.clone(),
-                    source,
-                })?;
-                write_atomic(&path, |w| w.write_all(&bytes)).map_err(write_err(&path))?;
-                outputs.push(OutputRecord {
-                    format: "glb",
-                    path: format!("{stem}.glb"),
-                });
-            }
-            OutputFormat::Gltf => {
-                let path = out_dir.join(format!("{stem}.gltf"));
-                let bin_name = format!("{stem}.bin");
-                let bin_path = out_dir.join(&bin_name);
-                let (json, bin) =
-                    to_gltf(animation, &stem, &bin_name).map_err(|source| ConvertError::Gltf {
-                        path: path.clone(),
-                        source,
-                    })?;
-                // The buffer first, so a .gltf never points at a missing .bin.
-                write_atomic(&bin_path, |w| w.write_all(&bin)).map_err(write_err(&bin_path))?;
-                write_atomic(&path, |w| w.write_all(json.as_bytes())).map_err(write_err(&path))?;
-                outputs.push(OutputRecord {
-                    format: "gltf",
-                    path: format!("{stem}.gltf"),
-                });
-            }
-        }
-    }
-
+    // What the sidecar needs of the take; the samples themselves are no longer needed, so a long
+    // take's memory is freed before the outputs are built.
+    let source_format = take.source().format;
+    let start_timestamp = take.source().start_timestamp.clone();
+    let sensor_summaries = SensorSummaries::of(&take);
     let mut warnings = take.warnings().to_vec();
     warnings.extend(converted.warnings.iter().cloned());
+    let dropped_lines = take.dropped_lines().to_vec();
+    let repaired_lines = take.repaired_lines().to_vec();
+    drop(take);
+    let animation = &converted.animation;
+
+    let stem = take_stem(input);
+    let outputs = write_outputs(out_dir, &stem, animation, None, settings)?;
+
     let heading_sensor = match &converted.calibration.heading_source {
         pipeline::calibrate::HeadingSource::DeclaredForward { sensor }
         | pipeline::calibrate::HeadingSource::KnownMount { sensor } => Some(sensor.clone()),
@@ -387,9 +341,9 @@ pub fn convert(
         source: SourceRecord {
             path: input.to_string_lossy().into_owned(),
             sha256,
-            format: take.source().format,
+            format: source_format,
             world: converted.world,
-            start_timestamp: take.source().start_timestamp.clone(),
+            start_timestamp,
         },
         fps: animation.fps(),
         frames: animation.frames(),
@@ -415,11 +369,99 @@ pub fn convert(
             mode: "quaternion",
         },
         outputs,
-        sensors: SensorSummaries::of(&take),
-        dropped_lines: take.dropped_lines().to_vec(),
-        repaired_lines: take.repaired_lines().to_vec(),
+        sensors: sensor_summaries,
+        dropped_lines,
+        repaired_lines,
         warnings,
     };
+    write_sidecar(out_dir, &stem, sidecar)
+}
+
+fn write_err(path: &Path) -> impl FnOnce(io::Error) -> ConvertError {
+    let path = path.to_path_buf();
+    move |source| ConvertError::Write { path, source }
+}
+
+/// Writes the requested formats of `animation` as `<out_dir>/<stem>.*`. The BVH gets `euler_deg`
+/// (`[joint][frame]`, degrees, each joint's order) when given, else [`euler_degrees`].
+fn write_outputs(
+    out_dir: &Path,
+    stem: &str,
+    animation: &Animation,
+    euler_deg: Option<&[Vec<[f64; 3]>]>,
+    settings: &ConvertSettings,
+) -> Result<Vec<OutputRecord>, ConvertError> {
+    std::fs::create_dir_all(out_dir).map_err(|source| ConvertError::Write {
+        path: out_dir.to_path_buf(),
+        source,
+    })?;
+    let mut outputs = Vec::new();
+    for format in &settings.formats {
+        match format {
+            OutputFormat::Bvh => {
+                let path = out_dir.join(format!("{stem}.bvh"));
+                let filtered;
+                let euler_deg = match euler_deg {
+                    Some(e) => e,
+                    None => {
+                        filtered = euler_degrees(animation);
+                        &filtered
+                    }
+                };
+                let motion = BvhMotion {
+                    rig: animation.rig(),
+                    fps: animation.fps(),
+                    root_positions: animation.root_positions(),
+                    euler_deg,
+                };
+                write_atomic(&path, |w| write_bvh_in(w, &motion, settings.units))
+                    .map_err(write_err(&path))?;
+                outputs.push(OutputRecord {
+                    format: "bvh",
+                    path: format!("{stem}.bvh"),
+                });
+            }
+            OutputFormat::Glb => {
+                let path = out_dir.join(format!("{stem}.glb"));
+                let bytes = to_glb(animation, stem).map_err(|source| ConvertError::Gltf {
+                    path: path.clone(),
+                    source,
+                })?;
+                write_atomic(&path, |w| w.write_all(&bytes)).map_err(write_err(&path))?;
+                outputs.push(OutputRecord {
+                    format: "glb",
+                    path: format!("{stem}.glb"),
+                });
+            }
+            OutputFormat::Gltf => {
+                let path = out_dir.join(format!("{stem}.gltf"));
+                let bin_name = format!("{stem}.bin");
+                let bin_path = out_dir.join(&bin_name);
+                let (json, bin) =
+                    to_gltf(animation, stem, &bin_name).map_err(|source| ConvertError::Gltf {
+                        path: path.clone(),
+                        source,
+                    })?;
+                // The buffer first, so a .gltf never points at a missing .bin.
+                write_atomic(&bin_path, |w| w.write_all(&bin)).map_err(write_err(&bin_path))?;
+                write_atomic(&path, |w| w.write_all(json.as_bytes())).map_err(write_err(&path))?;
+                outputs.push(OutputRecord {
+                    format: "gltf",
+                    path: format!("{stem}.gltf"),
+                });
+            }
+        }
+    }
+
+    Ok(outputs)
+}
+
+/// Writes the sidecar last: its appearance means the take is complete.
+fn write_sidecar(
+    out_dir: &Path,
+    stem: &str,
+    sidecar: Sidecar,
+) -> Result<ConvertOutcome, ConvertError> {
     let sidecar_path = out_dir.join(format!("{stem}.imubake.json"));
     let json = serde_json::to_vec_pretty(&sidecar).expect("the sidecar serialises");
     write_atomic(&sidecar_path, |w| {
@@ -431,4 +473,92 @@ pub fn convert(
         sidecar,
         sidecar_path,
     })
+}
+
+/// Paper 002's pipeline for a Listing-2 mapping ([`pipeline::legacy`]): the signed yaw/pitch/roll
+/// channel copy onto `--rig` (default `mixamo`), parents from Table 1 (the `sou12` rig), every
+/// joint written with BVH channels `Zrotation Yrotation Xrotation` (Blender's `XYZ` mode), the
+/// root fixed at rest. Sidecar: `pipeline.mode = "legacy-euler"`, `pipeline.heading = "none"`,
+/// `mapping.legacy` lists each target.
+fn convert_legacy(
+    input: &Path,
+    out_dir: &Path,
+    settings: &ConvertSettings,
+    take: &Take,
+    sha256: String,
+    mapping: &LegacyMapping,
+    mapping_path: &Path,
+) -> Result<ConvertOutcome, ConvertError> {
+    let rig = load_rig(settings.rig.as_deref().unwrap_or("mixamo"))?;
+    let table1 = load_rig("sou12")?;
+    let legacy: LegacyAnimation = pipeline::legacy::run(
+        take,
+        &rig,
+        &table1,
+        mapping,
+        mapping_path,
+        &settings.pipeline,
+    )
+    .map_err(|source| ConvertError::Pipeline {
+        input: input.to_path_buf(),
+        source,
+    })?;
+    let animation = &legacy.animation;
+    let stem = take_stem(input);
+    let outputs = write_outputs(out_dir, &stem, animation, Some(&legacy.euler_deg), settings)?;
+    let mut warnings = take.warnings().to_vec();
+    warnings.extend(legacy.warnings.iter().cloned());
+    let out_rig = animation.rig();
+    let sidecar = Sidecar {
+        imubake_version: env!("CARGO_PKG_VERSION"),
+        source: SourceRecord {
+            path: input.to_string_lossy().into_owned(),
+            sha256,
+            format: take.source().format,
+            world: take.source().world,
+            start_timestamp: take.source().start_timestamp.clone(),
+        },
+        fps: animation.fps(),
+        frames: animation.frames(),
+        duration_s: animation.duration_s(),
+        rig: RigRecord {
+            name: out_rig.name().to_string(),
+            units: settings.units.name(),
+            bones: out_rig.len(),
+        },
+        mapping: MappingRecord {
+            file: Some(mapping_path.to_string_lossy().into_owned()),
+            rig: out_rig.name().to_string(),
+            world: take.source().world,
+            calibration: None,
+            sensors: Vec::new(),
+            legacy: Some(
+                legacy
+                    .targets
+                    .iter()
+                    .map(|t| LegacyTargetRecord::new(&t.target, t.parent.clone()))
+                    .collect(),
+            ),
+        },
+        pipeline: PipelineRecord {
+            fusion: None,
+            smoothing: None,
+            root: settings.pipeline.root.label(),
+            heading: "none",
+            heading_sensor: None,
+            heading_deg: 0.0,
+            trim: settings.pipeline.trim.map(|t| TrimRecord {
+                start_s: t.start_s,
+                end_s: (t.end_s < f64::MAX).then_some(t.end_s),
+                first_frame: legacy.first_frame,
+            }),
+            mode: "legacy-euler",
+        },
+        outputs,
+        sensors: SensorSummaries::of(take),
+        dropped_lines: take.dropped_lines().to_vec(),
+        repaired_lines: take.repaired_lines().to_vec(),
+        warnings,
+    };
+    write_sidecar(out_dir, &stem, sidecar)
 }

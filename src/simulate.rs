@@ -109,12 +109,18 @@ pub struct Simulated {
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SimulateError {
-    #[error("bone `{bone}` (sensor `{sensor}`) has no source joint in the BVH; add it to --bone-map (BONE=JOINT)")]
+    #[error(
+        "bone `{bone}` (sensor `{sensor}`) has no source joint in the BVH; add it to --bone-map (BONE=JOINT)"
+    )]
     NoSourceJoint { sensor: String, bone: String },
     #[error("unknown bone `{0}` in the mapping's rig")]
     UnknownBone(String),
     #[error("the BVH has no frames in {first}..={last} (it has {frames})")]
-    Frames { first: usize, last: usize, frames: usize },
+    Frames {
+        first: usize,
+        last: usize,
+        frames: usize,
+    },
     #[error("the mapping's calibration pose `{0}` is not defined by the rig")]
     Pose(String),
     #[error("--as sou needs sensors named <SOU>_0 and <SOU>_1 in pairs; `{0}` has no partner")]
@@ -170,7 +176,11 @@ struct Source {
 impl Source {
     /// The world rotation of `joint` given each joint's local rotation: the product down its
     /// chain from the root (only the chain is evaluated).
-    fn chain(&self, joint: usize, local: impl Fn(usize) -> UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+    fn chain(
+        &self,
+        joint: usize,
+        local: impl Fn(usize) -> UnitQuaternion<f64>,
+    ) -> UnitQuaternion<f64> {
         let mut q = local(joint);
         let mut j = joint;
         while let Some(p) = self.rig.joints()[j].parent {
@@ -196,15 +206,29 @@ impl Source {
 }
 
 /// Simulates the capture. `rig` is the mapping's target rig (for the calibration pose).
-pub fn simulate(bvh: &Bvh, rig: &Rig, mapping: &Mapping, options: &SimulateOptions) -> Result<Simulated, SimulateError> {
+pub fn simulate(
+    bvh: &Bvh,
+    rig: &Rig,
+    mapping: &Mapping,
+    options: &SimulateOptions,
+) -> Result<Simulated, SimulateError> {
     if !(options.rate_hz.is_finite() && options.rate_hz > 0.0 && options.rate_hz <= 10_000.0) {
-        return Err(SimulateError::Invalid(format!("rate {} Hz is not in (0, 10000]", options.rate_hz)));
+        return Err(SimulateError::Invalid(format!(
+            "rate {} Hz is not in (0, 10000]",
+            options.rate_hz
+        )));
     }
     if !(0.0..1.0).contains(&options.dropout) {
-        return Err(SimulateError::Invalid(format!("dropout {} is not in [0, 1)", options.dropout)));
+        return Err(SimulateError::Invalid(format!(
+            "dropout {} is not in [0, 1)",
+            options.dropout
+        )));
     }
     let frames = bvh.frame_count();
-    let last = options.last_frame.unwrap_or(frames.saturating_sub(1)).min(frames.saturating_sub(1));
+    let last = options
+        .last_frame
+        .unwrap_or(frames.saturating_sub(1))
+        .min(frames.saturating_sub(1));
     if frames == 0 || options.first_frame > last {
         return Err(SimulateError::Frames {
             first: options.first_frame,
@@ -214,7 +238,13 @@ pub fn simulate(bvh: &Bvh, rig: &Rig, mapping: &Mapping, options: &SimulateOptio
     }
     let source = Source {
         locals: (0..=last)
-            .map(|f| if f < options.first_frame { Vec::new() } else { bvh.local_rotations(f) })
+            .map(|f| {
+                if f < options.first_frame {
+                    Vec::new()
+                } else {
+                    bvh.local_rotations(f)
+                }
+            })
             .collect(),
         rig: bvh
             .to_rig("source", LengthUnit::Centimetres)
@@ -227,10 +257,15 @@ pub fn simulate(bvh: &Bvh, rig: &Rig, mapping: &Mapping, options: &SimulateOptio
         CaptureFormat::Sou => World::Ned,
         CaptureFormat::Csv => mapping.world.unwrap_or(World::Enu),
     };
-    let heading_deg = options.heading_deg.unwrap_or_else(|| rng.uniform() * 360.0 - 180.0);
+    let heading_deg = options
+        .heading_deg
+        .unwrap_or_else(|| rng.uniform() * 360.0 - 180.0);
     let heading = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), heading_deg.to_radians());
     let from_rig = world.to_rig().inverse();
-    let pose_name = mapping.calibration.as_ref().map_or("rest".to_string(), |c| c.pose.label());
+    let pose_name = mapping
+        .calibration
+        .as_ref()
+        .map_or("rest".to_string(), |c| c.pose.label());
     let pose = rig.pose(&pose_name).ok_or(SimulateError::Pose(pose_name))?;
     let pose_world = rig.world_rotations(&pose.local);
 
@@ -244,7 +279,9 @@ pub fn simulate(bvh: &Bvh, rig: &Rig, mapping: &Mapping, options: &SimulateOptio
     }
     let mut sims = Vec::new();
     for s in &mapping.sensors {
-        let bone = rig.joint_index(&s.bone).ok_or_else(|| SimulateError::UnknownBone(s.bone.clone()))?;
+        let bone = rig
+            .joint_index(&s.bone)
+            .ok_or_else(|| SimulateError::UnknownBone(s.bone.clone()))?;
         let bone_name = rig.joints()[bone].name.clone();
         let source_name = options
             .bone_map
@@ -252,19 +289,28 @@ pub fn simulate(bvh: &Bvh, rig: &Rig, mapping: &Mapping, options: &SimulateOptio
             .find(|(target, _)| rig.joint_index(target) == Some(bone))
             .map(|(_, src)| src.clone())
             .unwrap_or_else(|| bone_name.clone());
-        let joint = source.rig.joint_index(&source_name).ok_or_else(|| SimulateError::NoSourceJoint {
-            sensor: s.sensor.clone(),
-            bone: bone_name.clone(),
-        })?;
+        let joint =
+            source
+                .rig
+                .joint_index(&source_name)
+                .ok_or_else(|| SimulateError::NoSourceJoint {
+                    sensor: s.sensor.clone(),
+                    bone: bone_name.clone(),
+                })?;
         let p = pose_world[bone];
         let mount = match (&s.mount, s.forward) {
             (Mount::Fixed(q), _) => *q,
             (Mount::Calibrate, Some(axis)) => {
                 // The declared axis must point where the body faces (+Z) in the pose:
                 // P ⊗ mount ⊗ axis = +Z. Any rotation about +Z keeps that true.
-                let to_z = UnitQuaternion::rotation_between(&axis, &Vector3::z())
-                    .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
-                let spin = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rng.uniform() * std::f64::consts::TAU);
+                let to_z =
+                    UnitQuaternion::rotation_between(&axis, &Vector3::z()).unwrap_or_else(|| {
+                        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+                    });
+                let spin = UnitQuaternion::from_axis_angle(
+                    &Vector3::z_axis(),
+                    rng.uniform() * std::f64::consts::TAU,
+                );
                 p.inverse() * spin * to_z
             }
             (Mount::Calibrate, None) => rng.rotation(),
@@ -289,9 +335,14 @@ pub fn simulate(bvh: &Bvh, rig: &Rig, mapping: &Mapping, options: &SimulateOptio
         } else if t < motion_start {
             let u = (t - options.hold_s) / options.blend_s;
             let u = u * u * (3.0 - 2.0 * u); // smoothstep: no jerk at either end
-            source.chain(joint, |j| slerp_shortest(&UnitQuaternion::identity(), &first_local[j], u))
+            source.chain(joint, |j| {
+                slerp_shortest(&UnitQuaternion::identity(), &first_local[j], u)
+            })
         } else {
-            source.world_at(joint, options.first_frame as f64 + (t - motion_start) / frame_time)
+            source.world_at(
+                joint,
+                options.first_frame as f64 + (t - motion_start) / frame_time,
+            )
         }
     };
 
@@ -364,11 +415,18 @@ pub fn simulate(bvh: &Bvh, rig: &Rig, mapping: &Mapping, options: &SimulateOptio
             let _ = writeln!(out, "# world: {world}");
             out.push_str("time_s,sensor,qw,qx,qy,qz\n");
             for (t, i, q) in &rows {
-                let _ = writeln!(out, "{t:.6},{},{:.9},{:.9},{:.9},{:.9}", sims[*i].sensor, q.w, q.i, q.j, q.k);
+                let _ = writeln!(
+                    out,
+                    "{t:.6},{},{:.9},{:.9},{:.9},{:.9}",
+                    sims[*i].sensor, q.w, q.i, q.j, q.k
+                );
             }
             out
         }
-        CaptureFormat::Sou => sou_text(&sims.iter().map(|s| s.sensor.clone()).collect::<Vec<_>>(), &rows)?,
+        CaptureFormat::Sou => sou_text(
+            &sims.iter().map(|s| s.sensor.clone()).collect::<Vec<_>>(),
+            &rows,
+        )?,
     };
     let truth = Truth {
         world,
@@ -393,10 +451,15 @@ pub fn simulate(bvh: &Bvh, rig: &Rig, mapping: &Mapping, options: &SimulateOptio
 }
 
 /// A SOU log: debug text, then `ms,SOU,yaw1,pitch1,roll1,yaw2,pitch2,roll2` per instant.
-fn sou_text(ids: &[String], rows: &[(f64, usize, UnitQuaternion<f64>)]) -> Result<String, SimulateError> {
+fn sou_text(
+    ids: &[String],
+    rows: &[(f64, usize, UnitQuaternion<f64>)],
+) -> Result<String, SimulateError> {
     let mut units: Vec<(String, Option<usize>, Option<usize>)> = Vec::new();
     for (i, id) in ids.iter().enumerate() {
-        let (unit, node) = id.rsplit_once('_').ok_or_else(|| SimulateError::SouPairs(id.clone()))?;
+        let (unit, node) = id
+            .rsplit_once('_')
+            .ok_or_else(|| SimulateError::SouPairs(id.clone()))?;
         let slot = match units.iter().position(|u| u.0 == unit) {
             Some(k) => k,
             None => {
@@ -410,12 +473,17 @@ fn sou_text(ids: &[String], rows: &[(f64, usize, UnitQuaternion<f64>)]) -> Resul
             _ => return Err(SimulateError::SouPairs(id.clone())),
         }
     }
-    let mut out = String::from("[    1.802] usb 1-1.2: new full-speed USB device\nCalibrating MPU9250 ... keep still\n");
+    let mut out = String::from(
+        "[    1.802] usb 1-1.2: new full-speed USB device\nCalibrating MPU9250 ... keep still\n",
+    );
     let ypr = |q: &UnitQuaternion<f64>| {
         let a = from_quaternion(q, EulerOrder::ZYX).map(f64::to_degrees);
         [a[0].rem_euclid(360.0), a[1], a[2]]
     };
-    if let Some((unit, n0, _)) = units.iter().find(|(_, n0, n1)| n0.is_none() || n1.is_none()) {
+    if let Some((unit, n0, _)) = units
+        .iter()
+        .find(|(_, n0, n1)| n0.is_none() || n1.is_none())
+    {
         let present = if n0.is_some() { 0 } else { 1 };
         return Err(SimulateError::SouPairs(format!("{unit}_{present}")));
     }

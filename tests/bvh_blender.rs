@@ -16,7 +16,6 @@ use imubake::rig::{Joint, LengthUnit, Rig};
 use imubake::rotation::EulerOrder;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde_json::Value;
-use std::process::Command;
 
 /// More than Blender's default scene length (250), so that `update_scene_duration` has to act.
 const FRAMES: usize = 260;
@@ -135,22 +134,7 @@ fn blender_imports_our_bvh() {
         .unwrap();
         paths.push(path);
     }
-    let script =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/blender_import_bvh.py");
-    let json_path = dir.path().join("blender.json");
-    let output = Command::new(&python)
-        .arg(&script)
-        .arg(&json_path)
-        .args(&paths)
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "blender script failed:\n{}\n{}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let report: Value = serde_json::from_slice(&std::fs::read(&json_path).unwrap()).unwrap();
+    let report = common::blender_import_bvh(&python, &paths, None);
     eprintln!("Blender {}", report["blender"]);
 
     // Our forward kinematics of the motion, in BVH world axes.

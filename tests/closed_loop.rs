@@ -35,7 +35,13 @@ struct Loop {
     heading_deg: f64,
 }
 
-fn closed_loop(bvh_rel: &str, frames: Option<&str>, bone_map: &str, noise_deg: f64, seed: u64) -> Option<Loop> {
+fn closed_loop(
+    bvh_rel: &str,
+    frames: Option<&str>,
+    bone_map: &str,
+    noise_deg: f64,
+    seed: u64,
+) -> Option<Loop> {
     let bvh = shared(bvh_rel)?;
     let py = python()?;
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -51,7 +57,14 @@ fn closed_loop(bvh_rel: &str, frames: Option<&str>, bone_map: &str, noise_deg: f
         .arg(&capture)
         .arg("--truth")
         .arg(&truth_path)
-        .args(["--bone-map", bone_map, "--seed", &seed.to_string(), "--noise-deg", &noise_deg.to_string()]);
+        .args([
+            "--bone-map",
+            bone_map,
+            "--seed",
+            &seed.to_string(),
+            "--noise-deg",
+            &noise_deg.to_string(),
+        ]);
     if let Some(f) = frames {
         sim.args(["--frames", f]);
     }
@@ -67,7 +80,9 @@ fn closed_loop(bvh_rel: &str, frames: Option<&str>, bone_map: &str, noise_deg: f
         .args(["--fps", "60", "--format", "bvh"]));
     let truth: Value = serde_json::from_slice(&std::fs::read(&truth_path).unwrap()).unwrap();
     let output = imubake::bvh::parse(&std::fs::read(out_dir.join("capture.bvh")).unwrap()).unwrap();
-    let out_rig = output.to_rig("out", imubake::rig::LengthUnit::Metres).unwrap();
+    let out_rig = output
+        .to_rig("out", imubake::rig::LengthUnit::Metres)
+        .unwrap();
     let world_out = |frame: usize| out_rig.world_rotations(&output.local_rotations(frame));
 
     // Output frames during the motion, with the source's fractional frame at each.
@@ -85,7 +100,10 @@ fn closed_loop(bvh_rel: &str, frames: Option<&str>, bone_map: &str, noise_deg: f
     }
     assert!(compared.len() > 300, "{} frames to compare", compared.len());
     let sensors = truth["sensors"].as_array().unwrap();
-    let joints: Vec<&str> = sensors.iter().map(|s| s["source_joint"].as_str().unwrap()).collect();
+    let joints: Vec<&str> = sensors
+        .iter()
+        .map(|s| s["source_joint"].as_str().unwrap())
+        .collect();
     let frame_list: Vec<String> = compared.iter().map(|(_, f)| format!("{f:.9}")).collect();
     let script = root.join("tests/python/bvh_world_rotations.py");
     let out = Command::new(py)
@@ -95,12 +113,17 @@ fn closed_loop(bvh_rel: &str, frames: Option<&str>, bone_map: &str, noise_deg: f
         .arg(frame_list.join(","))
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let expected: Value = serde_json::from_slice(&out.stdout).unwrap();
 
     // The calibration reference: the mean over the middle of the 2 s hold.
-    let hold: Vec<Vec<UnitQuaternion<f64>>> =
-        ((0.5 * OUT_FPS) as usize..(1.5 * OUT_FPS) as usize).map(world_out).collect();
+    let hold: Vec<Vec<UnitQuaternion<f64>>> = ((0.5 * OUT_FPS) as usize..(1.5 * OUT_FPS) as usize)
+        .map(world_out)
+        .collect();
     let calib: Vec<UnitQuaternion<f64>> = (0..out_rig.len())
         .map(|j| mean_rotation(&hold.iter().map(|w| w[j]).collect::<Vec<_>>()))
         .collect();
@@ -141,25 +164,41 @@ fn check(result: Option<Loop>, limit_deg: f64) {
     for (bone, rms) in &result.rms_deg {
         assert!(*rms < limit_deg, "{bone}: {rms:.3}° RMS ≥ {limit_deg}°");
     }
-    assert!(result.facing_error_deg < 2.0, "faces {:.2}° off +Z", result.facing_error_deg);
+    assert!(
+        result.facing_error_deg < 2.0,
+        "faces {:.2}° off +Z",
+        result.facing_error_deg
+    );
 }
 
 #[test]
 fn pymo_walk_without_noise() {
-    check(closed_loop("bvh/pymo_walk.bvh", None, "Spine2=Spine", 0.0, 11), 0.5);
+    check(
+        closed_loop("bvh/pymo_walk.bvh", None, "Spine2=Spine", 0.0, 11),
+        0.5,
+    );
 }
 
 #[test]
 fn pymo_walk_with_noise() {
-    check(closed_loop("bvh/pymo_walk.bvh", None, "Spine2=Spine", 0.5, 12), 2.0);
+    check(
+        closed_loop("bvh/pymo_walk.bvh", None, "Spine2=Spine", 0.5, 12),
+        2.0,
+    );
 }
 
 #[test]
 fn cmu_without_noise() {
-    check(closed_loop("bvh/cmu_01_01.bvh", Some("1:"), "Spine2=Spine1", 0.0, 13), 0.5);
+    check(
+        closed_loop("bvh/cmu_01_01.bvh", Some("1:"), "Spine2=Spine1", 0.0, 13),
+        0.5,
+    );
 }
 
 #[test]
 fn cmu_with_noise() {
-    check(closed_loop("bvh/cmu_01_01.bvh", Some("1:"), "Spine2=Spine1", 0.5, 14), 2.0);
+    check(
+        closed_loop("bvh/cmu_01_01.bvh", Some("1:"), "Spine2=Spine1", 0.5, 14),
+        2.0,
+    );
 }

@@ -5,15 +5,13 @@
 
 mod common;
 
-use common::{missing, python};
+use common::{blender_import_gltf, gltf_validate, node_modules, python};
 use imubake::anim::Animation;
 use imubake::fps::Fps;
 use imubake::rig::{Joint, LengthUnit, Rig, load_rig};
 use imubake::rotation::EulerOrder;
 use imubake::write::gltf::{to_glb, to_gltf};
 use nalgebra::{Unit, UnitQuaternion, Vector3};
-use std::path::{Path, PathBuf};
-use std::process::Command;
 
 const FRAMES: usize = 450;
 
@@ -68,41 +66,6 @@ fn take() -> Animation {
     Animation::new(rig, fps, local, animated, roots).unwrap()
 }
 
-fn node_modules() -> Option<PathBuf> {
-    let dir = std::env::var_os("IMUBAKE_NODE_MODULES")
-        .map(PathBuf::from)
-        .or_else(|| {
-            std::env::var_os("HOME")
-                .map(|h| PathBuf::from(h).join(".cache/imubake-test/node/node_modules"))
-        })?;
-    if dir.join("gltf-validator/package.json").is_file() {
-        Some(dir)
-    } else {
-        missing(&format!(
-            "gltf-validator in {} (run scripts/test.sh)",
-            dir.display()
-        ))
-    }
-}
-
-/// The validator's report on one file (scripts/gltf_validate.mjs).
-fn validate(file: &Path, modules: &Path) -> serde_json::Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/gltf_validate.mjs");
-    let out = Command::new("node")
-        .arg(script)
-        .arg(file)
-        .env("IMUBAKE_NODE_MODULES", modules)
-        .output()
-        .expect("node runs");
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "{e}: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        )
-    })
-}
-
 fn assert_clean(report: &serde_json::Value) {
     eprintln!(
         "{}: errors {} warnings {} infos {} hints {}",
@@ -122,13 +85,11 @@ fn validator_finds_nothing_in_glb_and_gltf() {
 
     let glb = dir.path().join("spin walk.glb");
     std::fs::write(&glb, to_glb(&anim, "spin walk").unwrap()).unwrap();
-    assert_clean(&validate(&glb, &modules));
 
     // A name with a space: the buffer URI must be percent-encoded for the validator to find it.
     let (json, bin) = to_gltf(&anim, "spin walk", "spin walk.bin").unwrap();
     std::fs::write(dir.path().join("spin walk.gltf"), json).unwrap();
     std::fs::write(dir.path().join("spin walk.bin"), bin).unwrap();
-    assert_clean(&validate(&dir.path().join("spin walk.gltf"), &modules));
 
     // One frame: a single key per channel.
     let rig = load_rig("mixamo").unwrap();
@@ -143,7 +104,6 @@ fn validator_finds_nothing_in_glb_and_gltf() {
     .unwrap();
     let one = dir.path().join("still.glb");
     std::fs::write(&one, to_glb(&still, "still").unwrap()).unwrap();
-    assert_clean(&validate(&one, &modules));
 
     // 300 joints (JOINTS_0 as UNSIGNED_SHORT), a chain in centimetres without end sites, every
     // joint animated.
@@ -179,7 +139,11 @@ fn validator_finds_nothing_in_glb_and_gltf() {
     .unwrap();
     let long = dir.path().join("chain.glb");
     std::fs::write(&long, to_glb(&chain, "chain").unwrap()).unwrap();
-    assert_clean(&validate(&long, &modules));
+
+    let files = [glb, dir.path().join("spin walk.gltf"), one, long];
+    for report in gltf_validate(&files, &modules) {
+        assert_clean(&report);
+    }
 }
 
 #[test]
@@ -209,21 +173,7 @@ fn blender_imports_an_armature_that_follows_forward_kinematics() {
         .map(|&n| f64::from(anim.fps().frame_time_of(n as u64) as f32))
         .collect();
     let query = serde_json::json!({"bones": bones, "times": times});
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/blender_import_gltf.py");
-    let out = Command::new(&py)
-        .arg(script)
-        .arg(&glb)
-        .arg(query.to_string())
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value =
-        serde_json::from_str(stdout.lines().last().unwrap_or_default()).unwrap();
+    let report = &blender_import_gltf(&py, &[&glb], &query)[0];
     eprintln!(
         "Blender {}: {} armature(s), {} bones, action {}, frame range {}, {} frames per second",
         report["blender"],

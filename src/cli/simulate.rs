@@ -70,19 +70,42 @@ fn parse_frames(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
     let Some((a, b)) = s.split_once(':') else {
         bail!("--frames `{s}`: expected A:B, e.g. 1: or 10:500");
     };
-    let first = if a.trim().is_empty() { 0 } else { a.trim().parse().context("--frames: A is not a frame number")? };
-    let last = if b.trim().is_empty() { None } else { Some(b.trim().parse().context("--frames: B is not a frame number")?) };
+    let first = if a.trim().is_empty() {
+        0
+    } else {
+        a.trim()
+            .parse()
+            .context("--frames: A is not a frame number")?
+    };
+    let last = if b.trim().is_empty() {
+        None
+    } else {
+        Some(
+            b.trim()
+                .parse()
+                .context("--frames: B is not a frame number")?,
+        )
+    };
     Ok((first, last))
 }
 
 pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
-    let bytes = std::fs::read(&args.motion).with_context(|| format!("{}: cannot read", args.motion.display()))?;
-    let motion = bvh::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", args.motion.display()))?;
+    let bytes = std::fs::read(&args.motion)
+        .with_context(|| format!("{}: cannot read", args.motion.display()))?;
+    let motion =
+        bvh::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", args.motion.display()))?;
     let mapping = match load_mapping(&args.mapping)? {
         MappingFile::Quaternion(m) => m,
-        MappingFile::Legacy(_) => bail!("{}: simulate needs a quaternion mapping, not the legacy paper-002 format", args.mapping.display()),
+        MappingFile::Legacy(_) => bail!(
+            "{}: simulate needs a quaternion mapping, not the legacy paper-002 format",
+            args.mapping.display()
+        ),
     };
-    let rig_name = args.rig.clone().or_else(|| mapping.rig.clone()).unwrap_or_else(|| "mixamo".into());
+    let rig_name = args
+        .rig
+        .clone()
+        .or_else(|| mapping.rig.clone())
+        .unwrap_or_else(|| "mixamo".into());
     let rig = load_rig(&rig_name)?;
     let (first_frame, last_frame) = match &args.frames {
         Some(f) => parse_frames(f)?,
@@ -117,7 +140,8 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("{}: cannot write", args.output.display()))?;
     if let Some(path) = &args.truth {
         let json = serde_json::to_vec_pretty(&simulated.truth)?;
-        write_atomic(path, |w| w.write_all(&json)).with_context(|| format!("{}: cannot write", path.display()))?;
+        write_atomic(path, |w| w.write_all(&json))
+            .with_context(|| format!("{}: cannot write", path.display()))?;
     }
     eprintln!(
         "{}: {} sensors, heading {:.1}°, motion from {:.3} s",

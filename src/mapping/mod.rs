@@ -391,6 +391,53 @@ pub struct MappingRecord {
     pub world: World,
     pub calibration: Option<CalibrationRecord>,
     pub sensors: Vec<SensorRecord>,
+    /// Paper 002's Listing-2 targets, in legacy mode (`sensors` is then empty).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub legacy: Option<Vec<LegacyTargetRecord>>,
+}
+
+/// One Listing-2 target as recorded in the sidecar.
+#[derive(Debug, Clone, Serialize)]
+pub struct LegacyTargetRecord {
+    pub sou: String,
+    /// 1 or 2.
+    pub mpu: u8,
+    /// The node MPU`mpu` measures: `<sou>_0` or `<sou>_1`.
+    pub node: String,
+    pub bone: String,
+    /// Blender Euler X, Y, Z channels as signed angles, e.g. `-pitch1`.
+    #[serde(rename = "X")]
+    pub x: String,
+    #[serde(rename = "Y")]
+    pub y: String,
+    #[serde(rename = "Z")]
+    pub z: String,
+    /// The Table-1 parent whose absolute angles were subtracted from `node`'s; `null` when
+    /// `node`'s angles were used as read.
+    pub relative_to: Option<String>,
+}
+
+impl LegacyTargetRecord {
+    pub fn new(target: &LegacyTarget, relative_to: Option<String>) -> Self {
+        let channel = |c: &LegacyChannel| {
+            format!(
+                "{}{}{}",
+                if c.sign < 0.0 { '-' } else { '+' },
+                ["yaw", "pitch", "roll"][c.source.angle],
+                c.source.mpu
+            )
+        };
+        LegacyTargetRecord {
+            sou: target.sou.clone(),
+            mpu: target.mpu,
+            node: target.node.clone(),
+            bone: target.target.clone(),
+            x: channel(&target.channels[0]),
+            y: channel(&target.channels[1]),
+            z: channel(&target.channels[2]),
+            relative_to,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize)]

@@ -12,6 +12,7 @@
 //! animation's quaternions ([`crate::rotation::euler`]).
 
 pub mod calibrate;
+pub mod legacy;
 pub mod relative;
 pub mod resample;
 pub mod root;
@@ -187,7 +188,7 @@ pub fn run(
                 s.sensor
             )),
             Some(Some(o)) => {
-                tracks.push(o.to_quaternions().map(|q| to_rig * q));
+                tracks.push(o.to_quaternions().map_in_place(|q| to_rig * q));
                 sensors.push(s);
             }
         }
@@ -245,7 +246,7 @@ pub fn run(
                     file: file.clone(),
                     rig: rig.name().to_string(),
                     pose: w.pose.label(),
-                    known: rig.pose_names().collect::<Vec<_>>().join(", "),
+                    known: rig.pose_names().join(", "),
                 })?;
             let pose_world_all = rig.world_rotations(&pose.local);
             let pose_world: Vec<_> = sensors.iter().map(|s| pose_world_all[s.bone]).collect();
@@ -270,11 +271,11 @@ pub fn run(
     // 2. Bone world orientations on each sensor's own sample times.
     let heading = calibration.heading;
     let bone_tracks: Vec<Track<UnitQuaternion<f64>>> = tracks
-        .iter()
+        .into_iter()
         .zip(&calibration.mounts)
         .map(|(t, mount)| {
             let inv = mount.inverse();
-            t.map(|q| heading * q * inv)
+            t.map_in_place(|q| heading * q * inv)
         })
         .collect();
 
@@ -302,13 +303,14 @@ pub fn run(
         }
     };
     let mut world_tracks = vec![None; rig.len()];
-    for (s, track) in sensors.iter().zip(&bone_tracks) {
-        world_tracks[s.bone] = Some(resample::resample(track, options.fps, first, frames));
+    for (s, track) in sensors.iter().zip(bone_tracks) {
+        world_tracks[s.bone] = Some(resample::resample(&track, options.fps, first, frames));
     }
 
     // 4. Local rotations; 5. root.
     let local = relative::to_local(rig, &world_tracks, frames);
     let animated = world_tracks.iter().map(Option::is_some).collect();
+    drop(world_tracks);
     let roots = root::root_positions(rig, options.root, frames);
     let animation = Animation::new(rig.clone(), options.fps, local, animated, roots)?;
     Ok(Converted {

@@ -169,7 +169,40 @@ pub fn parse_rig(text: &str, path: &Path) -> Result<Rig, RigLoadError> {
     })
 }
 
-/// Loads a rig by built-in name (`mixamo`, `sou12`) or from a `.yaml`/`.json` file.
+/// A BVH file's hierarchy as a rig, its frames as poses `frame:N`. BVH has no unit: a rig taller
+/// than 3 units at rest is taken to be in centimetres, else metres.
+pub fn bvh_rig(bytes: &[u8], path: &Path) -> Result<Rig, RigLoadError> {
+    let bvh = crate::bvh::parse(bytes).map_err(|e| RigLoadError::Parse {
+        path: path.to_path_buf(),
+        message: format!("{e}; expected a BVH file"),
+    })?;
+    let name = path
+        .file_stem()
+        .map_or("bvh".to_string(), |s| s.to_string_lossy().into_owned());
+    let invalid = |source| RigLoadError::Invalid {
+        path: path.to_path_buf(),
+        source,
+    };
+    let probe = bvh.to_rig(&name, LengthUnit::Metres).map_err(invalid)?;
+    let heights: Vec<f64> = probe.rest_positions().iter().map(|p| p.y).collect();
+    let height = heights.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+        - heights.iter().cloned().fold(f64::INFINITY, f64::min);
+    let units = if height > 3.0 {
+        LengthUnit::Centimetres
+    } else {
+        LengthUnit::Metres
+    };
+    let mut rig = bvh.to_rig(&name, units).map_err(invalid)?;
+    rig.set_frame_poses(
+        (0..bvh.frame_count())
+            .map(|f| bvh.local_rotations(f))
+            .collect(),
+    );
+    Ok(rig)
+}
+
+/// Loads a rig by built-in name (`mixamo`, `sou12`), from a `.yaml`/`.json` rig file, or from
+/// a `.bvh` file's hierarchy.
 pub fn load_rig(name_or_path: &str) -> Result<Rig, RigLoadError> {
     if let Some((name, text)) = BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
         return parse_rig(text, Path::new(&format!("rigs/{name}.yaml")));
@@ -178,9 +211,19 @@ pub fn load_rig(name_or_path: &str) -> Result<Rig, RigLoadError> {
     if !path.exists() {
         return Err(RigLoadError::Unknown(name_or_path.to_string()));
     }
-    let text = std::fs::read_to_string(path).map_err(|source| RigLoadError::Io {
+    let bytes = std::fs::read(path).map_err(|source| RigLoadError::Io {
         path: path.to_path_buf(),
         source,
+    })?;
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("bvh"))
+    {
+        return bvh_rig(&bytes, path);
+    }
+    let text = String::from_utf8(bytes).map_err(|_| RigLoadError::Parse {
+        path: path.to_path_buf(),
+        message: "not UTF-8 text; expected a YAML or JSON rig file".into(),
     })?;
     parse_rig(&text, path)
 }
@@ -197,6 +240,20 @@ mod tests {
         let s = load_rig("sou12").unwrap();
         assert_eq!(s.name(), "sou12");
         assert!(matches!(load_rig("nope"), Err(RigLoadError::Unknown(_))));
+    }
+
+    #[test]
+    fn a_bvh_hierarchy_is_a_rig_with_frame_poses() {
+        // Root 1 unit tall → metres; one frame with the child turned 90° about Z.
+        let text = "HIERARCHY\nROOT A\n{\n OFFSET 0 1 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n JOINT B\n {\n  OFFSET 0 0.5 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 0.5 0\n  }\n }\n}\nMOTION\nFrames: 1\nFrame Time: 0.1\n0 1 0 0 0 0 90 0 0\n";
+        let rig = bvh_rig(text.as_bytes(), Path::new("two.bvh")).unwrap();
+        assert_eq!(rig.name(), "two");
+        assert_eq!(rig.units(), LengthUnit::Metres);
+        assert_eq!(rig.joints()[1].order, EulerOrder::ZXY);
+        let pose = rig.pose("frame:0").unwrap();
+        assert!((pose.local[1].angle().to_degrees() - 90.0).abs() < 1e-9);
+        assert!(rig.pose("frame:1").is_none());
+        assert!(rig.pose_names().iter().any(|n| n.contains("frame:0")));
     }
 
     #[test]

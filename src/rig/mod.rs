@@ -84,6 +84,8 @@ pub struct Rig {
     units: LengthUnit,
     joints: Vec<Joint>,
     poses: BTreeMap<String, Pose>,
+    /// Local rotations per frame of a BVH rig's motion: the poses `frame:N`.
+    frame_poses: Vec<Vec<UnitQuaternion<f64>>>,
 }
 
 /// The prefix Mixamo puts before its bone names; names match with or without it.
@@ -138,6 +140,7 @@ impl Rig {
             units,
             joints,
             poses: BTreeMap::new(),
+            frame_poses: Vec::new(),
         })
     }
 
@@ -198,8 +201,23 @@ impl Rig {
         Ok(())
     }
 
-    /// A named pose; `rest` is always defined (all identity).
+    /// Makes the frames of a BVH rig's motion available as poses `frame:N`; each entry holds
+    /// every joint's local rotation.
+    pub fn set_frame_poses(&mut self, frames: Vec<Vec<UnitQuaternion<f64>>>) {
+        self.frame_poses = frames
+            .into_iter()
+            .filter(|f| f.len() == self.joints.len())
+            .collect();
+    }
+
+    /// A named pose; `rest` is always defined (all identity), `frame:N` for a BVH rig's frames.
     pub fn pose(&self, name: &str) -> Option<Pose> {
+        if let Some(n) = name.strip_prefix("frame:") {
+            let n: usize = n.trim().parse().ok()?;
+            return self.frame_poses.get(n).map(|local| Pose {
+                local: local.clone(),
+            });
+        }
         if name == "rest" {
             return Some(Pose {
                 local: vec![UnitQuaternion::identity(); self.joints.len()],
@@ -208,8 +226,15 @@ impl Rig {
         self.poses.get(name).cloned()
     }
 
-    pub fn pose_names(&self) -> impl Iterator<Item = &str> {
-        std::iter::once("rest").chain(self.poses.keys().map(String::as_str))
+    /// Pose names for messages: `rest`, the named poses, and `frame:0..N` for a BVH rig.
+    pub fn pose_names(&self) -> Vec<String> {
+        let mut names: Vec<String> = std::iter::once("rest".to_string())
+            .chain(self.poses.keys().cloned())
+            .collect();
+        if !self.frame_poses.is_empty() {
+            names.push(format!("frame:0 … frame:{}", self.frame_poses.len() - 1));
+        }
+        names
     }
 
     /// World rotations from local ones: q_world_j = q_world_parent ⊗ q_local_j.

@@ -105,6 +105,14 @@ impl<T> Track<T> {
         Some(Track { times_s, values })
     }
 
+    /// Transforms every value in place (the times, and so the invariants, are unchanged).
+    pub fn map_in_place(mut self, f: impl Fn(&T) -> T) -> Track<T> {
+        for v in &mut self.values {
+            *v = f(v);
+        }
+        self
+    }
+
     pub fn map<U>(&self, f: impl FnMut(&T) -> U) -> Track<U> {
         Track {
             times_s: self.times_s.clone(),

@@ -4,7 +4,9 @@
 //! so a broken install never turns into a green run.
 #![allow(dead_code)]
 
+use std::ffi::{OsStr, OsString};
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 pub fn in_ci() -> bool {
     std::env::var("CI")
@@ -71,4 +73,120 @@ pub fn python() -> Option<PathBuf> {
 /// The compiled `imubake` binary.
 pub fn imubake_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_imubake"))
+}
+
+/// A file of this crate (scripts, test scripts), by its path in the repository.
+pub fn repo_file(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
+
+/// The `node_modules` folder holding the Khronos glTF-Validator (set up by scripts/test.sh;
+/// `IMUBAKE_NODE_MODULES` overrides).
+pub fn node_modules() -> Option<PathBuf> {
+    let dir = std::env::var_os("IMUBAKE_NODE_MODULES")
+        .map(PathBuf::from)
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .map(|h| PathBuf::from(h).join(".cache/imubake-test/node/node_modules"))
+        })?;
+    if dir.join("gltf-validator/package.json").is_file() {
+        Some(dir)
+    } else {
+        missing(&format!(
+            "gltf-validator in {} (run scripts/test.sh)",
+            dir.display()
+        ))
+    }
+}
+
+/// The glTF-Validator's report on each file, in order, from one Node run of
+/// scripts/gltf_validate.mjs: `{"path", "validator", "errors", "warnings", "infos", "hints",
+/// "messages"}`.
+pub fn gltf_validate<P: AsRef<Path>>(files: &[P], modules: &Path) -> Vec<serde_json::Value> {
+    let out = Command::new("node")
+        .arg(repo_file("scripts/gltf_validate.mjs"))
+        .args(files.iter().map(AsRef::as_ref))
+        .env("IMUBAKE_NODE_MODULES", modules)
+        .output()
+        .expect("node runs");
+    let reports: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|line| {
+            serde_json::from_str(line)
+                .unwrap_or_else(|e| panic!("{e}: {line}\n{}", String::from_utf8_lossy(&out.stderr)))
+        })
+        .collect();
+    assert_eq!(
+        reports.len(),
+        files.len(),
+        "one report per file: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    reports
+}
+
+/// Runs `py script args...`; its stdout. Panics with stdout and stderr when it fails.
+fn run_python(py: &Path, script: &str, args: &mut dyn Iterator<Item = &OsStr>) -> String {
+    let out = Command::new(py)
+        .arg(repo_file(script))
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("{}: {e}", py.display()));
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{script} failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+/// Blender's own BVH import of each file, in one run of tests/python/blender_import_bvh.py
+/// (see its docstring): `{"blender", "files": [...]}`. `pose_frames`: the Blender frames to
+/// report bone poses at (default: every keyed frame).
+pub fn blender_import_bvh<P: AsRef<Path>>(
+    py: &Path,
+    files: &[P],
+    pose_frames: Option<&[u64]>,
+) -> serde_json::Value {
+    let dir = tempfile::tempdir().unwrap();
+    let json_path = dir.path().join("blender_bvh.json");
+    let mut args: Vec<OsString> = Vec::new();
+    if let Some(frames) = pose_frames {
+        let list: Vec<String> = frames.iter().map(u64::to_string).collect();
+        args.push("--frames".into());
+        args.push(list.join(",").into());
+    }
+    args.push(json_path.clone().into());
+    args.extend(files.iter().map(|f| f.as_ref().as_os_str().to_owned()));
+    run_python(
+        py,
+        "tests/python/blender_import_bvh.py",
+        &mut args.iter().map(OsString::as_os_str),
+    );
+    serde_json::from_slice(&std::fs::read(&json_path).unwrap()).unwrap()
+}
+
+/// Blender's own glTF import of each file, in one run of tests/python/blender_import_gltf.py
+/// (see its docstring): one report per file, in order. `query`: `{"bones", "times"}`.
+pub fn blender_import_gltf<P: AsRef<Path>>(
+    py: &Path,
+    files: &[P],
+    query: &serde_json::Value,
+) -> Vec<serde_json::Value> {
+    let query = OsString::from(query.to_string());
+    let stdout = run_python(
+        py,
+        "tests/python/blender_import_gltf.py",
+        &mut files
+            .iter()
+            .map(|f| f.as_ref().as_os_str())
+            .chain(std::iter::once(query.as_os_str())),
+    );
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert!(lines.len() >= files.len(), "{stdout}");
+    lines[lines.len() - files.len()..]
+        .iter()
+        .map(|line| serde_json::from_str(line).unwrap_or_else(|e| panic!("{e}: {line}")))
+        .collect()
 }

@@ -1,0 +1,53 @@
+//! Shared by the benchmarks: the synthetic capture log of issue 2 and memory readings.
+#![allow(dead_code)]
+
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+pub const RATE_HZ: usize = 100;
+
+/// Writes an imubake CSV of quaternions: `minutes` long, one row per sensor per 1/RATE_HZ s,
+/// `time_s` with 4 decimals and quaternions with 6, sensors offset by 0.3 ms each (asynchronous).
+/// Returns the file size in bytes.
+pub fn write_log(path: &Path, minutes: usize, sensors: &[&str]) -> std::io::Result<u64> {
+    let mut out = BufWriter::with_capacity(1 << 20, std::fs::File::create(path)?);
+    writeln!(out, "time_s,sensor,qw,qx,qy,qz")?;
+    let frames = minutes * 60 * RATE_HZ;
+    for i in 0..frames {
+        for (s, name) in sensors.iter().enumerate() {
+            let t = i as f64 / RATE_HZ as f64 + s as f64 * 0.0003;
+            let angle = 0.01 * i as f64 + s as f64;
+            let (half_sin, half_cos) = (angle / 2.0).sin_cos();
+            let axis = [0.6, 0.0, 0.8];
+            writeln!(
+                out,
+                "{t:.4},{name},{:.6},{:.6},{:.6},{:.6}",
+                half_cos,
+                axis[0] * half_sin,
+                axis[1] * half_sin,
+                axis[2] * half_sin
+            )?;
+        }
+    }
+    out.flush()?;
+    Ok(std::fs::metadata(path)?.len())
+}
+
+/// A field of /proc/self/status in KiB (`VmRSS:`, `VmHWM:`).
+pub fn status_kib(field: &str) -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with(field))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+/// Resets the peak-memory mark (VmHWM) to the current resident size.
+pub fn reset_peak() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+}
+
+pub fn minutes_from_env() -> usize {
+    std::env::var("IMUBAKE_BENCH_MINUTES")
+        .ok()
+        .and_then(|m| m.parse().ok())
+        .unwrap_or(60)
+}
