@@ -301,7 +301,7 @@ pub fn convert(
         Some(path) => match load_mapping(path)? {
             MappingFile::Quaternion(m) => Some((m, path.clone())),
             MappingFile::Legacy(m) => {
-                return convert_legacy(input, out_dir, settings, &take, sha256, &m, path);
+                return convert_legacy(input, out_dir, settings, take, sha256, &m, path);
             }
         },
         None => None,
@@ -330,11 +330,11 @@ pub fn convert(
     let stem = take_stem(input);
     let outputs = write_outputs(out_dir, &stem, animation, None, settings)?;
 
-    let heading_sensor = match &converted.calibration.heading_source {
-        pipeline::calibrate::HeadingSource::DeclaredForward { sensor }
-        | pipeline::calibrate::HeadingSource::KnownMount { sensor } => Some(sensor.clone()),
-        pipeline::calibrate::HeadingSource::None => None,
-    };
+    let heading_sensor = converted
+        .calibration
+        .heading_source
+        .sensor()
+        .map(str::to_string);
     let h = converted.calibration.heading;
     let sidecar = Sidecar {
         imubake_version: env!("CARGO_PKG_VERSION"),
@@ -395,6 +395,14 @@ fn write_outputs(
         path: out_dir.to_path_buf(),
         source,
     })?;
+    // A sidecar left by an earlier conversion would claim a complete take while its outputs are
+    // being replaced, and after a failure: it goes before any output is touched.
+    let old_sidecar = out_dir.join(format!("{stem}.imubake.json"));
+    if let Err(e) = std::fs::remove_file(&old_sidecar)
+        && e.kind() != io::ErrorKind::NotFound
+    {
+        return Err(write_err(&old_sidecar)(e));
+    }
     let mut outputs = Vec::new();
     for format in &settings.formats {
         match format {
@@ -484,7 +492,7 @@ fn convert_legacy(
     input: &Path,
     out_dir: &Path,
     settings: &ConvertSettings,
-    take: &Take,
+    take: Take,
     sha256: String,
     mapping: &LegacyMapping,
     mapping_path: &Path,
@@ -492,7 +500,7 @@ fn convert_legacy(
     let rig = load_rig(settings.rig.as_deref().unwrap_or("mixamo"))?;
     let table1 = load_rig("sou12")?;
     let legacy: LegacyAnimation = pipeline::legacy::run(
-        take,
+        &take,
         &rig,
         &table1,
         mapping,
@@ -503,21 +511,28 @@ fn convert_legacy(
         input: input.to_path_buf(),
         source,
     })?;
+    // What the sidecar needs of the take; its samples are freed before the outputs are built.
+    let source = SourceRecord {
+        path: input.to_string_lossy().into_owned(),
+        sha256,
+        format: take.source().format,
+        world: take.source().world,
+        start_timestamp: take.source().start_timestamp.clone(),
+    };
+    let sensor_summaries = SensorSummaries::of(&take);
+    let mut warnings = take.warnings().to_vec();
+    warnings.extend(legacy.warnings.iter().cloned());
+    let dropped_lines = take.dropped_lines().to_vec();
+    let repaired_lines = take.repaired_lines().to_vec();
+    drop(take);
     let animation = &legacy.animation;
     let stem = take_stem(input);
     let outputs = write_outputs(out_dir, &stem, animation, Some(&legacy.euler_deg), settings)?;
-    let mut warnings = take.warnings().to_vec();
-    warnings.extend(legacy.warnings.iter().cloned());
     let out_rig = animation.rig();
+    let world = source.world;
     let sidecar = Sidecar {
         imubake_version: env!("CARGO_PKG_VERSION"),
-        source: SourceRecord {
-            path: input.to_string_lossy().into_owned(),
-            sha256,
-            format: take.source().format,
-            world: take.source().world,
-            start_timestamp: take.source().start_timestamp.clone(),
-        },
+        source,
         fps: animation.fps(),
         frames: animation.frames(),
         duration_s: animation.duration_s(),
@@ -529,7 +544,7 @@ fn convert_legacy(
         mapping: MappingRecord {
             file: Some(mapping_path.to_string_lossy().into_owned()),
             rig: out_rig.name().to_string(),
-            world: take.source().world,
+            world,
             calibration: None,
             sensors: Vec::new(),
             legacy: Some(
@@ -555,9 +570,9 @@ fn convert_legacy(
             mode: "legacy-euler",
         },
         outputs,
-        sensors: SensorSummaries::of(take),
-        dropped_lines: take.dropped_lines().to_vec(),
-        repaired_lines: take.repaired_lines().to_vec(),
+        sensors: sensor_summaries,
+        dropped_lines,
+        repaired_lines,
         warnings,
     };
     write_sidecar(out_dir, &stem, sidecar)

@@ -202,3 +202,96 @@ fn cmu_with_noise() {
         2.0,
     );
 }
+
+/// The heading from travel: the same simulated walk converted with a mapping that declares no
+/// forward axis must face the direction the source walks in over the first 4 s of motion (read
+/// straight from the BVH's root position channels), within 10°: the pymo walker curves and sways
+/// its hips by ±40°, so its direction of travel is itself only that well defined.
+#[test]
+fn heading_from_travel_faces_the_walking_direction() {
+    let (Some(bvh), Some(_)) = (shared("bvh/pymo_walk.bvh"), python()) else {
+        return;
+    };
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("walk.csv");
+    let truth_path = dir.path().join("truth.json");
+    run(Command::new(imubake_bin())
+        .arg("simulate")
+        .arg(&bvh)
+        .arg("--mapping")
+        .arg(root.join(MAPPING))
+        .arg("--output")
+        .arg(&capture)
+        .arg("--truth")
+        .arg(&truth_path)
+        .args([
+            "--bone-map",
+            "Spine2=Spine",
+            "--seed",
+            "21",
+            "--heading-deg",
+            "-120",
+        ]));
+    // The same mapping without the pelvis's forward axis.
+    let mut mapping: Value =
+        serde_json::from_slice(&std::fs::read(root.join(MAPPING)).unwrap()).unwrap();
+    mapping["sensors"]["pelvis"]
+        .as_object_mut()
+        .unwrap()
+        .remove("forward");
+    let no_forward = dir.path().join("no_forward.json");
+    std::fs::write(&no_forward, mapping.to_string()).unwrap();
+    let heading = |mapping: &Path, out: &str| -> (String, f64) {
+        let out_dir = dir.path().join(out);
+        run(Command::new(imubake_bin())
+            .arg("convert")
+            .arg(&capture)
+            .arg("--mapping")
+            .arg(mapping)
+            .arg("--out")
+            .arg(&out_dir)
+            .args(["--format", "bvh"]));
+        let sidecar: Value =
+            serde_json::from_slice(&std::fs::read(out_dir.join("walk.imubake.json")).unwrap())
+                .unwrap();
+        (
+            sidecar["pipeline"]["heading"].as_str().unwrap().to_string(),
+            sidecar["pipeline"]["heading_deg"].as_f64().unwrap(),
+        )
+    };
+    let (source, declared_deg) = heading(&root.join(MAPPING), "declared");
+    assert_eq!(source, "declared-forward");
+    let (source, travel_deg) = heading(&no_forward, "travel");
+    assert_eq!(source, "travel");
+
+    // The source's walking direction: the mean direction of its root's steps (X/Z position, its
+    // first channels) every 0.1 s over the first 4 s of motion (the walk curves, so the mean
+    // direction, not the chord).
+    let text = std::fs::read_to_string(&bvh).unwrap();
+    let motion: Vec<Vec<f64>> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("Frame Time"))
+        .skip(1)
+        .map(|l| l.split_whitespace().map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let truth: Value = serde_json::from_slice(&std::fs::read(&truth_path).unwrap()).unwrap();
+    let frame_time = truth["source_frame_time_s"].as_f64().unwrap();
+    let step = (0.1 / frame_time).round() as usize;
+    let (mut dx, mut dz) = (0.0, 0.0);
+    for k in (0..(4.0 / frame_time) as usize).step_by(step) {
+        let (a, b) = (&motion[k], &motion[k + step]);
+        let n = (b[0] - a[0]).hypot(b[2] - a[2]);
+        dx += (b[0] - a[0]) / n;
+        dz += (b[2] - a[2]) / n;
+    }
+    // Declared output = the source's own world; the travel output is turned by the difference
+    // of the two headings, which must bring the walking direction onto +Z.
+    let expected_deg = -dx.atan2(dz).to_degrees();
+    let turn = (travel_deg - declared_deg - expected_deg + 540.0).rem_euclid(360.0) - 180.0;
+    eprintln!("travel heading off the walking direction by {turn:.2}°");
+    assert!(
+        turn.abs() < 10.0,
+        "travel heading is {turn:.1}° off the walking direction"
+    );
+}

@@ -939,3 +939,72 @@ fn converting_twice_gives_identical_files() {
         assert!(x == y, "{file} differs between two conversions");
     }
 }
+
+#[test]
+fn each_format_is_written_and_listed_once() {
+    let (dir, sidecar) = convert_sou("formats_twice", &["--format", "bvh,glb,bvh"]);
+    let outputs: Vec<&str> = sidecar["outputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|o| o["path"].as_str().unwrap())
+        .collect();
+    assert_eq!(outputs, ["sou_wave.bvh", "sou_wave.glb"]);
+    assert!(dir.join("sou_wave.glb").is_file());
+}
+
+#[test]
+fn json_prints_nothing_for_a_failed_take() {
+    let dir = scratch("json_failed");
+    let input = dir.join("missing.log");
+    let out = imubake([
+        OsStr::new("convert"),
+        input.as_ref(),
+        "--out".as_ref(),
+        dir.as_ref(),
+        "--json".as_ref(),
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(
+        out.stdout.is_empty(),
+        "stdout is not JSON: {:?}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+}
+
+#[test]
+fn a_failed_reconversion_leaves_no_stale_sidecar() {
+    let (dir, first) = convert_sou("reconvert", &["--fps", "30", "--format", "bvh,glb"]);
+    assert_eq!(first["frames"], 600);
+    // The GLB cannot be written this time: a folder stands at its path.
+    std::fs::remove_file(dir.join("sou_wave.glb")).unwrap();
+    std::fs::create_dir(dir.join("sou_wave.glb")).unwrap();
+    let out = imubake([
+        OsStr::new("convert"),
+        repo_file(SOU).as_ref(),
+        "--mapping".as_ref(),
+        repo_file(SOU_MAPPING).as_ref(),
+        "--out".as_ref(),
+        dir.as_ref(),
+        "--fps".as_ref(),
+        "60".as_ref(),
+        "--format".as_ref(),
+        "bvh,glb".as_ref(),
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("sou_wave.glb"), "{err}");
+    // The BVH was rewritten at 60 fps: the 30 fps sidecar must not stay beside it claiming a
+    // complete take (conventions.md: the sidecar's appearance means the take is complete).
+    let bvh = imubake::bvh::parse(&std::fs::read(dir.join("sou_wave.bvh")).unwrap()).unwrap();
+    assert_eq!(bvh.frame_count(), 1200);
+    assert!(
+        !dir.join("sou_wave.imubake.json").exists(),
+        "a stale sidecar describes other outputs"
+    );
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(!names.iter().any(|n| n.ends_with(".tmp")), "{names:?}");
+}

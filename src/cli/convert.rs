@@ -76,6 +76,13 @@ impl ConvertArgs {
         if let Some(f) = &self.format {
             settings.formats = f.clone();
         }
+        // Each format once (`--format bvh,glb,bvh`), in the order first given.
+        let mut seen = Vec::new();
+        settings.formats.retain(|f| {
+            let new = !seen.contains(f);
+            seen.push(*f);
+            new
+        });
         if let Some(u) = self.units {
             settings.units = u;
         }
@@ -134,14 +141,16 @@ pub fn run(args: ConvertArgs) -> anyhow::Result<ExitCode> {
     }
     if args.json {
         let mut stdout = std::io::stdout().lock();
+        // One input: its sidecar, or nothing when it failed (stdout stays valid JSON or empty).
         if args.inputs.len() == 1 {
             if let Some(s) = sidecars.first() {
                 serde_json::to_writer_pretty(&mut stdout, s)?;
+                writeln!(stdout).context("writing to stdout")?;
             }
         } else {
             serde_json::to_writer_pretty(&mut stdout, &sidecars)?;
+            writeln!(stdout).context("writing to stdout")?;
         }
-        writeln!(stdout).context("writing to stdout")?;
     }
     Ok(if failed > 0 {
         ExitCode::from(1)

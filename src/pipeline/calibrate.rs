@@ -10,7 +10,8 @@
 //! A static pose cannot tell the subject's heading apart from unknown mounts, so the heading comes
 //! from what can tell it: a sensor whose forward axis is declared (that axis points where the body
 //! faces), else a sensor whose mount is known (its bone's pose orientation says where the body
-//! faces), else none (the sensors' own heading is kept: north → +Z).
+//! faces), else the direction of travel when the take starts by walking (read off the knees, see
+//! [`heading_from_knees`]), else none (the sensors' own heading is kept: north → +Z).
 
 use crate::mapping::{Mount, ResolvedSensor};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -18,8 +19,14 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 /// Where the heading came from (sidecar `pipeline.heading`).
 #[derive(Debug, Clone, PartialEq)]
 pub enum HeadingSource {
-    DeclaredForward { sensor: String },
-    KnownMount { sensor: String },
+    DeclaredForward {
+        sensor: String,
+    },
+    KnownMount {
+        sensor: String,
+    },
+    /// Walking after calibration: the knees' flexion axis points to the subject's left.
+    Travel,
     None,
 }
 
@@ -28,7 +35,18 @@ impl HeadingSource {
         match self {
             HeadingSource::DeclaredForward { .. } => "declared-forward",
             HeadingSource::KnownMount { .. } => "mounts",
+            HeadingSource::Travel => "travel",
             HeadingSource::None => "none",
+        }
+    }
+
+    /// The sensor the heading came from, if one did.
+    pub fn sensor(&self) -> Option<&str> {
+        match self {
+            HeadingSource::DeclaredForward { sensor } | HeadingSource::KnownMount { sensor } => {
+                Some(sensor)
+            }
+            HeadingSource::Travel | HeadingSource::None => None,
         }
     }
 }
@@ -66,14 +84,42 @@ pub fn heading_towards_plus_z(d: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
     Some(UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -psi))
 }
 
+/// The heading from walking: a knee flexes about the subject's left axis whatever the mounts, so
+/// the mean rotation vector of each shank relative to its thigh (both as world-frame rotations
+/// since calibration) points left; forward = left × up. `knees` holds, per leg, the thigh's and
+/// the shank's rotations since calibration at common instants during the walk (rig world).
+/// `None` when the knees barely bend (under 10° on average): not walking.
+pub fn heading_from_knees(
+    knees: &[Vec<(UnitQuaternion<f64>, UnitQuaternion<f64>)>],
+) -> Option<UnitQuaternion<f64>> {
+    let mut sum = Vector3::zeros();
+    let mut count = 0usize;
+    for leg in knees {
+        for (thigh, shank) in leg {
+            let knee = shank * thigh.inverse();
+            let v = knee.scaled_axis();
+            sum += Vector3::new(v.x, 0.0, v.z);
+            count += 1;
+        }
+    }
+    if count == 0 || (sum.norm() / count as f64).to_degrees() < 10.0 {
+        return None;
+    }
+    let left = sum.normalize();
+    heading_towards_plus_z(&left.cross(&Vector3::y()))
+}
+
 /// Solves heading and mounts.
 ///
 /// `held[i]`: sensor i's mean orientation over the window, in the rig world (`C ⊗ q`).
 /// `pose_world[i]`: its bone's world orientation in the calibration pose.
+/// `travel`: the heading from walking ([`heading_from_knees`]), used when neither a declared
+/// forward axis nor a known mount gives one.
 pub fn solve(
     sensors: &[ResolvedSensor],
     held: &[UnitQuaternion<f64>],
     pose_world: &[UnitQuaternion<f64>],
+    travel: Option<UnitQuaternion<f64>>,
 ) -> Calibration {
     let mut warnings = Vec::new();
     let mut heading = None;
@@ -111,6 +157,7 @@ pub fn solve(
             }
         }
     }
+    let heading = heading.or_else(|| travel.map(|h| (h, HeadingSource::Travel)));
     let (heading, heading_source) =
         heading.unwrap_or((UnitQuaternion::identity(), HeadingSource::None));
     let mounts = sensors
@@ -155,6 +202,7 @@ mod tests {
             &[sensor(Mount::Calibrate, Some(Vector3::y()))],
             &[held],
             &[UnitQuaternion::identity()],
+            None,
         );
         assert_eq!(cal.heading_source.label(), "declared-forward");
         assert!((cal.heading * Vector3::x() - Vector3::z()).norm() < 1e-12);
@@ -173,6 +221,7 @@ mod tests {
             &[sensor(Mount::Fixed(UnitQuaternion::identity()), None)],
             &[held],
             &[UnitQuaternion::identity()],
+            None,
         );
         assert_eq!(cal.heading_source.label(), "mounts");
         assert!((cal.heading * (-Vector3::x()) - Vector3::z()).norm() < 1e-12);
@@ -180,9 +229,31 @@ mod tests {
             &[sensor(Mount::Calibrate, None)],
             &[held],
             &[UnitQuaternion::identity()],
+            None,
         );
         assert_eq!(cal.heading_source, HeadingSource::None);
         assert!(cal.heading.angle() < 1e-12);
+    }
+
+    #[test]
+    fn knees_bending_about_plus_x_mean_facing_plus_z() {
+        // A subject facing +Z: left is +X, and knee flexion turns the shank about +X (the foot
+        // swings back). Turn the whole scene by 30° about +Y: the heading must undo it.
+        let turn = rot(Vector3::y(), 30.0);
+        let leg: Vec<_> = (0..50)
+            .map(|i| {
+                let thigh =
+                    turn * rot(Vector3::x(), -20.0 * (i as f64 * 0.2).sin()) * turn.inverse();
+                let flex =
+                    turn * rot(Vector3::x(), 30.0 + 20.0 * (i as f64 * 0.2).sin()) * turn.inverse();
+                (thigh, flex * thigh)
+            })
+            .collect();
+        let h = heading_from_knees(&[leg]).unwrap();
+        assert!((h * turn * Vector3::z() - Vector3::z()).norm() < 1e-9);
+        // Straight knees: not walking.
+        let still = vec![(UnitQuaternion::identity(), rot(Vector3::x(), 2.0)); 10];
+        assert!(heading_from_knees(&[still]).is_none());
     }
 
     #[test]

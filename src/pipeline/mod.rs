@@ -143,21 +143,59 @@ fn held_over(
         .map(|(_, q)| *q)
         .collect();
     if inside.is_empty() {
-        let mid = window.start_s + window.duration_s / 2.0;
-        let times = track.times_s();
-        let i = times.partition_point(|&t| t <= mid);
-        let values = track.values();
-        return match i {
-            0 => values[0],
-            i if i == times.len() => values[i - 1],
-            i => resample::slerp_shortest(
-                &values[i - 1],
-                &values[i],
-                (mid - times[i - 1]) / (times[i] - times[i - 1]),
-            ),
-        };
+        return resample::sample_at(track, window.start_s + window.duration_s / 2.0);
     }
     mean_rotation(&inside)
+}
+
+/// How long after the calibration window the walk is read for the heading from travel.
+const TRAVEL_WINDOW_S: f64 = 4.0;
+
+/// A joint whose own offset and whose child (or end site) both point down at rest: a knee-like
+/// joint (the thigh → shank link of a leg), for the heading from travel.
+fn is_shank(rig: &Rig, joint: usize) -> bool {
+    let down = |v: &nalgebra::Vector3<f64>| v.norm() > 0.0 && -v.y > 0.8 * v.norm();
+    let j = &rig.joints()[joint];
+    let below = rig
+        .children(joint)
+        .map(|c| rig.joints()[c].offset)
+        .chain(j.end_site);
+    j.parent.is_some() && down(&j.offset) && below.into_iter().any(|v| down(&v))
+}
+
+/// For every mapped thigh–shank pair, both sensors' rotations since calibration (rig world) at
+/// the shank's samples in the seconds after the window.
+fn knee_samples(
+    rig: &Rig,
+    sensors: &[ResolvedSensor],
+    tracks: &[Track<UnitQuaternion<f64>>],
+    held: &[UnitQuaternion<f64>],
+    window: &CalibrationWindow,
+) -> Vec<Vec<(UnitQuaternion<f64>, UnitQuaternion<f64>)>> {
+    let start = window.start_s + window.duration_s;
+    let end = start + TRAVEL_WINDOW_S;
+    let mut legs = Vec::new();
+    for (s, shank) in sensors.iter().enumerate() {
+        let Some(parent) = rig.joints()[shank.bone].parent else {
+            continue;
+        };
+        let Some(t) = sensors.iter().position(|o| o.bone == parent) else {
+            continue;
+        };
+        if !is_shank(rig, shank.bone) {
+            continue;
+        }
+        let leg = tracks[s]
+            .iter()
+            .filter(|(time, _)| *time > start && *time <= end)
+            .map(|(time, q)| {
+                let thigh = resample::sample_at(&tracks[t], time);
+                (thigh * held[t].inverse(), q * held[s].inverse())
+            })
+            .collect();
+        legs.push(leg);
+    }
+    legs
 }
 
 /// Runs the pipeline. `mapping_file` names the mapping in errors.
@@ -251,7 +289,9 @@ pub fn run(
             let pose_world_all = rig.world_rotations(&pose.local);
             let pose_world: Vec<_> = sensors.iter().map(|s| pose_world_all[s.bone]).collect();
             let held: Vec<_> = tracks.iter().map(|t| held_over(t, w)).collect();
-            calibrate::solve(&sensors, &held, &pose_world)
+            let travel =
+                calibrate::heading_from_knees(&knee_samples(rig, &sensors, &tracks, &held, w));
+            calibrate::solve(&sensors, &held, &pose_world, travel)
         }
         None => Calibration {
             heading: UnitQuaternion::identity(),

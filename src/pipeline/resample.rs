@@ -30,6 +30,21 @@ pub fn slerp_shortest(
     UnitQuaternion::from_quaternion(q)
 }
 
+/// The track's value at time `t`: slerp between the bracketing samples, held outside.
+pub fn sample_at(track: &Track<UnitQuaternion<f64>>, t: f64) -> UnitQuaternion<f64> {
+    let times = track.times_s();
+    let values = track.values();
+    match times.partition_point(|&x| x <= t) {
+        0 => values[0],
+        i if i == times.len() => values[i - 1],
+        i => slerp_shortest(
+            &values[i - 1],
+            &values[i],
+            (t - times[i - 1]) / (times[i] - times[i - 1]),
+        ),
+    }
+}
+
 /// Samples `track` at frames `first .. first + frames` of `fps`.
 pub fn resample(
     track: &Track<UnitQuaternion<f64>>,
