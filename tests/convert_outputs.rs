@@ -784,18 +784,23 @@ fn json_prints_exactly_the_sidecars_written() {
     assert_eq!(printed, expected);
 }
 
-/// Converts the SOU sample with a mapping file written from `text`; the output.
-fn convert_with_mapping(dir: &Path, name: &str, text: &str) -> (PathBuf, Output) {
+/// Converts the SOU sample into `dir`/out with a mapping file written from `text` and `extra`
+/// flags; the mapping's path and the output.
+fn convert_with_mapping(dir: &Path, name: &str, text: &str, extra: &[&str]) -> (PathBuf, Output) {
     let mapping = dir.join(name);
     std::fs::write(&mapping, text).unwrap();
-    let out = imubake([
-        OsStr::new("convert"),
-        repo_file(SOU).as_ref(),
-        "--mapping".as_ref(),
-        mapping.as_ref(),
-        "--out".as_ref(),
-        dir.join("out").as_ref(),
-    ]);
+    let out = imubake(
+        [
+            OsStr::new("convert"),
+            repo_file(SOU).as_ref(),
+            "--mapping".as_ref(),
+            mapping.as_ref(),
+            "--out".as_ref(),
+            dir.join("out").as_ref(),
+        ]
+        .into_iter()
+        .chain(extra.iter().map(OsStr::new)),
+    );
     (mapping, out)
 }
 
@@ -825,7 +830,7 @@ fn mapping_errors_name_the_file_and_the_key() {
         ),
     ];
     for (name, text, needles) in cases {
-        let (mapping, out) = convert_with_mapping(&dir, name, text);
+        let (mapping, out) = convert_with_mapping(&dir, name, text, &[]);
         let err = stderr(&out);
         eprintln!("{name}: {err}");
         assert_eq!(out.status.code(), Some(1), "{name}: {err}");
@@ -843,7 +848,7 @@ fn a_sensor_missing_from_the_mapping_is_a_sidecar_warning() {
     let dir = scratch("unmapped");
     let mut mapping = read_json(&repo_file(SOU_MAPPING));
     mapping["sensors"].as_object_mut().unwrap().remove("N5_1");
-    let (_, out) = convert_with_mapping(&dir, "no_head.json", &mapping.to_string());
+    let (_, out) = convert_with_mapping(&dir, "no_head.json", &mapping.to_string(), &[]);
     let out = ok(out);
     let sidecar = read_json(&dir.join("out/sou_wave.imubake.json"));
     let warnings: Vec<&str> = sidecar["warnings"]
@@ -861,6 +866,36 @@ fn a_sensor_missing_from_the_mapping_is_a_sidecar_warning() {
     assert_eq!(warnings.len(), 1, "{warnings:?}");
     assert!(stderr(&out).contains("N5_1"), "also said on stderr");
     assert_eq!(sidecar["mapping"]["sensors"].as_array().unwrap().len(), 11);
+}
+
+#[test]
+fn frames_end_at_the_last_sample_of_a_mapped_sensor() {
+    // N1_0 and N1_1 end at 19.966 s, the take at 19.998 s (N0_0): 1198 frames at 60 fps, not
+    // 1200; t = 0 stays at the take's earliest sample.
+    let dir = scratch("mapped_end");
+    let text = r#"{"rig": "mixamo", "world": "ned",
+        "calibration": {"pose": "rest", "start_s": 0.5, "duration_s": 2.0},
+        "sensors": {"N1_0": {"bone": "RightArm"}, "N1_1": {"bone": "RightForeArm"}}}"#;
+    let (mapping, out) = convert_with_mapping(&dir, "arm.json", text, &["--fps", "60"]);
+    ok(out);
+    let take = Take::new("arm", repo_file(SOU), mapping, "sou_wave");
+    let expected = take.expected_frames(60, 1);
+    let whole = take.inspect["time_frame_s"].as_f64().unwrap();
+    assert_ne!(
+        expected,
+        (whole * 60.0).floor() as u64 + 1,
+        "the test needs a shorter sensor"
+    );
+    let sidecar = read_json(&dir.join("out/sou_wave.imubake.json"));
+    eprintln!(
+        "t_last of the mapped sensors {} s: {expected} frames",
+        take.t_last_s
+    );
+    assert_eq!(sidecar["frames"].as_u64(), Some(expected));
+    assert_eq!(
+        sidecar["source"]["start_timestamp"],
+        take.inspect["source"]["start_timestamp"]
+    );
 }
 
 #[test]

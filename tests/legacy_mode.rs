@@ -210,7 +210,7 @@ fn convert(log: &Path, mapping: &Path, out: &Path, extra: &[&str]) -> Value {
 /// R = Rz(Z)·Ry(Y)·Rx(X), degrees: Blender's XYZ Euler mode.
 fn blender_xyz(xyz: [f64; 3]) -> UnitQuaternion<f64> {
     let r = |axis, deg: f64| UnitQuaternion::from_axis_angle(&axis, deg.to_radians());
-    r(Vector3::x_axis(), xyz[0]) * r(Vector3::y_axis(), xyz[1]) * r(Vector3::z_axis(), xyz[2])
+    r(Vector3::z_axis(), xyz[2]) * r(Vector3::y_axis(), xyz[1]) * r(Vector3::x_axis(), xyz[0])
 }
 
 const FRAMES: [usize; 6] = [0, 45, 137, 201, 333, 598];
