@@ -97,14 +97,6 @@ fn to_blender() -> Matrix3<f64> {
     Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.0, 0.0)
 }
 
-fn vec3(v: &Value) -> Vector3<f64> {
-    Vector3::new(
-        v[0].as_f64().unwrap(),
-        v[1].as_f64().unwrap(),
-        v[2].as_f64().unwrap(),
-    )
-}
-
 fn mat3(v: &Value) -> Matrix3<f64> {
     Matrix3::from_fn(|r, c| v[r][c].as_f64().unwrap())
 }
@@ -175,12 +167,7 @@ fn blender_imports_our_bvh() {
             "{num}/{den}"
         );
 
-        let bones: Vec<&str> = file["bones"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|b| b.as_str().unwrap())
-            .collect();
+        let bones: Vec<&str> = common::strings(&file["bones"]);
         assert_eq!(bones, ["Hips", "Spine", "Head", "LeftArm"]);
         // Hips: location and rotation_euler (3 + 3); the others rotation_euler (3 each).
         let curves = file["fcurves"].as_array().unwrap();
@@ -201,7 +188,7 @@ fn blender_imports_our_bvh() {
         for (f, frame) in frames.iter().enumerate() {
             assert_eq!(frame["frame"].as_u64(), Some(f as u64 + 1));
             for (j, name) in bones.iter().enumerate() {
-                let head = vec3(&frame["bones"][name]["head"]);
+                let head = common::vec3(&frame["bones"][name]["head"]);
                 let expected = c * heads[f][j];
                 assert!(
                     (head - expected).norm() < 1e-5,

@@ -24,14 +24,12 @@ mod common;
 
 use common::{
     blender_import_bvh, blender_import_gltf, gltf_validate, imubake_bin, node_modules, python,
-    repo_file, shared,
+    repo_file, shared, vec3,
 };
 use imubake::rig::load_rig;
-use nalgebra::Vector3;
 use serde_json::Value;
 use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, BTreeSet};
-use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
@@ -60,11 +58,27 @@ const SANITY_BONES: [&str; 6] = [
     "RightLeg",
 ];
 
-fn imubake<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>) -> Output {
+fn imubake(args: &[&str]) -> Output {
     Command::new(imubake_bin())
         .args(args)
         .output()
         .expect("imubake runs")
+}
+
+fn utf8(path: &Path) -> &str {
+    path.to_str().expect("a UTF-8 path")
+}
+
+/// `imubake convert <inputs> [--mapping <mapping>] --out <out> <extra>`.
+fn convert(inputs: &[&Path], mapping: Option<&Path>, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["convert"];
+    args.extend(inputs.iter().map(|p| utf8(p)));
+    if let Some(m) = mapping {
+        args.extend(["--mapping", utf8(m)]);
+    }
+    args.extend(["--out", utf8(out)]);
+    args.extend(extra);
+    imubake(&args)
 }
 
 fn stderr(out: &Output) -> String {
@@ -95,12 +109,9 @@ fn sha256_hex(path: &Path) -> String {
         .collect()
 }
 
-fn vec3(v: &Value) -> Vector3<f64> {
-    Vector3::new(
-        v[0].as_f64().unwrap(),
-        v[1].as_f64().unwrap(),
-        v[2].as_f64().unwrap(),
-    )
+fn sorted(mut names: Vec<&str>) -> Vec<&str> {
+    names.sort_unstable();
+    names
 }
 
 /// A capture and what `inspect --json` and its mapping file say about it.
@@ -118,15 +129,9 @@ struct Take {
 
 impl Take {
     fn new(name: &'static str, input: PathBuf, mapping: PathBuf, stem: &'static str) -> Take {
-        let inspect: Value = serde_json::from_slice(
-            &ok(imubake([
-                OsStr::new("inspect"),
-                input.as_ref(),
-                "--json".as_ref(),
-            ]))
-            .stdout,
-        )
-        .unwrap();
+        let inspect: Value =
+            serde_json::from_slice(&ok(imubake(&["inspect", utf8(&input), "--json"])).stdout)
+                .unwrap();
         let bones: BTreeMap<String, String> = read_json(&mapping)["sensors"]
             .as_object()
             .unwrap()
@@ -212,18 +217,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn convert_into(take: &Take, dir: &Path, extra: &[&str]) -> Value {
-    let out = ok(imubake(
-        [
-            OsStr::new("convert"),
-            take.input.as_ref(),
-            "--mapping".as_ref(),
-            take.mapping.as_ref(),
-            "--out".as_ref(),
-            dir.as_ref(),
-        ]
-        .into_iter()
-        .chain(extra.iter().map(OsStr::new)),
-    ));
+    let out = ok(convert(&[&take.input], Some(&take.mapping), dir, extra));
     assert!(
         stderr(&out).is_empty(),
         "{}: unexpected messages: {}",
@@ -248,19 +242,19 @@ fn fixture() -> &'static Fixture {
         if let Some(motion) = shared("bvh/pymo_walk.bvh") {
             let capture = root.join("walk.csv");
             // 2 s of the walk (frames 0..=240 at 120 fps) after the 2 s hold and 1 s blend.
-            ok(imubake([
-                OsStr::new("simulate"),
-                motion.as_ref(),
-                "--mapping".as_ref(),
-                repo_file(WALK_MAPPING).as_ref(),
-                "--bone-map".as_ref(),
-                "Spine2=Spine".as_ref(),
-                "--frames".as_ref(),
-                "0:240".as_ref(),
-                "--seed".as_ref(),
-                "1".as_ref(),
-                "--output".as_ref(),
-                capture.as_ref(),
+            ok(imubake(&[
+                "simulate",
+                utf8(&motion),
+                "--mapping",
+                utf8(&repo_file(WALK_MAPPING)),
+                "--bone-map",
+                "Spine2=Spine",
+                "--frames",
+                "0:240",
+                "--seed",
+                "1",
+                "--output",
+                utf8(&capture),
             ]));
             takes.push(Take::new("walk", capture, repo_file(WALK_MAPPING), "walk"));
         }
@@ -476,8 +470,7 @@ fn blender_imports_every_output_and_bvh_and_glb_carry_the_same_motion() {
     };
     let fx = fixture();
     let rig = load_rig("mixamo").unwrap();
-    let mut bone_names: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
-    bone_names.sort_unstable();
+    let bone_names = sorted(rig.joints().iter().map(|j| j.name.as_str()).collect());
 
     // BVH: one Blender run for all files; poses at the walk frames checked below (Blender
     // frame = our frame + 1).
@@ -516,14 +509,11 @@ fn blender_imports_every_output_and_bvh_and_glb_carry_the_same_motion() {
             "{label}: fps_base {fps_base}"
         );
         assert!(((fps / fps_base) / rate - 1.0).abs() < 1e-6, "{label}");
-        let mut bones: Vec<&str> = file["bones"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|b| b.as_str().unwrap())
-            .collect();
-        bones.sort_unstable();
-        assert_eq!(bones, bone_names, "{label}");
+        assert_eq!(
+            sorted(common::strings(&file["bones"])),
+            bone_names,
+            "{label}"
+        );
         // The root's location and rotation, every other joint's rotation.
         assert_eq!(
             file["fcurves"].as_array().unwrap().len(),
@@ -577,14 +567,11 @@ fn blender_imports_every_output_and_bvh_and_glb_carry_the_same_motion() {
         );
         assert_eq!(report["blender"], "5.0.1");
         assert_eq!(report["armatures"], 1, "{label}: {report}");
-        let mut bones: Vec<&str> = report["bones"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|b| b.as_str().unwrap())
-            .collect();
-        bones.sort_unstable();
-        assert_eq!(bones, bone_names, "{label}");
+        assert_eq!(
+            sorted(common::strings(&report["bones"])),
+            bone_names,
+            "{label}"
+        );
         let stem = fx.takes[c.take].stem;
         assert_eq!(
             report["action"].as_str().map(|a| a.contains(stem)),
@@ -723,15 +710,7 @@ fn two_inputs_with_the_same_stem_are_a_usage_error() {
         std::fs::copy(repo_file(SOU), p).unwrap();
     }
     let out_dir = dir.join("out");
-    let out = imubake([
-        OsStr::new("convert"),
-        a.as_ref(),
-        b.as_ref(),
-        "--mapping".as_ref(),
-        repo_file(SOU_MAPPING).as_ref(),
-        "--out".as_ref(),
-        out_dir.as_ref(),
-    ]);
+    let out = convert(&[&a, &b], Some(&repo_file(SOU_MAPPING)), &out_dir, &[]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(
@@ -747,15 +726,8 @@ fn two_inputs_with_the_same_stem_are_a_usage_error() {
 #[test]
 fn json_prints_exactly_the_sidecars_written() {
     let dir = scratch("json");
-    let out = ok(imubake([
-        OsStr::new("convert"),
-        repo_file(SOU).as_ref(),
-        "--mapping".as_ref(),
-        repo_file(SOU_MAPPING).as_ref(),
-        "--out".as_ref(),
-        dir.as_ref(),
-        "--json".as_ref(),
-    ]));
+    let (sou, mapping) = (repo_file(SOU), repo_file(SOU_MAPPING));
+    let out = ok(convert(&[&sou], Some(&mapping), &dir, &["--json"]));
     let printed: Value = serde_json::from_slice(&out.stdout).unwrap();
     let written = std::fs::read(dir.join("sou_wave.imubake.json")).unwrap();
     assert_eq!(printed, serde_json::from_slice::<Value>(&written).unwrap());
@@ -764,16 +736,7 @@ fn json_prints_exactly_the_sidecars_written() {
     // Several inputs: an array, one sidecar per input in order.
     let other = dir.join("other.log");
     std::fs::copy(repo_file(SOU), &other).unwrap();
-    let out = ok(imubake([
-        OsStr::new("convert"),
-        repo_file(SOU).as_ref(),
-        other.as_ref(),
-        "--mapping".as_ref(),
-        repo_file(SOU_MAPPING).as_ref(),
-        "--out".as_ref(),
-        dir.as_ref(),
-        "--json".as_ref(),
-    ]));
+    let out = ok(convert(&[&sou, &other], Some(&mapping), &dir, &["--json"]));
     let printed: Value = serde_json::from_slice(&out.stdout).unwrap();
     let expected = Value::Array(
         ["sou_wave", "other"]
@@ -789,18 +752,7 @@ fn json_prints_exactly_the_sidecars_written() {
 fn convert_with_mapping(dir: &Path, name: &str, text: &str, extra: &[&str]) -> (PathBuf, Output) {
     let mapping = dir.join(name);
     std::fs::write(&mapping, text).unwrap();
-    let out = imubake(
-        [
-            OsStr::new("convert"),
-            repo_file(SOU).as_ref(),
-            "--mapping".as_ref(),
-            mapping.as_ref(),
-            "--out".as_ref(),
-            dir.join("out").as_ref(),
-        ]
-        .into_iter()
-        .chain(extra.iter().map(OsStr::new)),
-    );
+    let out = convert(&[&repo_file(SOU)], Some(&mapping), &dir.join("out"), extra);
     (mapping, out)
 }
 
@@ -851,12 +803,7 @@ fn a_sensor_missing_from_the_mapping_is_a_sidecar_warning() {
     let (_, out) = convert_with_mapping(&dir, "no_head.json", &mapping.to_string(), &[]);
     let out = ok(out);
     let sidecar = read_json(&dir.join("out/sou_wave.imubake.json"));
-    let warnings: Vec<&str> = sidecar["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|w| w.as_str().unwrap())
-        .collect();
+    let warnings: Vec<&str> = common::strings(&sidecar["warnings"]);
     assert!(
         warnings
             .iter()
@@ -917,14 +864,7 @@ fn trim_2_to_5_at_30_fps_keeps_91_frames_and_is_recorded() {
 #[test]
 fn rig_sou12_without_a_mapping_matches_sensors_to_bones_by_name() {
     let dir = scratch("sou12");
-    let out = ok(imubake([
-        OsStr::new("convert"),
-        repo_file(SOU).as_ref(),
-        "--rig".as_ref(),
-        "sou12".as_ref(),
-        "--out".as_ref(),
-        dir.as_ref(),
-    ]));
+    let out = ok(convert(&[&repo_file(SOU)], None, &dir, &["--rig", "sou12"]));
     let sidecar = read_json(&dir.join("sou_wave.imubake.json"));
     assert_eq!(sidecar["rig"]["name"], "sou12");
     assert_eq!(sidecar["rig"]["bones"], 12);
@@ -946,18 +886,18 @@ fn rig_sou12_without_a_mapping_matches_sensors_to_bones_by_name() {
 fn a_missing_input_fails_naming_it() {
     let dir = scratch("missing");
     let input = dir.join("no such take.log");
-    let out = imubake([
-        OsStr::new("convert"),
-        input.as_ref(),
-        "--mapping".as_ref(),
-        repo_file(SOU_MAPPING).as_ref(),
-        "--out".as_ref(),
-        dir.join("out").as_ref(),
-    ]);
+    let mapping = repo_file(SOU_MAPPING);
+    let out = convert(&[&input], Some(&mapping), &dir.join("out"), &["--json"]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains(input.to_str().unwrap()), "{err}");
     assert!(!err.contains("panicked"), "{err}");
+    // --json: no sidecar to print, and nothing that is not JSON either.
+    assert!(
+        out.stdout.is_empty(),
+        "stdout: {:?}",
+        String::from_utf8_lossy(&out.stdout)
+    );
 }
 
 #[test]
@@ -978,33 +918,15 @@ fn converting_twice_gives_identical_files() {
 #[test]
 fn each_format_is_written_and_listed_once() {
     let (dir, sidecar) = convert_sou("formats_twice", &["--format", "bvh,glb,bvh"]);
-    let outputs: Vec<&str> = sidecar["outputs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|o| o["path"].as_str().unwrap())
-        .collect();
-    assert_eq!(outputs, ["sou_wave.bvh", "sou_wave.glb"]);
-    assert!(dir.join("sou_wave.glb").is_file());
-}
-
-#[test]
-fn json_prints_nothing_for_a_failed_take() {
-    let dir = scratch("json_failed");
-    let input = dir.join("missing.log");
-    let out = imubake([
-        OsStr::new("convert"),
-        input.as_ref(),
-        "--out".as_ref(),
-        dir.as_ref(),
-        "--json".as_ref(),
-    ]);
-    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
-    assert!(
-        out.stdout.is_empty(),
-        "stdout is not JSON: {:?}",
-        String::from_utf8_lossy(&out.stdout)
+    let outputs: Vec<&Value> = sidecar["outputs"].as_array().unwrap().iter().collect();
+    assert_eq!(
+        outputs,
+        [
+            &serde_json::json!({"format": "bvh", "path": "sou_wave.bvh"}),
+            &serde_json::json!({"format": "glb", "path": "sou_wave.glb"}),
+        ]
     );
+    assert!(dir.join("sou_wave.glb").is_file());
 }
 
 #[test]
@@ -1014,18 +936,13 @@ fn a_failed_reconversion_leaves_no_stale_sidecar() {
     // The GLB cannot be written this time: a folder stands at its path.
     std::fs::remove_file(dir.join("sou_wave.glb")).unwrap();
     std::fs::create_dir(dir.join("sou_wave.glb")).unwrap();
-    let out = imubake([
-        OsStr::new("convert"),
-        repo_file(SOU).as_ref(),
-        "--mapping".as_ref(),
-        repo_file(SOU_MAPPING).as_ref(),
-        "--out".as_ref(),
-        dir.as_ref(),
-        "--fps".as_ref(),
-        "60".as_ref(),
-        "--format".as_ref(),
-        "bvh,glb".as_ref(),
-    ]);
+    let (sou, mapping) = (repo_file(SOU), repo_file(SOU_MAPPING));
+    let out = convert(
+        &[&sou],
+        Some(&mapping),
+        &dir,
+        &["--fps", "60", "--format", "bvh,glb"],
+    );
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("sou_wave.glb"), "{err}");

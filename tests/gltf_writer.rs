@@ -190,12 +190,7 @@ fn blender_imports_an_armature_that_follows_forward_kinematics() {
     let skinned = report["skinned_meshes"].as_array().unwrap();
     assert_eq!(skinned.len(), 1, "{report}");
     assert_eq!(skinned[0]["armature"], report["armature"], "{report}");
-    let names: Vec<&str> = report["bones"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|b| b.as_str().unwrap())
-        .collect();
+    let names: Vec<&str> = common::strings(&report["bones"]);
     let mut expected: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
     let mut got = names.clone();
     expected.sort_unstable();
@@ -226,12 +221,7 @@ fn blender_imports_an_armature_that_follows_forward_kinematics() {
             let p = fk[j] * metres;
             // glTF / rig world (x, y, z) is Blender (x, -z, y).
             let expected = Vector3::new(p.x, -p.z, p.y);
-            let got = &sample["bones"][bone];
-            let got = Vector3::new(
-                got[0].as_f64().unwrap(),
-                got[1].as_f64().unwrap(),
-                got[2].as_f64().unwrap(),
-            );
+            let got = common::vec3(&sample["bones"][bone]);
             let err = (got - expected).norm();
             worst = worst.max(err);
             assert!(

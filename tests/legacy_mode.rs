@@ -499,7 +499,7 @@ fn blender_keys_the_paper_values() {
                     let want = if (rest - c).norm() < 1e-5 {
                         Some([x, y, z])
                     } else if (rest - c * rz180).norm() < 1e-5 {
-                        Some([x, y, z])
+                        Some([-x, -y, z])
                     } else {
                         None
                     };

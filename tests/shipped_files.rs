@@ -31,7 +31,11 @@ fn shipped_mappings_resolve_on_their_rigs() {
         }
         // A calibration pose the rig defines.
         if let Some(c) = &m.calibration {
-            assert!(rig.pose(&c.pose.label()).is_some(), "{name}: pose {}", c.pose.label());
+            assert!(
+                rig.pose(&c.pose.label()).is_some(),
+                "{name}: pose {}",
+                c.pose.label()
+            );
         }
     }
     assert_eq!(seen, expected.len());
@@ -58,7 +62,11 @@ fn builtin_rigs_are_sound() {
     let sou = load_rig("sou12").unwrap();
     assert_eq!(sou.len(), 12);
     // Table 1 of paper 002.
-    let parent = |n: &str| sou.joints()[sou.joint_index(n).unwrap()].parent.map(|p| sou.joints()[p].name.clone());
+    let parent = |n: &str| {
+        sou.joints()[sou.joint_index(n).unwrap()]
+            .parent
+            .map(|p| sou.joints()[p].name.clone())
+    };
     for (node, p) in [
         ("N0_1", "N0_0"),
         ("N1_0", "N0_1"),

@@ -27,8 +27,9 @@
 //!    the later `b` along the shorter way round, `a + wrap(b − a) · u` with `wrap` into
 //!    (−180°, 180°]. That is linear interpolation of the unwrapped angle, so 359° and 1° give 0°
 //!    (360°) half way, never 180°. Section 6.5's (cos, sin) averaging followed by `atan2` points
-//!    the same way at the middle of a step (and for any two equal weights); we interpolate the
-//!    angle itself so that the angle moves at a constant rate between samples.
+//!    the same way at the middle of a step and slightly differently elsewhere (it is to this what
+//!    nlerp is to slerp); we interpolate the angle itself so that it moves at a constant rate
+//!    between samples.
 //! 5. **Euler discontinuity filter** (section 6.8; [`unwrap_filter`]) per channel, as Blender's
 //!    Graph Editor filter treats a single channel: a frame at 180° or more from the previous frame
 //!    is moved by whole turns towards it. The first frame keeps its value (a relative yaw of
@@ -55,9 +56,13 @@
 //! the identity (it points along +Y with roll 0: Spine2, Neck, Head of the mixamo rig) stores
 //! exactly the paper's X, Y, Z. With the default `rotate_mode='NATIVE'` the importer sets the
 //! mode to the channel string *un*-reversed (`'ZYX'`, R = Rx·Ry·Rz), so the same rotation shows
-//! other numbers there. Bones pointing elsewhere (arms along ±X, legs and Hips along −Y) store
-//! the same rotation in their own bone axes. In every case the rotation relative to rest in
-//! Blender's armature space is C·R·Cᵀ, C the importer's Y-up → Z-up axis conversion.
+//! other numbers there. Bones pointing elsewhere store the same rotation in their own bone axes:
+//! along −Y (Hips, whose tail is the mean of its children, and the legs; B = Rz(180°)) as
+//! `(−X, −Y, Z)` in `XYZ` mode; along ±X (arms) as a different triple. In every case the
+//! rotation relative to rest in Blender's armature space,
+//! `bone.matrix_local · matrix_basis · bone.matrix_localᵀ`, is C·R·Cᵀ, C the importer's Y-up →
+//! Z-up axis conversion ((x, y, z) → (x, −z, y)), and posed bones are C·W·Cᵀ times their rest,
+//! W the world rotation down the chain.
 
 use super::{PipelineError, PipelineOptions};
 use crate::anim::Animation;

@@ -52,22 +52,28 @@ pub fn fixture(rel: &str) -> PathBuf {
         .join(rel)
 }
 
-/// The test venv's Python (set up by scripts/test.sh; `IMUBAKE_PYTHON` overrides).
-pub fn python() -> Option<PathBuf> {
-    let path = std::env::var_os("IMUBAKE_PYTHON")
-        .map(PathBuf::from)
-        .or_else(|| {
-            std::env::var_os("HOME")
-                .map(|h| PathBuf::from(h).join(".cache/imubake-test/venv/bin/python"))
-        })?;
-    if path.is_file() {
+/// A test tool set up by scripts/test.sh under `~/.cache/imubake-test` (`rel`), or where the
+/// environment variable `var` says; it is there when the file `marker` (relative to that path,
+/// the path itself when empty) is.
+fn test_tool(var: &str, rel: &str, marker: &str, what: &str) -> Option<PathBuf> {
+    let path = std::env::var_os(var).map(PathBuf::from).or_else(|| {
+        std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache/imubake-test").join(rel))
+    })?;
+    let marker = if marker.is_empty() {
+        path.clone()
+    } else {
+        path.join(marker)
+    };
+    if marker.is_file() {
         Some(path)
     } else {
-        missing(&format!(
-            "test Python {} (run scripts/test.sh)",
-            path.display()
-        ))
+        missing(&format!("{what} {} (run scripts/test.sh)", path.display()))
     }
+}
+
+/// The test venv's Python (set up by scripts/test.sh; `IMUBAKE_PYTHON` overrides).
+pub fn python() -> Option<PathBuf> {
+    test_tool("IMUBAKE_PYTHON", "venv/bin/python", "", "test Python")
 }
 
 /// The compiled `imubake` binary.
@@ -83,20 +89,30 @@ pub fn repo_file(rel: &str) -> PathBuf {
 /// The `node_modules` folder holding the Khronos glTF-Validator (set up by scripts/test.sh;
 /// `IMUBAKE_NODE_MODULES` overrides).
 pub fn node_modules() -> Option<PathBuf> {
-    let dir = std::env::var_os("IMUBAKE_NODE_MODULES")
-        .map(PathBuf::from)
-        .or_else(|| {
-            std::env::var_os("HOME")
-                .map(|h| PathBuf::from(h).join(".cache/imubake-test/node/node_modules"))
-        })?;
-    if dir.join("gltf-validator/package.json").is_file() {
-        Some(dir)
-    } else {
-        missing(&format!(
-            "gltf-validator in {} (run scripts/test.sh)",
-            dir.display()
-        ))
-    }
+    test_tool(
+        "IMUBAKE_NODE_MODULES",
+        "node/node_modules",
+        "gltf-validator/package.json",
+        "gltf-validator in",
+    )
+}
+
+/// A JSON array of three numbers (a position in a report).
+pub fn vec3(v: &serde_json::Value) -> nalgebra::Vector3<f64> {
+    let x = |i: usize| {
+        v[i].as_f64()
+            .unwrap_or_else(|| panic!("not three numbers: {v}"))
+    };
+    nalgebra::Vector3::new(x(0), x(1), x(2))
+}
+
+/// The strings of a JSON array (names in a report).
+pub fn strings(v: &serde_json::Value) -> Vec<&str> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("not an array: {v}"))
+        .iter()
+        .map(|s| s.as_str().unwrap_or_else(|| panic!("not a string: {s}")))
+        .collect()
 }
 
 /// The glTF-Validator's report on each file, in order, from one Node run of

@@ -8,7 +8,7 @@ Python, where `bpy` is Blender (5.0.1) as a module. For each mode: factory setti
 `bpy.ops.import_anim.bvh(rotate_mode=MODE, update_scene_fps=True)` with the importer's default
 axes (-Z forward, Y up), then per bone its `rotation_mode` and rest matrix `bone.matrix_local`
 (armature space, 3x3), and at each frame its `rotation_euler`, `matrix_basis` (3x3, relative to
-rest in the bone's own axes) and `matrix` (3x3, armature space). tests/blender_import_bvh.py
+rest in the bone's own axes) and `matrix` (3x3, armature space). blender_import_bvh.py
 reports world matrices only; this script exists for the Euler values.
 """
 
