@@ -134,32 +134,64 @@ impl MappingError {
     }
 }
 
-/// A JSON object whose duplicate keys are an error (serde_json keeps the last one silently).
+/// A JSON object's entries in file order (repeated keys are refused before, by
+/// [`first_repeated_sensor`]).
 #[derive(Debug)]
-struct OrderedUniqueMap<V>(Vec<(String, V)>);
+struct OrderedMap<V>(Vec<(String, V)>);
 
-impl<'de, V: Deserialize<'de>> Deserialize<'de> for OrderedUniqueMap<V> {
+impl<'de, V: Deserialize<'de>> Deserialize<'de> for OrderedMap<V> {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
         struct V_<V>(std::marker::PhantomData<V>);
         impl<'de, V: Deserialize<'de>> Visitor<'de> for V_<V> {
-            type Value = OrderedUniqueMap<V>;
+            type Value = OrderedMap<V>;
             fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
                 f.write_str("an object")
             }
             fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
                 let mut out: Vec<(String, V)> = Vec::new();
                 while let Some(key) = map.next_key::<String>()? {
-                    if out.iter().any(|(k, _)| *k == key) {
-                        return Err(de::Error::custom(format!("`{key}` is mapped twice")));
-                    }
                     let value = map.next_value()?;
                     out.push((key, value));
                 }
-                Ok(OrderedUniqueMap(out))
+                Ok(OrderedMap(out))
             }
         }
         deserializer.deserialize_map(V_(std::marker::PhantomData))
     }
+}
+
+/// The first sensor id that appears twice under `sensors`, if any (serde_json would silently keep
+/// the last one).
+fn first_repeated_sensor(text: &str) -> Option<String> {
+    struct FirstRepeat(Option<String>);
+    impl<'de> Deserialize<'de> for FirstRepeat {
+        fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+            struct V;
+            impl<'de> Visitor<'de> for V {
+                type Value = FirstRepeat;
+                fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                    f.write_str("an object")
+                }
+                fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<FirstRepeat, A::Error> {
+                    let mut seen = std::collections::HashSet::new();
+                    let mut repeat = None;
+                    while let Some(key) = map.next_key::<String>()? {
+                        map.next_value::<de::IgnoredAny>()?;
+                        if !seen.insert(key.clone()) && repeat.is_none() {
+                            repeat = Some(key);
+                        }
+                    }
+                    Ok(FirstRepeat(repeat))
+                }
+            }
+            deserializer.deserialize_map(V)
+        }
+    }
+    #[derive(Deserialize)]
+    struct Top {
+        sensors: FirstRepeat,
+    }
+    serde_json::from_str::<Top>(text).ok()?.sensors.0
 }
 
 #[derive(Deserialize)]
@@ -171,7 +203,7 @@ struct RawMapping {
     world: Option<String>,
     #[serde(default)]
     calibration: Option<RawCalibration>,
-    sensors: OrderedUniqueMap<RawSensor>,
+    sensors: OrderedMap<RawSensor>,
 }
 
 #[derive(Deserialize)]
@@ -236,6 +268,13 @@ pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingErro
         .map_err(|e| MappingError::new(file, "", format!("not valid JSON: {e}")))?;
     if legacy::looks_like(&value) {
         return legacy::parse(&value, file).map(MappingFile::Legacy);
+    }
+    if let Some(id) = first_repeated_sensor(text) {
+        return Err(MappingError::new(
+            file,
+            format!("sensors.{id}"),
+            format!("sensor `{id}` is mapped twice; map each sensor once"),
+        ));
     }
     let raw: RawMapping = serde_json::from_str(text).map_err(|e| {
         MappingError::new(
@@ -505,7 +544,7 @@ mod tests {
         let twice = r#"{"sensors": {"a": {"bone": "Hips"}, "a": {"bone": "Spine"}}}"#;
         let e = parse(twice).unwrap_err().to_string();
         assert!(
-            e.contains("m.json") && e.contains("`a` is mapped twice"),
+            e.contains("m.json") && e.contains("`sensors.a`") && e.contains("`a` is mapped twice"),
             "{e}"
         );
         let same_bone = r#"{"sensors": {"a": {"bone": "Hips"}, "b": {"bone": "Hips"}}}"#;
