@@ -148,6 +148,9 @@ fn held_over(
     mean_rotation(&inside)
 }
 
+/// A sensor turning further than this from its mean during the calibration window is reported.
+const MOVED_DURING_CALIBRATION_DEG: f64 = 5.0;
+
 /// How long after the calibration window the walk is read for the heading from travel.
 const TRAVEL_WINDOW_S: f64 = 4.0;
 
@@ -289,6 +292,22 @@ pub fn run(
             let pose_world_all = rig.world_rotations(&pose.local);
             let pose_world: Vec<_> = sensors.iter().map(|s| pose_world_all[s.bone]).collect();
             let held: Vec<_> = tracks.iter().map(|t| held_over(t, w)).collect();
+            for ((s, track), mean) in sensors.iter().zip(&tracks).zip(&held) {
+                let moved = track
+                    .iter()
+                    .filter(|(t, _)| *t >= w.start_s && *t <= w.start_s + w.duration_s)
+                    .map(|(_, q)| crate::rotation::angle_between(q, mean))
+                    .fold(0.0, f64::max)
+                    .to_degrees();
+                if moved > MOVED_DURING_CALIBRATION_DEG {
+                    warnings.push(format!(
+                        "sensor `{}` moved by up to {moved:.1}° during the calibration window ({} s to {} s); its mount may be off: check the mapping's `calibration`",
+                        s.sensor,
+                        w.start_s,
+                        w.start_s + w.duration_s
+                    ));
+                }
+            }
             let travel =
                 calibrate::heading_from_knees(&knee_samples(rig, &sensors, &tracks, &held, w));
             calibrate::solve(&sensors, &held, &pose_world, travel)
