@@ -13,6 +13,9 @@
 //! skip_lines: 0
 //! skip_seconds: 0
 //! world: ned             # override the format's world
+//! smoothing: butterworth:order=4,cutoff=6    # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
+//! # or with per-bone overrides:
+//! # smoothing: {method: "butterworth:cutoff=4", bones: {LeftHand: none, Head: "gaussian:sigma=0.05"}}
 //! ```
 
 use crate::convert::{ConvertSettings, OutputFormat};
@@ -21,8 +24,10 @@ use crate::pipeline::Trim;
 use crate::pipeline::root::RootMode;
 use crate::read::InputFormat;
 use crate::rig::LengthUnit;
+use crate::smooth::Smoothing;
 use crate::world::World;
 use serde::Deserialize;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, Clone, Default, Deserialize, PartialEq)]
@@ -39,6 +44,43 @@ pub struct Config {
     pub skip_lines: Option<u64>,
     pub skip_seconds: Option<f64>,
     pub world: Option<World>,
+    pub smoothing: Option<SmoothingEntry>,
+}
+
+/// `smoothing:` in the config: a method string, or a method with per-bone overrides.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum SmoothingEntry {
+    Method(String),
+    WithBones {
+        method: String,
+        #[serde(default)]
+        bones: BTreeMap<String, String>,
+    },
+}
+
+impl SmoothingEntry {
+    pub fn to_smoothing(&self) -> Result<Smoothing, String> {
+        match self {
+            SmoothingEntry::Method(m) => Ok(Smoothing {
+                method: m.parse()?,
+                bones: BTreeMap::new(),
+            }),
+            SmoothingEntry::WithBones { method, bones } => {
+                let mut parsed = BTreeMap::new();
+                for (bone, m) in bones {
+                    parsed.insert(
+                        bone.clone(),
+                        m.parse().map_err(|e| format!("bone `{bone}`: {e}"))?,
+                    );
+                }
+                Ok(Smoothing {
+                    method: method.parse()?,
+                    bones: parsed,
+                })
+            }
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -94,6 +136,9 @@ impl Config {
         {
             return Err("`skip_seconds`: expected seconds ≥ 0".into());
         }
+        if let Some(s) = &self.smoothing {
+            s.to_smoothing().map_err(|e| format!("`smoothing`: {e}"))?;
+        }
         if self.formats.as_ref().is_some_and(Vec::is_empty) {
             return Err("`formats`: name at least one of bvh, glb, gltf".into());
         }
@@ -124,6 +169,9 @@ impl Config {
         s.read.skip_lines = self.skip_lines.unwrap_or(0);
         s.read.skip_seconds = self.skip_seconds.unwrap_or(0.0);
         s.read.world = self.world;
+        if let Some(smoothing) = self.smoothing.as_ref().and_then(|e| e.to_smoothing().ok()) {
+            s.pipeline.smoothing = smoothing;
+        }
         s
     }
 }
@@ -158,6 +206,27 @@ mod tests {
         std::fs::write(&path, "fsp: 30\n").unwrap();
         let e = Config::load(&path).unwrap_err().to_string();
         assert!(e.contains("imubake.yaml") && e.contains("fsp"), "{e}");
+        std::fs::write(
+            &path,
+            "smoothing: {method: \"gaussian:sigma=0.05\", bones: {LeftHand: none}}\n",
+        )
+        .unwrap();
+        let s = Config::load(&path).unwrap().to_settings();
+        assert_eq!(
+            s.pipeline.smoothing.for_bone("Hips"),
+            &crate::smooth::Method::Gaussian { sigma_s: 0.05 }
+        );
+        assert_eq!(
+            s.pipeline.smoothing.for_bone("mixamorig:LeftHand"),
+            &crate::smooth::Method::None
+        );
+        std::fs::write(&path, "smoothing: median\n").unwrap();
+        assert!(
+            Config::load(&path)
+                .unwrap_err()
+                .to_string()
+                .contains("`smoothing`")
+        );
         std::fs::write(&path, "trim: \"5:1\"\n").unwrap();
         assert!(
             Config::load(&path)

@@ -11,6 +11,7 @@ use crate::mapping::{
 use crate::pipeline::legacy::LegacyAnimation;
 use crate::pipeline::{self, Converted, PipelineError, PipelineOptions};
 use crate::read::{ReadError, ReadOptions, read_take};
+use crate::report::{BoneSeries, ReportInput, render_report};
 use crate::rig::file::RigLoadError;
 use crate::rig::{LengthUnit, Rig, load_rig};
 use crate::rotation::euler::filter_track;
@@ -20,6 +21,7 @@ use crate::write::sidecar::{
     OutputRecord, PipelineRecord, RigRecord, Sidecar, SourceRecord, TrimRecord,
 };
 use crate::write::write_atomic;
+use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::io::{self, Read};
@@ -71,6 +73,8 @@ pub struct ConvertSettings {
     pub formats: Vec<OutputFormat>,
     /// Length unit of the BVH output (glTF is always metres).
     pub units: LengthUnit,
+    /// Also write `<stem>.report.html`.
+    pub report: bool,
 }
 
 impl Default for ConvertSettings {
@@ -82,6 +86,7 @@ impl Default for ConvertSettings {
             pipeline: PipelineOptions::default(),
             formats: vec![OutputFormat::Bvh, OutputFormat::Glb],
             units: LengthUnit::Metres,
+            report: false,
         }
     }
 }
@@ -231,6 +236,38 @@ pub fn euler_degrees(animation: &Animation) -> Vec<Vec<[f64; 3]>> {
         .collect()
 }
 
+/// Each animated bone's Euler angles before (`unsmoothed`, when kept) and after smoothing.
+fn report_bones(
+    animation: &Animation,
+    unsmoothed: Option<&[Vec<UnitQuaternion<f64>>]>,
+    euler_after: &[Vec<[f64; 3]>],
+) -> Vec<BoneSeries> {
+    let fps = animation.fps();
+    let times: Vec<f64> = (0..animation.frames() as u64)
+        .map(|n| fps.frame_time_of(n))
+        .collect();
+    animation
+        .rig()
+        .joints()
+        .iter()
+        .enumerate()
+        .filter(|(j, _)| animation.is_animated(*j))
+        .map(|(j, joint)| BoneSeries {
+            bone: joint.name.clone(),
+            order: joint.order,
+            times_s: times.clone(),
+            before_deg: match unsmoothed {
+                Some(raw) => filter_track(&raw[j], joint.order)
+                    .into_iter()
+                    .map(|a| a.map(f64::to_degrees))
+                    .collect(),
+                None => euler_after[j].clone(),
+            },
+            after_deg: euler_after[j].clone(),
+        })
+        .collect()
+}
+
 /// What a conversion wrote.
 #[derive(Debug, Clone)]
 pub struct ConvertOutcome {
@@ -310,7 +347,9 @@ pub fn convert(
     let mapping_name = mapping_path
         .clone()
         .unwrap_or_else(|| PathBuf::from("(sensors matched to bones by name)"));
-    let converted = pipeline::run(&take, &rig, &mapping, &mapping_name, &settings.pipeline)
+    let mut pipeline_options = settings.pipeline.clone();
+    pipeline_options.keep_unsmoothed |= settings.report;
+    let converted = pipeline::run(&take, &rig, &mapping, &mapping_name, &pipeline_options)
         .map_err(|source| ConvertError::Pipeline {
             input: input.to_path_buf(),
             source,
@@ -328,7 +367,27 @@ pub fn convert(
     let animation = &converted.animation;
 
     let stem = take_stem(input);
-    let outputs = write_outputs(out_dir, &stem, animation, None, settings)?;
+    let euler = euler_degrees(animation);
+    let mut outputs = write_outputs(out_dir, &stem, animation, Some(&euler), settings)?;
+    if settings.report {
+        let path = out_dir.join(format!("{stem}.report.html"));
+        let bones = report_bones(animation, converted.unsmoothed.as_deref(), &euler);
+        let html = render_report(&ReportInput {
+            take: &stem,
+            source: &input.to_string_lossy(),
+            fps: animation.fps().to_string(),
+            smoothing: settings.pipeline.smoothing.describe(),
+            bones,
+            sensors: &sensor_summaries,
+            warnings: &warnings,
+            dropped_lines: dropped_lines.len(),
+        });
+        write_atomic(&path, |w| w.write_all(html.as_bytes())).map_err(write_err(&path))?;
+        outputs.push(OutputRecord {
+            format: "report",
+            path: format!("{stem}.report.html"),
+        });
+    }
 
     let heading_sensor = converted
         .calibration
@@ -356,7 +415,9 @@ pub fn convert(
         mapping: mapping_record(&converted, &rig, &mapping, mapping_path.as_deref()),
         pipeline: PipelineRecord {
             fusion: None,
-            smoothing: None,
+            smoothing: Some(
+                serde_json::to_value(&settings.pipeline.smoothing).expect("serialisable"),
+            ),
             root: settings.pipeline.root.label(),
             heading: converted.calibration.heading_source.label(),
             heading_sensor,
@@ -557,7 +618,9 @@ fn convert_legacy(
         },
         pipeline: PipelineRecord {
             fusion: None,
-            smoothing: None,
+            smoothing: Some(
+                serde_json::to_value(&settings.pipeline.smoothing).expect("serialisable"),
+            ),
             root: settings.pipeline.root.label(),
             heading: "none",
             heading_sensor: None,

@@ -42,6 +42,14 @@ pub struct ConvertArgs {
     /// Keep only START:END seconds of the take (either side optional).
     #[arg(long, value_name = "START:END")]
     trim: Option<Trim>,
+    /// Smoothing: none, butterworth[:order=4,cutoff=6[,causal]], gaussian[:sigma=0.02],
+    /// fft[:threshold=0.5,suppress=0.3] or fft:cutoff=8 [default: butterworth:order=4,cutoff=6]
+    #[arg(long, value_name = "METHOD[:key=value,...]")]
+    smooth: Option<imubake::smooth::Method>,
+    /// Also write <stem>.report.html: each bone's angles before and after smoothing, the sensor
+    /// rates and the warnings.
+    #[arg(long)]
+    report: bool,
     /// Print the sidecar as JSON on stdout (an array for several inputs).
     #[arg(long)]
     json: bool,
@@ -89,6 +97,14 @@ impl ConvertArgs {
         if self.trim.is_some() {
             settings.pipeline.trim = self.trim;
         }
+        if let Some(m) = &self.smooth {
+            // A flag's method replaces the config's, overrides included.
+            settings.pipeline.smoothing = imubake::smooth::Smoothing {
+                method: m.clone(),
+                bones: Default::default(),
+            };
+        }
+        settings.report |= self.report;
         Ok(settings)
     }
 }

@@ -71,6 +71,7 @@ use crate::mapping::{LegacyChannel, LegacyMapping, LegacyTarget, MappingError};
 use crate::rig::Rig;
 use crate::rotation::EulerOrder;
 use crate::rotation::euler;
+use crate::smooth::tracks::smooth_angles_deg;
 use crate::take::{OrientationTrack, Take, Track};
 use nalgebra::UnitQuaternion;
 use std::collections::{BTreeMap, BTreeSet};
@@ -217,32 +218,6 @@ fn source_node(target: &LegacyTarget, channel: &LegacyChannel) -> String {
     format!("{}_{}", target.sou, channel.source.mpu - 1)
 }
 
-/// The frames of the grid kept: `(first, count)` (see [`super::run`]).
-fn frame_range(
-    fps: Fps,
-    t_last: f64,
-    options: &PipelineOptions,
-) -> Result<(usize, usize), PipelineError> {
-    let total = fps.frame_count(t_last) as usize;
-    match options.trim {
-        None => Ok((0, total)),
-        Some(trim) => {
-            let num = fps.num() as f64;
-            let den = fps.den() as f64;
-            let first = (trim.start_s * num / den - 1e-9).ceil().max(0.0) as usize;
-            let last = ((trim.end_s.min(1e12) * num / den + 1e-9).floor() as usize).min(total - 1);
-            if first > last || first >= total {
-                return Err(PipelineError::EmptyTrim {
-                    start_s: trim.start_s,
-                    end_s: trim.end_s,
-                    end_take_s: fps.frame_time_of(total as u64 - 1),
-                });
-            }
-            Ok((first, last - first + 1))
-        }
-    }
-}
-
 /// Runs the legacy pipeline: `mapping` onto `rig`, parents from `table1` (the `sou12` rig).
 /// `mapping_file` names the mapping in errors.
 pub fn run(
@@ -378,17 +353,26 @@ pub fn run(
         .values()
         .map(|(t, _)| t.last_time_s())
         .fold(0.0, f64::max);
-    let (first, frames) = frame_range(options.fps, t_last, options)?;
+    let (first, frames) = super::frame_range(options.fps, t_last, options.trim)?;
 
+    let mut not_smoothed: Vec<String> = Vec::new();
     let mut euler_deg = vec![vec![[0.0; 3]; frames]; rig.len()];
     let mut local = vec![vec![UnitQuaternion::identity(); frames]; rig.len()];
     let mut animated = vec![false; rig.len()];
     for (bone, xyz) in &channels {
         // Stages 4 and 5 per channel.
+        // Smoothing on the frame grid, through (cos, sin) pairs (paper 002, 6.5).
+        let method = options.smoothing.for_bone(&rig.joints()[*bone].name);
         let [x, y, z] = xyz.each_ref().map(|c| {
             let mut v = resample_circular(c, options.fps, first, frames);
             unwrap_filter(&mut v);
-            v
+            match smooth_angles_deg(&v, options.fps.as_f64(), method) {
+                Ok(smoothed) => smoothed,
+                Err(why) => {
+                    not_smoothed.push(why.0);
+                    v
+                }
+            }
         });
         for f in 0..frames {
             let zyx = [z[f], y[f], x[f]];
@@ -396,6 +380,12 @@ pub fn run(
             local[*bone][f] = euler::to_quaternion(zyx.map(f64::to_radians), LEGACY_ORDER);
         }
         animated[*bone] = true;
+    }
+    if let Some(why) = not_smoothed.first() {
+        warnings.push(format!(
+            "{} channels are not smoothed, e.g. because {why}",
+            not_smoothed.len()
+        ));
     }
     let roots = super::root::root_positions(&rig, options.root, frames);
     let animation = Animation::new(rig, options.fps, local, animated, roots)?;

@@ -21,6 +21,8 @@ use crate::anim::{Animation, AnimationError};
 use crate::fps::Fps;
 use crate::mapping::{CalibrationWindow, Mapping, MappingError, Mount, ResolvedSensor};
 use crate::rig::Rig;
+use crate::smooth::Smoothing;
+use crate::smooth::tracks::smooth_track;
 use crate::take::{Take, Track};
 use crate::world::World;
 use calibrate::{Calibration, mean_rotation};
@@ -67,6 +69,9 @@ pub struct PipelineOptions {
     pub fps: Fps,
     pub trim: Option<Trim>,
     pub root: RootMode,
+    pub smoothing: Smoothing,
+    /// Also produce the local rotations without smoothing (for the report).
+    pub keep_unsmoothed: bool,
 }
 
 impl Default for PipelineOptions {
@@ -75,6 +80,8 @@ impl Default for PipelineOptions {
             fps: Fps::new(30, 1).expect("30 fps"),
             trim: None,
             root: RootMode::Fixed,
+            smoothing: Smoothing::default(),
+            keep_unsmoothed: false,
         }
     }
 }
@@ -91,6 +98,8 @@ pub struct Converted {
     pub world: World,
     /// Frame of the take's grid that became frame 0 (non-zero after `--trim`).
     pub first_frame: usize,
+    /// `local[joint][frame]` before smoothing, when asked for (`keep_unsmoothed`).
+    pub unsmoothed: Option<Vec<Vec<UnitQuaternion<f64>>>>,
     pub warnings: Vec<String>,
 }
 
@@ -199,6 +208,67 @@ fn knee_samples(
         legs.push(leg);
     }
     legs
+}
+
+/// The frames of the grid kept, `(first, count)`: frames 0 ..= floor(t_last · fps), cut by
+/// `trim` (both ends inclusive).
+pub(crate) fn frame_range(
+    fps: Fps,
+    t_last: f64,
+    trim: Option<Trim>,
+) -> Result<(usize, usize), PipelineError> {
+    let total = fps.frame_count(t_last) as usize;
+    let Some(trim) = trim else {
+        return Ok((0, total));
+    };
+    let (num, den) = (fps.num() as f64, fps.den() as f64);
+    let first = (trim.start_s * num / den - 1e-9).ceil().max(0.0) as usize;
+    let last = ((trim.end_s.min(1e12) * num / den + 1e-9).floor() as usize).min(total - 1);
+    if first > last || first >= total {
+        return Err(PipelineError::EmptyTrim {
+            start_s: trim.start_s,
+            end_s: trim.end_s,
+            end_take_s: fps.frame_time_of(total as u64 - 1),
+        });
+    }
+    Ok((first, last - first + 1))
+}
+
+/// Maps `f` over `items` on up to as many threads as there are cores, keeping the order.
+fn parallel_map<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> Vec<R> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(items.len().max(1));
+    if threads <= 1 {
+        return items.into_iter().map(f).collect();
+    }
+    let mut chunks: Vec<Vec<(usize, T)>> = (0..threads).map(|_| Vec::new()).collect();
+    for (i, item) in items.into_iter().enumerate() {
+        chunks[i % threads].push((i, item));
+    }
+    let f = &f;
+    let mut results: Vec<(usize, R)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = chunks
+            .into_iter()
+            .map(|chunk| {
+                scope.spawn(move || {
+                    chunk
+                        .into_iter()
+                        .map(|(i, t)| (i, f(t)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| {
+                h.join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })
+            .collect()
+    });
+    results.sort_by_key(|(i, _)| *i);
+    results.into_iter().map(|(_, r)| r).collect()
 }
 
 /// Runs the pipeline. `mapping_file` names the mapping in errors.
@@ -343,31 +413,53 @@ pub fn run(
         .iter()
         .map(|t| t.last_time_s())
         .fold(0.0, f64::max);
-    let total = options.fps.frame_count(t_last) as usize;
-    let (first, frames) = match options.trim {
-        None => (0, total),
-        Some(trim) => {
-            let num = options.fps.num() as f64;
-            let den = options.fps.den() as f64;
-            let first = (trim.start_s * num / den - 1e-9).ceil().max(0.0) as usize;
-            let last = ((trim.end_s.min(1e12) * num / den + 1e-9).floor() as usize).min(total - 1);
-            if first > last || first >= total {
-                return Err(PipelineError::EmptyTrim {
-                    start_s: trim.start_s,
-                    end_s: trim.end_s,
-                    end_take_s: options.fps.frame_time_of(total as u64 - 1),
-                });
-            }
-            (first, last - first + 1)
-        }
-    };
+    let (first, frames) = frame_range(options.fps, t_last, options.trim)?;
+    // Per sensor (independent, so spread over the cores): 3b. smoothing at the sensor's own rate
+    // (smooth::tracks explains why), then resampling onto the frame grid.
+    let per_sensor = parallel_map(sensors.iter().zip(bone_tracks).collect(), |(s, track)| {
+        let raw = options
+            .keep_unsmoothed
+            .then(|| resample::resample(&track, options.fps, first, frames));
+        let bone = &rig.joints()[s.bone].name;
+        let (track, unsmoothed) = smooth_track(track, options.smoothing.for_bone(bone));
+        let grid = resample::resample(&track, options.fps, first, frames);
+        (
+            s.bone,
+            grid,
+            raw,
+            unsmoothed.map(|why| (bone.clone(), why.0)),
+        )
+    });
     let mut world_tracks = vec![None; rig.len()];
-    for (s, track) in sensors.iter().zip(bone_tracks) {
-        world_tracks[s.bone] = Some(resample::resample(&track, options.fps, first, frames));
+    let mut raw_tracks = options.keep_unsmoothed.then(|| vec![None; rig.len()]);
+    let mut not_smoothed: Vec<(String, String)> = Vec::new();
+    for (bone, grid, raw, unsmoothed) in per_sensor {
+        world_tracks[bone] = Some(grid);
+        if let (Some(all), Some(raw)) = (&mut raw_tracks, raw) {
+            all[bone] = Some(raw);
+        }
+        not_smoothed.extend(unsmoothed);
+    }
+
+    // One warning for a reason many bones share (a low sensor rate, a short take).
+    if let Some((_, first_reason)) = not_smoothed.first() {
+        if not_smoothed.len() > 3 {
+            let bones: Vec<&str> = not_smoothed.iter().map(|(b, _)| b.as_str()).collect();
+            warnings.push(format!(
+                "{} bones are not smoothed ({}), e.g. because {first_reason}",
+                bones.len(),
+                bones.join(", ")
+            ));
+        } else {
+            for (bone, why) in &not_smoothed {
+                warnings.push(format!("`{bone}` is not smoothed: {why}"));
+            }
+        }
     }
 
     // 4. Local rotations; 5. root.
     let local = relative::to_local(rig, &world_tracks, frames);
+    let unsmoothed = raw_tracks.map(|raw| relative::to_local(rig, &raw, frames));
     let animated = world_tracks.iter().map(Option::is_some).collect();
     drop(world_tracks);
     let roots = root::root_positions(rig, options.root, frames);
@@ -379,6 +471,7 @@ pub fn run(
         window,
         world,
         first_frame: first,
+        unsmoothed,
         warnings,
     })
 }

@@ -52,13 +52,24 @@ pub fn resample(
     first: usize,
     frames: usize,
 ) -> Vec<UnitQuaternion<f64>> {
+    resample_at(
+        track,
+        (first..first + frames).map(|n| fps.frame_time_of(n as u64)),
+    )
+}
+
+/// Samples `track` at increasing times (slerp between the bracketing samples, held outside).
+pub fn resample_at(
+    track: &Track<UnitQuaternion<f64>>,
+    times_s: impl IntoIterator<Item = f64>,
+) -> Vec<UnitQuaternion<f64>> {
     let times = track.times_s();
     let values = track.values();
-    let mut out = Vec::with_capacity(frames);
-    // Frame times increase, so the bracketing sample only moves forward.
+    let times_s = times_s.into_iter();
+    let mut out = Vec::with_capacity(times_s.size_hint().0);
+    // The times increase, so the bracketing sample only moves forward.
     let mut i = 0;
-    for n in first..first + frames {
-        let t = fps.frame_time_of(n as u64);
+    for t in times_s {
         while i < times.len() && times[i] <= t {
             i += 1;
         }

@@ -105,6 +105,11 @@ impl<T> Track<T> {
         Some(Track { times_s, values })
     }
 
+    /// The times and values, taking the track apart.
+    pub fn into_parts(self) -> (Vec<f64>, Vec<T>) {
+        (self.times_s, self.values)
+    }
+
     /// Transforms every value in place (the times, and so the invariants, are unchanged).
     pub fn map_in_place(mut self, f: impl Fn(&T) -> T) -> Track<T> {
         for v in &mut self.values {
