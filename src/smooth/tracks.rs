@@ -119,13 +119,13 @@ pub fn smooth_quaternions_in_place(
     let mut min_dot_in: f64 = 1.0;
     let mut min_dot_out: f64 = 1.0;
     let mut previous = None;
-    for n in 0..values.len() {
-        let out = smoothed(n, &values[n]);
+    for (n, input) in values.iter().enumerate() {
+        let out = smoothed(n, input);
         if let Some((prev_in, prev_out)) = previous {
-            min_dot_in = min_dot_in.min(values[n].coords.dot(&prev_in).abs());
+            min_dot_in = min_dot_in.min(input.coords.dot(&prev_in).abs());
             min_dot_out = min_dot_out.min(out.coords.dot(&prev_out).abs());
         }
-        previous = Some((values[n].coords, out.coords));
+        previous = Some((input.coords, out.coords));
     }
     let (step_in, step_out) = (
         2.0 * min_dot_in.min(1.0).acos(),
