@@ -534,8 +534,10 @@ mod tests {
         };
         let rig = load_rig("mixamo").unwrap();
         let table1 = load_rig("sou12").unwrap();
+        // No smoothing: the test checks the paper's channel copy exactly.
         let options = PipelineOptions {
             fps: Fps::new(50, 1).unwrap(),
+            smoothing: crate::smooth::Smoothing::none(),
             ..PipelineOptions::default()
         };
         let out = run(

@@ -24,6 +24,9 @@ pub struct Unsmoothed(pub String);
 pub fn smooth_series(x: &[f64], rate_hz: f64, method: &Method) -> Result<Vec<f64>, Unsmoothed> {
     match method {
         Method::None => Ok(x.to_vec()),
+        // A low-pass at or above half the sample rate has nothing to remove: the identity (the
+        // default's 14 Hz on a 26 Hz SOU log, say).
+        Method::Butterworth { cutoff_hz, .. } if *cutoff_hz >= rate_hz / 2.0 => Ok(x.to_vec()),
         Method::Butterworth {
             order,
             cutoff_hz,
