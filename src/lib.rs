@@ -6,11 +6,13 @@
 //! times are seconds on the take's clock (t = 0 at the earliest kept sample).
 
 pub mod anim;
+pub mod batch;
 pub mod bvh;
 pub mod config;
 pub mod convert;
 pub mod fps;
 pub mod inspect;
+pub mod ledger;
 pub mod mapping;
 pub mod pipeline;
 pub mod read;

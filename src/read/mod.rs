@@ -261,6 +261,49 @@ fn detect_folder(path: &Path) -> Result<InputFormat, ReadError> {
     }
 }
 
+/// The files of a multi-file take's folder that `looks_like` accepts (name and path, sorted),
+/// and a note for each file passed over; an error naming `what` when none is accepted.
+pub(crate) fn take_files(
+    dir: &Path,
+    looks_like: fn(&[u8]) -> bool,
+    what: &str,
+    expected: &str,
+) -> Result<(Vec<(PathBuf, String)>, Vec<String>), ReadError> {
+    let mut files = Vec::new();
+    let mut notes = Vec::new();
+    for file in visible_files(dir)? {
+        let name = file
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let head = sniff(&file)?;
+        if !looks_like(&head) {
+            notes.push(format!("`{name}` is not {what}; ignored"));
+            continue;
+        }
+        check_text(&file, &head)?;
+        files.push((file, name));
+    }
+    if files.is_empty() {
+        return Err(ReadError::format(
+            dir,
+            format!("no {what} files in the folder; expected {expected}"),
+        ));
+    }
+    Ok((files, notes))
+}
+
+/// Reads a single-file take through a reader's byte-level entry, after the text checks.
+pub(crate) fn read_single_file(
+    path: &Path,
+    options: &ReadOptions,
+    read_from: fn(fs::File, &Path, &ReadOptions) -> Result<Take, ReadError>,
+) -> Result<Take, ReadError> {
+    check_text(path, &sniff(path)?)?;
+    let file = fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
+    read_from(file, path, options)
+}
+
 /// Non-hidden regular files of a folder, sorted by name so reading order is stable.
 pub(crate) fn visible_files(dir: &Path) -> Result<Vec<PathBuf>, ReadError> {
     let mut files = Vec::new();

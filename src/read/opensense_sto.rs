@@ -25,11 +25,10 @@
 //! `--skip-lines N` drops data rows whose line number is at most N; header lines are always read.
 
 use super::lines::{LineReader, number_problem, parse_f64};
-use super::{InputFormat, ReadError, ReadOptions, check_text, sniff};
+use super::{InputFormat, ReadError, ReadOptions, read_single_file};
 use crate::take::{ClockUnit, SensorIdx, Take, TakeBuilder};
 use crate::world::World;
 use nalgebra::{Quaternion, UnitQuaternion};
-use std::fs::File;
 use std::io::Read;
 use std::path::Path;
 
@@ -53,9 +52,7 @@ pub fn looks_like(head: &[u8]) -> bool {
 }
 
 pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
-    check_text(path, &sniff(path)?)?;
-    let file = File::open(path).map_err(|e| ReadError::io(path, e))?;
-    read_from(file, path, options)
+    read_single_file(path, options, read_from)
 }
 
 /// Unit quaternion from `w, x, y, z`; `None` for a zero quaternion. Also returns the norm.

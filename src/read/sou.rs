@@ -6,11 +6,10 @@
 //! dropped and reported — only that line, not everything before it as the paper did.
 
 use super::lines::{LineReader, parse_f64, split_fields};
-use super::{InputFormat, ReadError, ReadOptions, check_text, sniff};
+use super::{InputFormat, ReadError, ReadOptions, read_single_file};
 use crate::take::{ClockUnit, Take, TakeBuilder, YawPitchRollDeg};
 use crate::world::World;
 use std::collections::HashMap;
-use std::fs::File;
 use std::io::Read;
 use std::path::Path;
 
@@ -70,9 +69,7 @@ pub fn looks_like(head: &[u8]) -> bool {
 }
 
 pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
-    check_text(path, &sniff(path)?)?;
-    let file = File::open(path).map_err(|e| ReadError::io(path, e))?;
-    read_from(file, path, options)
+    read_single_file(path, options, read_from)
 }
 
 /// Reads a SOU log from any reader; `path` names it in reports.

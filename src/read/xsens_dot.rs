@@ -38,7 +38,7 @@
 //! `--skip-lines N` drops data rows whose line number is at most N in each file.
 
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
-use super::{InputFormat, ReadError, ReadOptions, check_text, sniff, visible_files};
+use super::{InputFormat, ReadError, ReadOptions, read_single_file, take_files};
 use crate::take::{ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg};
 use crate::world::World;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -325,33 +325,18 @@ fn footer_start(line: &[u8]) -> Option<usize> {
 pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
     let meta = fs::metadata(path).map_err(|e| ReadError::io(path, e))?;
     if !meta.is_dir() {
-        check_text(path, &sniff(path)?)?;
-        let file = File::open(path).map_err(|e| ReadError::io(path, e))?;
-        return read_from(file, path, options);
+        return read_single_file(path, options, read_from);
     }
     let world = options.world.unwrap_or(World::Enu);
     let mut take = TakeBuilder::new(path, InputFormat::XsensDot, world, ClockUnit::Microseconds);
-    let mut files = Vec::new();
-    for file in visible_files(path)? {
-        let name = file
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let head = sniff(&file)?;
-        if !looks_like(&head) {
-            take.warn(format!("`{name}` is not a Movella DOT CSV export; ignored"));
-            continue;
-        }
-        check_text(&file, &head)?;
-        files.push((file, name));
-    }
-    if files.is_empty() {
-        return Err(ReadError::format(
-            path,
-            format!(
-                "no Movella DOT CSV files in the folder; expected one CSV per sensor with {EXPECTED_HEADER}"
-            ),
-        ));
+    let (files, notes) = take_files(
+        path,
+        looks_like,
+        "Movella DOT CSV",
+        &format!("one CSV per sensor with {EXPECTED_HEADER}"),
+    )?;
+    for note in notes {
+        take.warn(note);
     }
     let mut ids: HashMap<String, String> = HashMap::new();
     for (file, name) in &files {

@@ -50,7 +50,7 @@
 
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
 use super::xsens_dot::{WrappingClock, parse_counter};
-use super::{InputFormat, ReadError, ReadOptions, check_text, sniff, visible_files};
+use super::{InputFormat, ReadError, ReadOptions, read_single_file, take_files};
 use crate::take::{
     BuildError, ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg,
 };
@@ -327,31 +327,14 @@ fn read_header<R: Read>(lines: &mut LineReader<R>, path: &Path) -> Result<Header
 pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
     let meta = fs::metadata(path).map_err(|e| ReadError::io(path, e))?;
     if !meta.is_dir() {
-        check_text(path, &sniff(path)?)?;
-        let file = File::open(path).map_err(|e| ReadError::io(path, e))?;
-        return read_from(file, path, options);
+        return read_single_file(path, options, read_from);
     }
-    let mut notes = Vec::new();
-    let mut files = Vec::new();
-    for file in visible_files(path)? {
-        let name = file
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let head = sniff(&file)?;
-        if !looks_like(&head) {
-            notes.push(format!("`{name}` is not an Xsens MTw export; ignored"));
-            continue;
-        }
-        check_text(&file, &head)?;
-        files.push((file, name));
-    }
-    if files.is_empty() {
-        return Err(ReadError::format(
-            path,
-            format!("no Xsens MTw .txt files in the folder; expected files with {EXPECTED_HEADER}"),
-        ));
-    }
+    let (files, notes) = take_files(
+        path,
+        looks_like,
+        "Xsens MTw",
+        &format!("files with {EXPECTED_HEADER}"),
+    )?;
     let mut ids: HashMap<String, String> = HashMap::new();
     for (file, name) in &files {
         let id = sensor_id(file);

@@ -2,6 +2,7 @@
 //! (conventions.md, "Takes and names": hidden temporary file in the same folder, renamed into
 //! place).
 
+pub mod error_report;
 pub mod gltf;
 pub mod sidecar;
 
