@@ -326,26 +326,12 @@ pub fn run(
         .iter()
         .flat_map(|(n, (_, p))| std::iter::once(n.as_str()).chain(p.as_deref()))
         .collect();
-    for s in take.sensors() {
-        if !used.contains(s.id()) {
-            warnings.push(format!("sensor {} is not in the mapping; ignored", s.id()));
-        }
-    }
+    warnings.extend(super::unmapped_sensors(take, |id| used.contains(id)));
     if channels.is_empty() {
-        return Err(PipelineError::NoSensors {
-            mapped: mapping
-                .targets
-                .iter()
-                .map(|t| t.node.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
-            present: take
-                .sensors()
-                .iter()
-                .map(|s| s.id())
-                .collect::<Vec<_>>()
-                .join(", "),
-        });
+        return Err(super::no_sensors(
+            take,
+            mapping.targets.iter().map(|t| t.node.as_str()),
+        ));
     }
 
     // Stage 4: the frame grid over the mapped nodes.

@@ -210,6 +210,28 @@ fn knee_samples(
     legs
 }
 
+/// A warning for each sensor of the take that the mapping does not use.
+pub(crate) fn unmapped_sensors(take: &Take, is_mapped: impl Fn(&str) -> bool) -> Vec<String> {
+    take.sensors()
+        .iter()
+        .filter(|s| !is_mapped(s.id()))
+        .map(|s| format!("sensor {} is not in the mapping; ignored", s.id()))
+        .collect()
+}
+
+/// The error when none of the mapped sensors can drive a bone.
+pub(crate) fn no_sensors<'a>(take: &Take, mapped: impl Iterator<Item = &'a str>) -> PipelineError {
+    PipelineError::NoSensors {
+        mapped: mapped.collect::<Vec<_>>().join(", "),
+        present: take
+            .sensors()
+            .iter()
+            .map(|s| s.id())
+            .collect::<Vec<_>>()
+            .join(", "),
+    }
+}
+
 /// The frames of the grid kept, `(first, count)`: frames 0 ..= floor(t_last · fps), cut by
 /// `trim` (both ends inclusive).
 pub(crate) fn frame_range(
@@ -304,26 +326,14 @@ pub fn run(
             }
         }
     }
-    for s in take.sensors() {
-        if !mapping.sensors.iter().any(|m| m.sensor == s.id()) {
-            warnings.push(format!("sensor {} is not in the mapping; ignored", s.id()));
-        }
-    }
+    warnings.extend(unmapped_sensors(take, |id| {
+        mapping.sensors.iter().any(|m| m.sensor == id)
+    }));
     if sensors.is_empty() {
-        return Err(PipelineError::NoSensors {
-            mapped: mapping
-                .sensors
-                .iter()
-                .map(|s| s.sensor.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
-            present: take
-                .sensors()
-                .iter()
-                .map(|s| s.id())
-                .collect::<Vec<_>>()
-                .join(", "),
-        });
+        return Err(no_sensors(
+            take,
+            mapping.sensors.iter().map(|s| s.sensor.as_str()),
+        ));
     }
 
     // 1. Calibration.
