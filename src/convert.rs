@@ -8,6 +8,7 @@ use crate::mapping::{
     CalibrationRecord, LegacyMapping, LegacyTargetRecord, Mapping, MappingError, MappingFile,
     MappingRecord, Mount, SensorRecord, load_mapping,
 };
+use crate::pipeline::calibrate::HeadingSource;
 use crate::pipeline::legacy::LegacyAnimation;
 use crate::pipeline::{self, Converted, PipelineError, PipelineOptions};
 use crate::read::{ReadError, ReadOptions, read_take};
@@ -389,11 +390,6 @@ pub fn convert(
         });
     }
 
-    let heading_sensor = converted
-        .calibration
-        .heading_source
-        .sensor()
-        .map(str::to_string);
     let h = converted.calibration.heading;
     let sidecar = Sidecar {
         imubake_version: env!("CARGO_PKG_VERSION"),
@@ -413,22 +409,13 @@ pub fn convert(
             bones: rig.len(),
         },
         mapping: mapping_record(&converted, &rig, &mapping, mapping_path.as_deref()),
-        pipeline: PipelineRecord {
-            fusion: None,
-            smoothing: Some(
-                serde_json::to_value(&settings.pipeline.smoothing).expect("serialisable"),
-            ),
-            root: settings.pipeline.root.label(),
-            heading: converted.calibration.heading_source.label(),
-            heading_sensor,
-            heading_deg: (h.scaled_axis().y).to_degrees(),
-            trim: settings.pipeline.trim.map(|t| TrimRecord {
-                start_s: t.start_s,
-                end_s: (t.end_s < f64::MAX).then_some(t.end_s),
-                first_frame: converted.first_frame,
-            }),
-            mode: "quaternion",
-        },
+        pipeline: pipeline_record(
+            settings,
+            &converted.calibration.heading_source,
+            h.scaled_axis().y.to_degrees(),
+            converted.first_frame,
+            "quaternion",
+        ),
         outputs,
         sensors: sensor_summaries,
         dropped_lines,
@@ -436,6 +423,30 @@ pub fn convert(
         warnings,
     };
     write_sidecar(out_dir, &stem, sidecar)
+}
+
+/// The sidecar's `pipeline`: what was done, in which mode.
+fn pipeline_record(
+    settings: &ConvertSettings,
+    heading: &HeadingSource,
+    heading_deg: f64,
+    first_frame: usize,
+    mode: &'static str,
+) -> PipelineRecord {
+    PipelineRecord {
+        fusion: None,
+        smoothing: Some(serde_json::to_value(&settings.pipeline.smoothing).expect("serialisable")),
+        root: settings.pipeline.root.label(),
+        heading: heading.label(),
+        heading_sensor: heading.sensor().map(str::to_string),
+        heading_deg,
+        trim: settings.pipeline.trim.map(|t| TrimRecord {
+            start_s: t.start_s,
+            end_s: (t.end_s < f64::MAX).then_some(t.end_s),
+            first_frame,
+        }),
+        mode,
+    }
 }
 
 fn write_err(path: &Path) -> impl FnOnce(io::Error) -> ConvertError {
@@ -616,22 +627,13 @@ fn convert_legacy(
                     .collect(),
             ),
         },
-        pipeline: PipelineRecord {
-            fusion: None,
-            smoothing: Some(
-                serde_json::to_value(&settings.pipeline.smoothing).expect("serialisable"),
-            ),
-            root: settings.pipeline.root.label(),
-            heading: "none",
-            heading_sensor: None,
-            heading_deg: 0.0,
-            trim: settings.pipeline.trim.map(|t| TrimRecord {
-                start_s: t.start_s,
-                end_s: (t.end_s < f64::MAX).then_some(t.end_s),
-                first_frame: legacy.first_frame,
-            }),
-            mode: "legacy-euler",
-        },
+        pipeline: pipeline_record(
+            settings,
+            &HeadingSource::None,
+            0.0,
+            legacy.first_frame,
+            "legacy-euler",
+        ),
         outputs,
         sensors: sensor_summaries,
         dropped_lines,
