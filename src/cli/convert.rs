@@ -21,6 +21,17 @@ pub struct ConvertArgs {
     /// Output folder (created if missing).
     #[arg(long, short)]
     out: PathBuf,
+    #[command(flatten)]
+    settings: SettingsArgs,
+    /// Print the sidecar as JSON on stdout (an array for several inputs).
+    #[arg(long)]
+    json: bool,
+}
+
+/// The conversion settings flags, shared by `convert` and `batch`: `--config` and the flags that
+/// override it.
+#[derive(Debug, Args)]
+pub struct SettingsArgs {
     /// YAML settings (the same keys as these flags); flags override it.
     #[arg(long, value_name = "YAML")]
     config: Option<PathBuf>,
@@ -50,9 +61,6 @@ pub struct ConvertArgs {
     /// rates and the warnings.
     #[arg(long)]
     report: bool,
-    /// Print the sidecar as JSON on stdout (an array for several inputs).
-    #[arg(long)]
-    json: bool,
     #[command(flatten)]
     read: ReadArgs,
 }
@@ -65,8 +73,9 @@ fn parse_units(s: &str) -> Result<LengthUnit, String> {
     }
 }
 
-impl ConvertArgs {
-    fn settings(&self) -> anyhow::Result<ConvertSettings> {
+impl SettingsArgs {
+    /// The settings: the config file's, overridden by the flags given.
+    pub fn settings(&self) -> anyhow::Result<ConvertSettings> {
         let mut settings = match &self.config {
             Some(path) => Config::load(path)?.to_settings(),
             None => ConvertSettings::default(),
@@ -122,7 +131,7 @@ pub fn run(args: ConvertArgs) -> anyhow::Result<ExitCode> {
             return Ok(ExitCode::from(2));
         }
     }
-    let settings = args.settings()?;
+    let settings = args.settings.settings()?;
     let mut sidecars = Vec::new();
     let mut failed = 0;
     for input in &args.inputs {

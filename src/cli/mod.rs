@@ -1,5 +1,6 @@
 //! Command-line interface: one module per subcommand.
 
+mod batch;
 mod convert;
 mod inspect;
 mod simulate;
@@ -24,6 +25,8 @@ pub struct Cli {
 enum Command {
     /// Convert captures into keyframed BVH and glTF on a rig, with a JSON sidecar.
     Convert(convert::ConvertArgs),
+    /// Convert many takes in parallel (files, folders, globs), skipping those already current.
+    Batch(batch::BatchArgs),
     /// Summarise a capture: time frame, nodes, sample rates, gaps, dropped lines.
     Inspect(inspect::InspectArgs),
     /// Simulate the capture a mapping's sensors would record from BVH motion (tests, samples).
@@ -85,6 +88,7 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Convert(args) => convert::run(args),
+        Command::Batch(args) => batch::run(args),
         Command::Inspect(args) => inspect::run(args),
         Command::Simulate(args) => simulate::run(args),
     }

@@ -261,6 +261,9 @@ fn detect_folder(path: &Path) -> Result<InputFormat, ReadError> {
     }
 }
 
+/// A session folder's accepted files (path and name), and notes on the files passed over.
+pub(crate) type TakeFiles = (Vec<(PathBuf, String)>, Vec<String>);
+
 /// The files of a multi-file take's folder that `looks_like` accepts (name and path, sorted),
 /// and a note for each file passed over; an error naming `what` when none is accepted.
 pub(crate) fn take_files(
@@ -268,7 +271,7 @@ pub(crate) fn take_files(
     looks_like: fn(&[u8]) -> bool,
     what: &str,
     expected: &str,
-) -> Result<(Vec<(PathBuf, String)>, Vec<String>), ReadError> {
+) -> Result<TakeFiles, ReadError> {
     let mut files = Vec::new();
     let mut notes = Vec::new();
     for file in visible_files(dir)? {

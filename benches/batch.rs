@@ -1,0 +1,100 @@
+//! Benchmark: `batch` throughput on a library of one-minute takes (16 sensors at 100 Hz, paper
+//! 000's mapping, onto mixamo at 60 fps, BVH + GLB + sidecar, default smoothing) with 1 and 2 jobs,
+//! and the rerun that skips everything (ledger).
+//!
+//! Target (issue 6): 200 one-minute takes; 2 jobs at least 1.6× the throughput of 1 job.
+//!
+//!   cargo bench --bench batch
+//!   IMUBAKE_BENCH_TAKES=40 cargo bench --bench batch
+//!
+//! The takes are hard links of one generated log (distinct names, so distinct takes and outputs;
+//! the disk holds one copy), each read, hashed and converted in full.
+
+mod common;
+
+use common::write_log;
+use imubake::batch::{Summary, discover, run};
+use imubake::convert::ConvertSettings;
+use std::path::Path;
+use std::time::Instant;
+
+const SENSORS: [&str; 16] = [
+    "pelvis",
+    "sternum",
+    "left_shoulder_blade",
+    "left_upper_arm",
+    "left_forearm",
+    "left_hand",
+    "left_thigh",
+    "left_shank",
+    "left_foot",
+    "right_shoulder_blade",
+    "right_upper_arm",
+    "right_forearm",
+    "right_hand",
+    "right_thigh",
+    "right_shank",
+    "right_foot",
+];
+
+fn main() {
+    let takes: usize = std::env::var("IMUBAKE_BENCH_TAKES")
+        .ok()
+        .and_then(|t| t.parse().ok())
+        .unwrap_or(200);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = dir.path().join("in");
+    std::fs::create_dir_all(input.join("day2")).expect("input folder");
+    let first = input.join("take000.csv");
+    let bytes = write_log(&first, 1, &SENSORS).expect("write the log");
+    for i in 1..takes {
+        // Half the library in a sub-folder, as a studio's would be.
+        let sub = if i % 2 == 0 { "" } else { "day2/" };
+        std::fs::hard_link(&first, input.join(format!("{sub}take{i:03}.csv"))).expect("link");
+    }
+    let mapping = Path::new(env!("CARGO_MANIFEST_DIR")).join("mappings/paper000_16imu_mixamo.json");
+    let mut settings = ConvertSettings {
+        mapping: Some(mapping),
+        ..ConvertSettings::default()
+    };
+    settings.pipeline.fps = "60".parse().expect("fps");
+    let library = discover(std::slice::from_ref(&input), None).expect("discover");
+    assert_eq!(library.len(), takes);
+    println!(
+        "{takes} one-minute takes (16 sensors at 100 Hz, {:.1} MB each) → BVH + GLB at 60 fps",
+        bytes as f64 / 1e6
+    );
+
+    let mut throughput = Vec::new();
+    for jobs in [1, 2] {
+        let out = dir.path().join(format!("out{jobs}"));
+        let start = Instant::now();
+        let results = run(&library, &out, &settings, jobs, &|_| {}).expect("batch");
+        let secs = start.elapsed().as_secs_f64();
+        let summary = Summary::of(&results);
+        assert_eq!(summary.converted, takes, "{summary}");
+        let rate = takes as f64 / secs;
+        println!(
+            "{jobs} job{}: {secs:.2} s, {rate:.2} takes/s ({:.1} ms per take)",
+            if jobs == 1 { "" } else { "s" },
+            1000.0 * secs / takes as f64
+        );
+        throughput.push(rate);
+        if jobs == 2 {
+            let start = Instant::now();
+            let results = run(&library, &out, &settings, jobs, &|_| {}).expect("rerun");
+            let summary = Summary::of(&results);
+            assert_eq!(summary.skipped, takes, "{summary}");
+            println!(
+                "rerun, everything current (ledger): {:.3} s",
+                start.elapsed().as_secs_f64()
+            );
+        }
+        std::fs::remove_dir_all(&out).expect("clean up");
+    }
+    let speedup = throughput[1] / throughput[0];
+    println!(
+        "2 jobs / 1 job: {speedup:.2}× (target ≥ 1.6×){}",
+        if speedup >= 1.6 { "" } else { "  BELOW TARGET" }
+    );
+}

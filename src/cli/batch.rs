@@ -1,0 +1,139 @@
+//! `imubake batch <files|folders|globs>... --out <dir> [--jobs N] [--shard I/N] [options]`.
+
+use super::convert::SettingsArgs;
+use anyhow::Context;
+use clap::Args;
+use imubake::batch::{self, Shard, Summary, TakeResult, TakeStatus};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct BatchArgs {
+    /// Capture files, folders (each file and session sub-folder in them, recursively, is a take;
+    /// a session folder is one take) and globs (`*`, `?`, `**`).
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    /// Output root: each take's outputs go to <out>/<its relative folder>/<stem>.*; the ledger to
+    /// <out>/.imubake/ledger.jsonl.
+    #[arg(long, short)]
+    out: PathBuf,
+    /// Conversions at once [default: one per core].
+    #[arg(long, short, value_name = "N")]
+    jobs: Option<usize>,
+    /// Convert only the takes whose index in relative-path order is I modulo N. Default: from
+    /// JOB_COMPLETION_INDEX + IMUBAKE_SHARD_COUNT (Kubernetes Indexed Job) or
+    /// SLURM_ARRAY_TASK_ID + SLURM_ARRAY_TASK_COUNT (Slurm array), else all takes.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<Shard>,
+    /// List the takes of this shard (relative paths) and exit without converting.
+    #[arg(long)]
+    list: bool,
+    #[command(flatten)]
+    settings: SettingsArgs,
+    /// Print the result as JSON on stdout: {"converted", "failed", "skipped", "shard", "takes"}.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Serialize)]
+struct Report<'a> {
+    #[serde(flatten)]
+    summary: &'a Summary,
+    shard: Option<Shard>,
+    takes: &'a [TakeResult],
+}
+
+pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
+    let shard = match args.shard {
+        Some(s) => Some(s),
+        None => match Shard::from_env(|k| std::env::var(k).ok()) {
+            Ok(s) => s.map(|(s, from)| {
+                eprintln!("shard {s} (from {from})");
+                s
+            }),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return Ok(ExitCode::from(2));
+            }
+        },
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("{}: cannot create", args.out.display()))?;
+    let takes = match batch::discover(&args.inputs, Some(&args.out)) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    let total = takes.len();
+    let takes = match shard {
+        Some(s) => s.select(takes),
+        None => takes,
+    };
+    if args.list {
+        let mut stdout = std::io::stdout().lock();
+        if args.json {
+            let rels: Vec<&str> = takes.iter().map(|t| t.rel.as_str()).collect();
+            serde_json::to_writer_pretty(&mut stdout, &rels)?;
+            writeln!(stdout)?;
+        } else {
+            for t in &takes {
+                writeln!(stdout, "{}", t.rel)?;
+            }
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let settings = args.settings.settings()?;
+
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::with_draw_target(Some(takes.len() as u64), ProgressDrawTarget::stderr())
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} takes, {elapsed} (eta {eta}) {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    if let Some(s) = shard {
+        bar.set_message(format!("shard {s} of {total} takes"));
+    }
+    let on_result = |r: &TakeResult| {
+        bar.suspend(|| {
+            for w in &r.warnings {
+                eprintln!("warning: {}: {w}", r.source);
+            }
+            if let Some(reason) = &r.reason {
+                eprintln!("error: {reason}");
+            }
+        });
+        bar.inc(1);
+    };
+    let jobs = args.jobs.unwrap_or(0);
+    let results = batch::run(&takes, &args.out, &settings, jobs, &on_result)
+        .with_context(|| format!("{}: cannot run the batch", args.out.display()))?;
+    bar.finish_and_clear();
+
+    let summary = Summary::of(&results);
+    let mut stdout = std::io::stdout().lock();
+    if args.json {
+        let report = Report {
+            summary: &summary,
+            shard,
+            takes: &results,
+        };
+        serde_json::to_writer_pretty(&mut stdout, &report)?;
+        writeln!(stdout).context("writing to stdout")?;
+    } else {
+        writeln!(stdout, "{summary}").context("writing to stdout")?;
+    }
+    let failed = results.iter().any(|r| r.status == TakeStatus::Failed);
+    Ok(if failed {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
