@@ -22,5 +22,6 @@ pub mod rotation;
 pub mod simulate;
 pub mod smooth;
 pub mod take;
+pub mod watch;
 pub mod world;
 pub mod write;

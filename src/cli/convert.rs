@@ -10,7 +10,7 @@ use imubake::pipeline::Trim;
 use imubake::rig::LengthUnit;
 use std::collections::HashMap;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Debug, Args)]
@@ -75,8 +75,18 @@ fn parse_units(s: &str) -> Result<LengthUnit, String> {
 
 impl SettingsArgs {
     /// The settings: the config file's, overridden by the flags given.
+    /// The `--config` given, if any.
+    pub fn config(&self) -> Option<&Path> {
+        self.config.as_deref()
+    }
+
     pub fn settings(&self) -> anyhow::Result<ConvertSettings> {
-        let mut settings = match &self.config {
+        self.settings_with(self.config())
+    }
+
+    /// The settings from `config` (a YAML file, or none) with these flags over it.
+    pub fn settings_with(&self, config: Option<&Path>) -> anyhow::Result<ConvertSettings> {
+        let mut settings = match config {
             Some(path) => Config::load(path)?.to_settings(),
             None => ConvertSettings::default(),
         };

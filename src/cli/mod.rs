@@ -4,6 +4,7 @@ mod batch;
 mod convert;
 mod inspect;
 mod simulate;
+mod watch;
 
 use clap::{Args, Parser, Subcommand};
 use imubake::read::{InputFormat, ReadOptions};
@@ -31,6 +32,8 @@ enum Command {
     Inspect(inspect::InspectArgs),
     /// Simulate the capture a mapping's sensors would record from BVH motion (tests, samples).
     Simulate(simulate::SimulateArgs),
+    /// Convert an inbox's backlog, then each take as it arrives or changes.
+    Watch(watch::WatchArgs),
 }
 
 /// Flags shared by every command that reads captures.
@@ -91,5 +94,6 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Batch(args) => batch::run(args),
         Command::Inspect(args) => inspect::run(args),
         Command::Simulate(args) => simulate::run(args),
+        Command::Watch(args) => watch::run(args),
     }
 }

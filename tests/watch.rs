@@ -1,0 +1,300 @@
+//! `imubake watch` on real folders: the backlog with `--once`, captures written slowly while the
+//! watcher runs (events and polling), a watcher killed mid-run and restarted.
+
+use serde_json::Value;
+use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+fn repo(p: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
+}
+
+fn sample() -> Vec<u8> {
+    fs::read(repo("samples/sou_wave.log")).unwrap()
+}
+
+fn fast_args() -> Vec<String> {
+    [
+        "--smooth",
+        "none",
+        "--format",
+        "bvh",
+        "--mapping",
+        repo("samples/sou_wave.mapping.json").to_str().unwrap(),
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect()
+}
+
+fn watch_cmd(inbox: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_imubake"));
+    cmd.arg("watch")
+        .arg(inbox)
+        .arg("--out")
+        .arg(out)
+        .args(fast_args())
+        .args(extra);
+    cmd
+}
+
+fn spawn(inbox: &Path, out: &Path, extra: &[&str]) -> Child {
+    watch_cmd(inbox, out, extra)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("spawn imubake watch")
+}
+
+/// SIGINT, then the exit code (within 10 s).
+fn interrupt(mut child: Child) -> i32 {
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status.code().unwrap_or(-1);
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("the watcher did not stop within 10 s of SIGINT");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// Ledger lines per source, as (status, sha256).
+fn ledger(out: &Path) -> BTreeMap<String, Vec<(String, String)>> {
+    let mut map: BTreeMap<String, Vec<(String, String)>> = BTreeMap::new();
+    let Ok(text) = fs::read_to_string(out.join(".imubake/ledger.jsonl")) else {
+        return map;
+    };
+    for line in text.lines().filter(|l| !l.trim().is_empty()) {
+        let v: Value = serde_json::from_str(line).unwrap();
+        map.entry(v["source"].as_str().unwrap().to_string())
+            .or_default()
+            .push((
+                v["status"].as_str().unwrap().to_string(),
+                v["sha256"].as_str().unwrap().to_string(),
+            ));
+    }
+    map
+}
+
+/// The visible files of a folder (not recursive).
+fn visible(dir: &Path) -> Vec<String> {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut names: Vec<String> = entries
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.starts_with('.'))
+        .collect();
+    names.sort();
+    names
+}
+
+/// No visible temporary file, and every sidecar parses.
+fn assert_consistent(out: &Path) {
+    for name in visible(out) {
+        assert!(!name.ends_with(".tmp"), "visible temp file {name}");
+        if name.ends_with(".imubake.json") {
+            let text = fs::read_to_string(out.join(&name)).unwrap();
+            serde_json::from_str::<Value>(&text)
+                .unwrap_or_else(|e| panic!("{name} does not parse: {e}"));
+        }
+    }
+}
+
+fn sidecar_sha(out: &Path, stem: &str) -> String {
+    let text = fs::read_to_string(out.join(format!("{stem}.imubake.json"))).unwrap();
+    let v: Value = serde_json::from_str(&text).unwrap();
+    v["source"]["sha256"].as_str().unwrap().to_string()
+}
+
+#[test]
+fn once_converts_the_backlog_then_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    for name in ["a.log", "b.log", "c.log"] {
+        fs::write(inbox.join(name), sample()).unwrap();
+    }
+    let garbage: Vec<u8> = (0..4096u32)
+        .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+        .collect();
+    fs::write(inbox.join("bad.log"), garbage).unwrap();
+    // Ignored: hidden and temporary names.
+    fs::write(inbox.join(".hidden.log"), sample()).unwrap();
+    fs::write(inbox.join("d.log.part"), sample()).unwrap();
+    fs::write(inbox.join("e.log.tmp"), sample()).unwrap();
+
+    let run = watch_cmd(&inbox, &out, &["--once"]).output().unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert_eq!(run.status.code(), Some(1), "a take failed: {stdout}");
+    assert!(stdout.contains("converted 3, failed 1"), "{stdout}");
+    assert_eq!(
+        visible(&out),
+        [
+            "a.bvh",
+            "a.imubake.json",
+            "b.bvh",
+            "b.imubake.json",
+            "bad.error.json",
+            "c.bvh",
+            "c.imubake.json"
+        ]
+    );
+    assert_consistent(&out);
+    let bvh_mtime = fs::metadata(out.join("a.bvh")).unwrap().modified().unwrap();
+
+    let run = watch_cmd(&inbox, &out, &["--once"]).output().unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.contains("converted 0, failed 1, skipped 3"),
+        "{stdout}"
+    );
+    assert_eq!(
+        fs::metadata(out.join("a.bvh")).unwrap().modified().unwrap(),
+        bvh_mtime
+    );
+    let ledger = ledger(&out);
+    for name in ["a.log", "b.log", "c.log"] {
+        assert_eq!(ledger[name].len(), 1, "{name}: {:?}", ledger[name]);
+    }
+
+    // Fixing the bad capture converts it and removes its error report.
+    fs::write(inbox.join("bad.log"), sample()).unwrap();
+    let run = watch_cmd(&inbox, &out, &["--once"]).output().unwrap();
+    assert_eq!(run.status.code(), Some(0));
+    assert!(out.join("bad.imubake.json").is_file());
+    assert!(!out.join("bad.error.json").exists());
+    assert!(
+        inbox.join("bad.log").is_file(),
+        "sources are never modified"
+    );
+}
+
+/// Writes a capture in three chunks through one handle over ~2 s while the watcher runs: it is
+/// converted exactly once, from the whole file, and nothing partial is ever visible.
+fn slow_write(extra: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    let child = spawn(&inbox, &out, extra);
+    std::thread::sleep(Duration::from_millis(500));
+
+    let data = sample();
+    let written = Arc::new(AtomicBool::new(false));
+    let writer = {
+        let (path, data, written) = (inbox.join("slow.log"), data.clone(), Arc::clone(&written));
+        std::thread::spawn(move || {
+            let mut f = fs::File::create(path).unwrap();
+            let third = data.len() / 3;
+            for (i, chunk) in [&data[..third], &data[third..2 * third], &data[2 * third..]]
+                .into_iter()
+                .enumerate()
+            {
+                if i > 0 {
+                    std::thread::sleep(Duration::from_millis(900));
+                }
+                f.write_all(chunk).unwrap();
+                f.flush().unwrap();
+            }
+            written.store(true, Ordering::SeqCst);
+            drop(f);
+        })
+    };
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while !out.join("slow.imubake.json").is_file() {
+        assert_consistent(&out);
+        assert!(Instant::now() < deadline, "no sidecar within 15 s");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(
+        written.load(Ordering::SeqCst),
+        "converted before the capture was complete"
+    );
+    writer.join().unwrap();
+    // Long enough for a second conversion to show.
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_consistent(&out);
+    assert_eq!(sidecar_sha(&out, "slow"), sha256_hex(&data));
+    let ledger = ledger(&out);
+    assert_eq!(ledger["slow.log"].len(), 1, "{:?}", ledger["slow.log"]);
+    assert_eq!(interrupt(child), 0);
+    assert_eq!(fs::read(inbox.join("slow.log")).unwrap(), data);
+}
+
+#[test]
+fn a_slowly_written_capture_converts_once_when_complete() {
+    slow_write(&[]);
+}
+
+#[test]
+fn polling_converts_a_slowly_written_capture_once() {
+    slow_write(&["--poll", "200"]);
+}
+
+#[test]
+fn a_killed_watcher_restarts_without_duplicates_or_misses() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    let names: Vec<String> = (0..8).map(|i| format!("take{i}.log")).collect();
+    for name in &names {
+        fs::write(inbox.join(name), sample()).unwrap();
+    }
+    let mut child = spawn(&inbox, &out, &["--settle", "500"]);
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while !visible(&out).iter().any(|n| n.ends_with(".imubake.json")) {
+        assert!(Instant::now() < deadline, "nothing converted within 15 s");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let sidecars = |out: &Path| {
+        visible(out)
+            .iter()
+            .filter(|n| n.ends_with(".imubake.json"))
+            .count()
+    };
+    assert!(sidecars(&out) < names.len(), "killed after the last take");
+
+    let child = spawn(&inbox, &out, &["--settle", "500"]);
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while sidecars(&out) < names.len() {
+        assert!(Instant::now() < deadline, "takes missed after the restart");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(1000));
+    assert_eq!(interrupt(child), 0);
+    assert_consistent(&out);
+    assert_eq!(visible(&out).len(), 2 * names.len(), "{:?}", visible(&out));
+    let ledger = ledger(&out);
+    let sha = sha256_hex(&sample());
+    for name in &names {
+        assert_eq!(
+            ledger[name],
+            [("converted".to_string(), sha.clone())],
+            "{name}: one conversion"
+        );
+    }
+}
