@@ -12,30 +12,11 @@
 
 mod common;
 
-use common::write_log;
+use common::{PAPER000_SENSORS, write_log};
 use imubake::batch::{Summary, discover, run};
 use imubake::convert::ConvertSettings;
 use std::path::Path;
 use std::time::Instant;
-
-const SENSORS: [&str; 16] = [
-    "pelvis",
-    "sternum",
-    "left_shoulder_blade",
-    "left_upper_arm",
-    "left_forearm",
-    "left_hand",
-    "left_thigh",
-    "left_shank",
-    "left_foot",
-    "right_shoulder_blade",
-    "right_upper_arm",
-    "right_forearm",
-    "right_hand",
-    "right_thigh",
-    "right_shank",
-    "right_foot",
-];
 
 fn main() {
     let takes: usize = std::env::var("IMUBAKE_BENCH_TAKES")
@@ -46,7 +27,7 @@ fn main() {
     let input = dir.path().join("in");
     std::fs::create_dir_all(input.join("day2")).expect("input folder");
     let first = input.join("take000.csv");
-    let bytes = write_log(&first, 1, &SENSORS).expect("write the log");
+    let bytes = write_log(&first, 1, &PAPER000_SENSORS).expect("write the log");
     for i in 1..takes {
         // Half the library in a sub-folder, as a studio's would be.
         let sub = if i % 2 == 0 { "" } else { "day2/" };

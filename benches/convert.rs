@@ -9,35 +9,16 @@
 
 mod common;
 
-use common::{minutes_from_env, reset_peak, status_kib, write_log};
+use common::{PAPER000_SENSORS, minutes_from_env, reset_peak, status_kib, write_log};
 use imubake::convert::{ConvertSettings, convert};
 use std::path::Path;
 use std::time::Instant;
-
-const SENSORS: [&str; 16] = [
-    "pelvis",
-    "sternum",
-    "left_shoulder_blade",
-    "left_upper_arm",
-    "left_forearm",
-    "left_hand",
-    "left_thigh",
-    "left_shank",
-    "left_foot",
-    "right_shoulder_blade",
-    "right_upper_arm",
-    "right_forearm",
-    "right_hand",
-    "right_thigh",
-    "right_shank",
-    "right_foot",
-];
 
 fn main() {
     let minutes = minutes_from_env();
     let dir = tempfile::tempdir().expect("temp dir");
     let input = dir.path().join("long.csv");
-    let bytes = write_log(&input, minutes, &SENSORS).expect("write the log");
+    let bytes = write_log(&input, minutes, &PAPER000_SENSORS).expect("write the log");
     let mapping = Path::new(env!("CARGO_MANIFEST_DIR")).join("mappings/paper000_16imu_mixamo.json");
     let mut settings = ConvertSettings {
         mapping: Some(mapping),

@@ -16,7 +16,7 @@ use crate::report::{BoneSeries, ReportInput, render_report};
 use crate::rig::file::RigLoadError;
 use crate::rig::{LengthUnit, Rig, load_rig};
 use crate::rotation::euler::filter_track;
-use crate::take::Take;
+use crate::take::{LineReport, Take};
 use crate::write::gltf::{GltfWriteError, to_glb, to_gltf};
 use crate::write::sidecar::{
     OutputRecord, PipelineRecord, RigRecord, Sidecar, SourceRecord, TrimRecord,
@@ -237,6 +237,29 @@ pub fn euler_degrees(animation: &Animation) -> Vec<Vec<[f64; 3]>> {
         .collect()
 }
 
+/// What the sidecar and the report keep of a take once its samples are dropped.
+struct TakeFacts {
+    sensor_summaries: SensorSummaries,
+    /// The take's warnings, then the pipeline's.
+    warnings: Vec<String>,
+    dropped_lines: Vec<LineReport>,
+    repaired_lines: Vec<LineReport>,
+}
+
+impl TakeFacts {
+    /// Takes the take, so its samples are freed here.
+    fn of(take: Take, pipeline_warnings: &[String]) -> TakeFacts {
+        let mut warnings = take.warnings().to_vec();
+        warnings.extend(pipeline_warnings.iter().cloned());
+        TakeFacts {
+            sensor_summaries: SensorSummaries::of(&take),
+            warnings,
+            dropped_lines: take.dropped_lines().to_vec(),
+            repaired_lines: take.repaired_lines().to_vec(),
+        }
+    }
+}
+
 /// Each animated bone's Euler angles before (`unsmoothed`, when kept) and after smoothing.
 fn report_bones(
     animation: &Animation,
@@ -359,12 +382,12 @@ pub fn convert(
     // take's memory is freed before the outputs are built.
     let source_format = take.source().format;
     let start_timestamp = take.source().start_timestamp.clone();
-    let sensor_summaries = SensorSummaries::of(&take);
-    let mut warnings = take.warnings().to_vec();
-    warnings.extend(converted.warnings.iter().cloned());
-    let dropped_lines = take.dropped_lines().to_vec();
-    let repaired_lines = take.repaired_lines().to_vec();
-    drop(take);
+    let TakeFacts {
+        sensor_summaries,
+        warnings,
+        dropped_lines,
+        repaired_lines,
+    } = TakeFacts::of(take, &converted.warnings);
     let animation = &converted.animation;
 
     let stem = take_stem(input);
@@ -591,12 +614,12 @@ fn convert_legacy(
         world: take.source().world,
         start_timestamp: take.source().start_timestamp.clone(),
     };
-    let sensor_summaries = SensorSummaries::of(&take);
-    let mut warnings = take.warnings().to_vec();
-    warnings.extend(legacy.warnings.iter().cloned());
-    let dropped_lines = take.dropped_lines().to_vec();
-    let repaired_lines = take.repaired_lines().to_vec();
-    drop(take);
+    let TakeFacts {
+        sensor_summaries,
+        warnings,
+        dropped_lines,
+        repaired_lines,
+    } = TakeFacts::of(take, &legacy.warnings);
     let animation = &legacy.animation;
     let stem = take_stem(input);
     let outputs = write_outputs(out_dir, &stem, animation, Some(&legacy.euler_deg), settings)?;

@@ -6,6 +6,26 @@ use std::path::Path;
 
 pub const RATE_HZ: usize = 100;
 
+/// The sensor ids of `mappings/paper000_16imu_mixamo.json`.
+pub const PAPER000_SENSORS: [&str; 16] = [
+    "pelvis",
+    "sternum",
+    "left_shoulder_blade",
+    "left_upper_arm",
+    "left_forearm",
+    "left_hand",
+    "left_thigh",
+    "left_shank",
+    "left_foot",
+    "right_shoulder_blade",
+    "right_upper_arm",
+    "right_forearm",
+    "right_hand",
+    "right_thigh",
+    "right_shank",
+    "right_foot",
+];
+
 /// Writes an imubake CSV of quaternions: `minutes` long, one row per sensor per 1/RATE_HZ s,
 /// `time_s` with 4 decimals and quaternions with 6, sensors offset by 0.3 ms each (asynchronous).
 /// Returns the file size in bytes.
