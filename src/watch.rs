@@ -3,19 +3,21 @@
 //!
 //! Takes are found with [`crate::batch::discover`] (each top-level file or session folder of the
 //! inbox is one take); hidden and temporary names (`.*`, `*.part`, `*.tmp`, `*~`,
-//! `*.crdownload`) and the inbox's `imubake.yaml` are ignored. A take is complete when its size
-//! and modification time (a session folder: summed over its files, the latest mtime) stay the
-//! same over two looks at least [`WatchOptions::settle`] apart; a file renamed into place is
-//! complete the same way, one settle period later. Changes are noticed by file-system events
-//! (`notify`) or by polling; either way the inbox is rescanned, so a missed event only delays a
-//! take.
+//! `*.crdownload`) and the inbox's `imubake.yaml` are ignored. A take is complete when its file
+//! is closed after writing or renamed into place (file-system events), or when its size and
+//! modification time (a session folder: summed over its files, the latest mtime) stay the same
+//! over two looks at least [`WatchOptions::settle`] apart (500 ms by default) — and, on Linux, no
+//! process still has it open for writing ([`held_for_writing`]: a writer pausing between chunks
+//! through one open file is waited for, however long it pauses). Changes are noticed by
+//! file-system events (`notify`) or by polling; either way the inbox is rescanned, so a missed
+//! event only delays a take.
 
 use crate::batch::{BatchTake, Summary, TakeResult, TakeStatus, discover, process_take};
 use crate::convert::{ConvertSettings, source_sha256};
 use crate::ledger::{Ledger, SourceStat, Status, settings_fingerprint};
 use notify::Watcher;
-use notify::event::{AccessKind, AccessMode, EventKind};
-use std::collections::HashMap;
+use notify::event::{AccessKind, AccessMode, EventKind, ModifyKind, RenameMode};
+use std::collections::{HashMap, HashSet};
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -36,9 +38,10 @@ pub struct WatchOptions {
     pub once: bool,
     /// A change of settings reconverts takes converted under other settings.
     pub reconvert: bool,
-    /// How long a take's size and mtime must stay the same before it counts as complete (longer
-    /// than the pauses of the slowest writer; a file closed after writing, where the platform
-    /// reports it, is complete at once).
+    /// How long a take's size and mtime must stay the same before it counts as complete (a file
+    /// closed after writing or renamed into place, where the platform reports it, is complete at
+    /// once). On Linux a file some process still has open for writing is never complete, so this
+    /// need not outlast a writer's pauses; elsewhere it must.
     pub settle: Duration,
     /// The config file to follow (`--config`, else `<inbox>/imubake.yaml`).
     pub config: PathBuf,
@@ -53,7 +56,7 @@ impl WatchOptions {
             poll: None,
             once: false,
             reconvert: false,
-            settle: Duration::from_millis(2000),
+            settle: Duration::from_millis(500),
             config,
         }
     }
@@ -87,6 +90,68 @@ fn config_stat(path: &Path) -> Option<SourceStat> {
     SourceStat::of(path).ok()
 }
 
+/// Which of `candidates` (canonical paths; a folder stands for every file under it) some process
+/// has open for writing: on Linux, the `/proc/<pid>/fd/*` links that point at or under a
+/// candidate, with `O_WRONLY` or `O_RDWR` in `/proc/<pid>/fdinfo/<fd>`'s `flags`. Only processes
+/// whose `/proc` entries we may read are seen (our user's, or all as root); writers on other
+/// machines (network shares) are not. Elsewhere: none. One pass over `/proc` for all candidates.
+pub fn held_for_writing(candidates: &[PathBuf]) -> HashSet<PathBuf> {
+    let mut held = HashSet::new();
+    if candidates.is_empty() || !cfg!(target_os = "linux") {
+        return held;
+    }
+    let wanted: HashSet<&Path> = candidates.iter().map(PathBuf::as_path).collect();
+    let Ok(procs) = fs::read_dir("/proc") else {
+        return held;
+    };
+    for proc in procs.filter_map(Result::ok) {
+        let pid = proc.file_name();
+        if !pid.to_string_lossy().bytes().all(|b| b.is_ascii_digit()) {
+            continue;
+        }
+        let Ok(fds) = fs::read_dir(proc.path().join("fd")) else {
+            continue;
+        };
+        for fd in fds.filter_map(Result::ok) {
+            let Ok(target) = fs::read_link(fd.path()) else {
+                continue;
+            };
+            let Some(hit) = target.ancestors().find(|a| wanted.contains(a)) else {
+                continue;
+            };
+            if held.contains(hit) {
+                continue;
+            }
+            let info = proc.path().join("fdinfo").join(fd.file_name());
+            let writing = fs::read_to_string(info)
+                .ok()
+                .and_then(|text| fdinfo_flags(&text))
+                .is_some_and(|flags| flags & 0o3 != 0);
+            if writing {
+                held.insert(hit.to_path_buf());
+            }
+        }
+    }
+    held
+}
+
+/// The `flags:` field (octal) of a `/proc/<pid>/fdinfo/<fd>`.
+fn fdinfo_flags(text: &str) -> Option<u32> {
+    let line = text.lines().find(|l| l.starts_with("flags:"))?;
+    u32::from_str_radix(line["flags:".len()..].trim(), 8).ok()
+}
+
+/// A take seen changing.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    /// The stat last seen, and since when.
+    stat: SourceStat,
+    since: Instant,
+    /// Settled, but still being written (open for writing, a temporary file inside): looked at
+    /// again on the next event or poll rather than at a settle deadline.
+    busy: bool,
+}
+
 /// The follower of one inbox.
 struct Watch<'a> {
     opts: &'a WatchOptions,
@@ -97,11 +162,12 @@ struct Watch<'a> {
     ledger: Ledger,
     /// Takes handled at this size and mtime.
     done: HashMap<String, SourceStat>,
-    /// Takes seen changing: the stat last seen and since when.
-    pending: HashMap<String, (SourceStat, Instant)>,
+    /// Takes seen changing.
+    pending: HashMap<String, Pending>,
     last_discover_error: Option<String>,
-    /// Files reported closed after writing since the last scan.
-    closed: std::collections::HashSet<PathBuf>,
+    /// Files (or folders) reported closed after writing or renamed into place since the last
+    /// scan.
+    closed: HashSet<PathBuf>,
     summary: Summary,
 }
 
@@ -220,15 +286,17 @@ impl Watch<'_> {
         }
     }
 
-    /// One look at the inbox: converts the takes that are complete (`settled`: without waiting,
-    /// for `--once`).
+    /// One look at the inbox: converts the takes that are complete (`wait_for_settle` false: all
+    /// of them at once, for `--once`).
     fn scan(&mut self, stop: &AtomicBool, wait_for_settle: bool) {
         self.refresh_config();
         let takes = self.takes();
         let now = Instant::now();
-        let live: std::collections::HashSet<&str> = takes.iter().map(|t| t.rel.as_str()).collect();
+        let live: HashSet<&str> = takes.iter().map(|t| t.rel.as_str()).collect();
         self.pending.retain(|rel, _| live.contains(rel.as_str()));
         self.done.retain(|rel, _| live.contains(rel.as_str()));
+        // Settled or closed: complete unless some process still has them open for writing.
+        let mut candidates: Vec<(&BatchTake, SourceStat, PathBuf)> = Vec::new();
         for take in &takes {
             if stop.load(Ordering::SeqCst) {
                 return;
@@ -247,21 +315,55 @@ impl Watch<'_> {
                 continue;
             }
             let closed = self.closed.remove(&take.path);
-            let settled = closed
-                || match self.pending.get(&take.rel) {
-                    Some((seen, since)) if *seen == stat => {
-                        now.duration_since(*since) >= self.opts.settle
-                    }
-                    _ => {
-                        self.pending.insert(take.rel.clone(), (stat, now));
-                        false
-                    }
-                };
-            if settled && !(take.path.is_dir() && has_temporary_entry(&take.path)) {
-                self.convert(take, stat);
+            let pending = match self.pending.get_mut(&take.rel) {
+                Some(p) if p.stat == stat => p,
+                _ => {
+                    let fresh = Pending {
+                        stat,
+                        since: now,
+                        busy: false,
+                    };
+                    self.pending.insert(take.rel.clone(), fresh);
+                    self.pending.get_mut(&take.rel).expect("just inserted")
+                }
+            };
+            if !closed && now.duration_since(pending.since) < self.opts.settle {
+                continue;
             }
+            if take.path.is_dir() && has_temporary_entry(&take.path) {
+                pending.busy = true;
+                continue;
+            }
+            let canonical = take
+                .path
+                .canonicalize()
+                .unwrap_or_else(|_| take.path.clone());
+            candidates.push((take, stat, canonical));
         }
         self.closed.clear();
+        let paths: Vec<PathBuf> = candidates.iter().map(|(_, _, p)| p.clone()).collect();
+        let held = held_for_writing(&paths);
+        for (take, stat, canonical) in candidates {
+            if stop.load(Ordering::SeqCst) {
+                return;
+            }
+            if held.contains(&canonical) {
+                if let Some(p) = self.pending.get_mut(&take.rel) {
+                    p.busy = true;
+                }
+                continue;
+            }
+            self.convert(take, stat);
+        }
+    }
+
+    /// When the next pending take settles (not counting the busy ones).
+    fn next_settle(&self) -> Option<Instant> {
+        self.pending
+            .values()
+            .filter(|p| !p.busy)
+            .map(|p| p.since + self.opts.settle)
+            .min()
     }
 }
 
@@ -317,8 +419,10 @@ pub fn run(
         let tx = tx.clone();
         let mut w = notify::recommended_watcher(move |res: notify::Result<notify::Event>| {
             let close_write = EventKind::Access(AccessKind::Close(AccessMode::Write));
+            let renamed_to = EventKind::Modify(ModifyKind::Name(RenameMode::To));
             match res {
-                Ok(event) if event.kind == close_write => {
+                // Closed after writing, or renamed into place: complete (unless still open).
+                Ok(event) if event.kind == close_write || event.kind == renamed_to => {
                     for path in event.paths {
                         let _ = tx.send(Some(path));
                     }
@@ -351,11 +455,15 @@ pub fn run(
     // The backlog: current takes are done at once, the others once they are settled.
     watch.scan(stop, true);
     while !stop.load(Ordering::SeqCst) {
-        let wait = match opts.poll {
-            Some(p) => p,
-            None if !watch.pending.is_empty() => opts.settle / 2,
-            None => Duration::from_secs(2),
-        };
+        // Until the next poll (events: a fallback rescan) or the next take to settle, if sooner.
+        let until_settle = watch
+            .next_settle()
+            .map(|at| at.saturating_duration_since(Instant::now()));
+        let wait = opts
+            .poll
+            .unwrap_or(Duration::from_secs(2))
+            .min(until_settle.unwrap_or(Duration::MAX))
+            .max(Duration::from_millis(10));
         let deadline = Instant::now() + wait;
         while !stop.load(Ordering::SeqCst) {
             let left = deadline.saturating_duration_since(Instant::now());
@@ -365,7 +473,7 @@ pub fn run(
             match rx.recv_timeout(left.min(Duration::from_millis(50))) {
                 // An event: rescan soon, gathering the burst that comes with it.
                 Ok(first) if opts.poll.is_none() => {
-                    std::thread::sleep(Duration::from_millis(50));
+                    std::thread::sleep(Duration::from_millis(30));
                     for path in std::iter::once(first).chain(rx.try_iter()).flatten() {
                         watch.closed.insert(path);
                     }
@@ -381,4 +489,35 @@ pub fn run(
     }
     drop(tx);
     Ok(watch.summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    #[test]
+    fn fdinfo_flags_are_octal() {
+        let text = "pos:\t0\nflags:\t0100001\nmnt_id:\t25\n";
+        assert_eq!(fdinfo_flags(text), Some(0o100001));
+        assert_eq!(fdinfo_flags("pos:\t0\n"), None);
+    }
+
+    #[test]
+    #[cfg(target_os = "linux")]
+    fn a_file_open_for_writing_is_held_and_a_reader_does_not_hold_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().canonicalize().unwrap();
+        let (file, other) = (root.join("take.log"), root.join("other.log"));
+        fs::write(&other, b"x").unwrap();
+        let mut writer = fs::File::create(&file).unwrap();
+        writer.write_all(b"time_s").unwrap();
+        let _reader = fs::File::open(&other).unwrap();
+        let held = held_for_writing(&[file.clone(), other.clone()]);
+        assert!(held.contains(&file) && !held.contains(&other), "{held:?}");
+        // A folder is held when a file under it is.
+        assert!(held_for_writing(std::slice::from_ref(&root)).contains(&root));
+        drop(writer);
+        assert!(held_for_writing(&[file, other, root]).is_empty());
+    }
 }

@@ -298,3 +298,163 @@ fn a_killed_watcher_restarts_without_duplicates_or_misses() {
         );
     }
 }
+
+/// Every visible GLB's header length equals its size and every visible sidecar parses (a reader
+/// must never see a partial output). `seen` holds the files already checked, by (name, size,
+/// mtime), so each is read once.
+fn assert_no_partial_outputs(
+    out: &Path,
+    seen: &mut std::collections::HashSet<(String, u64, u128)>,
+) {
+    use std::io::Read;
+    for name in visible(out) {
+        assert!(!name.ends_with(".tmp"), "visible temp file {name}");
+        let glb = name.ends_with(".glb");
+        if !glb && !name.ends_with(".imubake.json") {
+            continue;
+        }
+        // Opened first, then measured through the handle: outputs are replaced by rename.
+        let Ok(mut file) = fs::File::open(out.join(&name)) else {
+            continue; // removed since the listing
+        };
+        let meta = file.metadata().unwrap();
+        let mtime = meta
+            .modified()
+            .unwrap()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos();
+        if !seen.insert((name.clone(), meta.len(), mtime)) {
+            continue;
+        }
+        if glb {
+            let mut header = [0u8; 12];
+            file.read_exact(&mut header)
+                .unwrap_or_else(|e| panic!("{name}: no GLB header ({} bytes): {e}", meta.len()));
+            assert_eq!(&header[..4], b"glTF", "{name}");
+            let length = u32::from_le_bytes(header[8..12].try_into().unwrap()) as u64;
+            assert_eq!(length, meta.len(), "{name}: header length vs size");
+        } else {
+            let mut text = String::new();
+            file.read_to_string(&mut text).unwrap();
+            serde_json::from_str::<Value>(&text)
+                .unwrap_or_else(|e| panic!("{name} does not parse: {e}"));
+        }
+    }
+}
+
+/// 300 captures dropped at once, 10 % corrupt: one set of outputs per good one, one error report
+/// per bad one, and nothing partial ever visible.
+fn drop_300(extra: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_imubake"));
+    cmd.arg("watch")
+        .arg(&inbox)
+        .arg("--out")
+        .arg(&out)
+        .args(["--smooth", "none", "--format", "bvh,glb", "--mapping"])
+        .arg(repo("samples/sou_wave.mapping.json"))
+        .args(extra);
+    let child = cmd
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawn imubake watch");
+    std::thread::sleep(Duration::from_millis(500));
+
+    let data = sample();
+    let (good, bad): (Vec<String>, Vec<String>) = (
+        (0..270).map(|i| format!("good{i:03}")).collect(),
+        (0..30).map(|i| format!("bad{i:02}")).collect(),
+    );
+    let started = Instant::now();
+    let writer = {
+        let (inbox, good, bad) = (inbox.clone(), good.clone(), bad.clone());
+        std::thread::spawn(move || {
+            for (i, stem) in good.iter().enumerate() {
+                fs::write(inbox.join(format!("{stem}.log")), &data).unwrap();
+                if i % 9 == 8 {
+                    let stem = &bad[i / 9];
+                    let garbage: Vec<u8> = (0..4096u32 + 97 * i as u32)
+                        .map(|j| ((j ^ i as u32).wrapping_mul(2654435761) >> 13) as u8)
+                        .collect();
+                    fs::write(inbox.join(format!("{stem}.log")), garbage).unwrap();
+                }
+            }
+        })
+    };
+
+    let mut seen = std::collections::HashSet::new();
+    let count = |suffix: &str| visible(&out).iter().filter(|n| n.ends_with(suffix)).count();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while count(".imubake.json") < good.len() || count(".error.json") < bad.len() {
+        assert_no_partial_outputs(&out, &mut seen);
+        assert!(
+            Instant::now() < deadline,
+            "after 60 s: {} sidecars, {} error reports",
+            count(".imubake.json"),
+            count(".error.json")
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    writer.join().unwrap();
+    eprintln!(
+        "300 captures ({}): all converted or reported in {:.1} s",
+        if extra.is_empty() { "events" } else { "--poll" },
+        started.elapsed().as_secs_f64()
+    );
+    // Long enough for a second conversion to show.
+    std::thread::sleep(Duration::from_millis(1000));
+    assert_no_partial_outputs(&out, &mut seen);
+    assert_eq!(interrupt(child), 0);
+
+    let mut expected: Vec<String> = good
+        .iter()
+        .flat_map(|s| {
+            ["bvh", "glb", "imubake.json"]
+                .iter()
+                .map(move |ext| format!("{s}.{ext}"))
+        })
+        .chain(bad.iter().map(|s| format!("{s}.error.json")))
+        .collect();
+    expected.sort();
+    assert_eq!(visible(&out), expected);
+    let hidden: Vec<String> = fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.') && n != ".imubake")
+        .collect();
+    assert!(hidden.is_empty(), "temporary files left: {hidden:?}");
+    let ledger = ledger(&out);
+    let sha = sha256_hex(&sample());
+    for stem in &good {
+        let name = format!("{stem}.log");
+        assert_eq!(
+            ledger[&name],
+            [("converted".to_string(), sha.clone())],
+            "{name}: one conversion"
+        );
+        assert_eq!(sidecar_sha(&out, stem), sha);
+    }
+    for stem in &bad {
+        let name = format!("{stem}.log");
+        assert!(
+            ledger[&name].iter().all(|(status, _)| status == "failed"),
+            "{name}: {:?}",
+            ledger[&name]
+        );
+    }
+    assert_eq!(ledger.len(), 300);
+}
+
+#[test]
+fn three_hundred_captures_dropped_at_once() {
+    drop_300(&[]);
+}
+
+#[test]
+fn polling_three_hundred_captures_dropped_at_once() {
+    drop_300(&["--poll", "200"]);
+}

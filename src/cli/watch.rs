@@ -24,8 +24,9 @@ pub struct WatchArgs {
     #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(10..))]
     poll: Option<u64>,
     /// A take is complete when its size and modification time stay the same this long (or when
-    /// its file is closed after writing, where the platform reports it).
-    #[arg(long, value_name = "MS", default_value_t = 2000, value_parser = clap::value_parser!(u64).range(500..))]
+    /// its file is closed after writing or renamed into place, where the platform reports it);
+    /// on Linux, never while a process still has it open for writing.
+    #[arg(long, value_name = "MS", default_value_t = 500, value_parser = clap::value_parser!(u64).range(500..))]
     settle: u64,
     /// Convert the backlog and exit (exit code 1 if a take failed).
     #[arg(long)]
