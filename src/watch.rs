@@ -152,6 +152,9 @@ struct Pending {
     busy: bool,
 }
 
+/// A subfolder config's stat when last loaded, and its last good settings and fingerprint.
+type FolderSettings = (Option<SourceStat>, Option<(ConvertSettings, String)>);
+
 /// The follower of one inbox.
 struct Watch<'a> {
     opts: &'a WatchOptions,
@@ -165,6 +168,9 @@ struct Watch<'a> {
     /// Takes seen changing.
     pending: HashMap<String, Pending>,
     last_discover_error: Option<String>,
+    /// A subfolder's own `imubake.yaml`: its stat when loaded, and its settings and fingerprint
+    /// (the last good ones when it became bad).
+    folder_settings: HashMap<PathBuf, FolderSettings>,
     /// Files (or folders) reported closed after writing or renamed into place since the last
     /// scan.
     closed: HashSet<PathBuf>,
@@ -222,7 +228,8 @@ impl Watch<'_> {
                         let temp = Path::new(&t.rel)
                             .components()
                             .any(|c| is_temporary_name(&c.as_os_str().to_string_lossy()));
-                        let is_config = t.rel == INBOX_CONFIG
+                        // The inbox's config, a subfolder's own, or --config inside the inbox.
+                        let is_config = t.path.file_name().is_some_and(|n| n == INBOX_CONFIG)
                             || config.is_some()
                                 && t.path.canonicalize().ok().as_ref() == config.as_ref();
                         !temp && !is_config
@@ -240,12 +247,61 @@ impl Watch<'_> {
         }
     }
 
+    /// The nearest subfolder `imubake.yaml` between the take and the inbox, if any.
+    fn folder_config(&self, take: &BatchTake) -> Option<PathBuf> {
+        let mut dir = take.path.parent()?;
+        while dir != self.opts.inbox && dir.starts_with(&self.opts.inbox) {
+            let config = dir.join(INBOX_CONFIG);
+            if config.is_file() {
+                return Some(config);
+            }
+            dir = dir.parent()?;
+        }
+        None
+    }
+
+    /// The settings and fingerprint for a take: a subfolder's own `imubake.yaml` (reloaded when
+    /// it changes; a bad one is reported and its last good settings stay, else the inbox's),
+    /// else the inbox's.
+    fn settings_for(&mut self, take: &BatchTake) -> (ConvertSettings, String) {
+        let Some(config) = self.folder_config(take) else {
+            return (self.settings.clone(), self.fingerprint.clone());
+        };
+        let stat = config_stat(&config);
+        let entry = self
+            .folder_settings
+            .entry(config.clone())
+            .or_insert((None, None));
+        if entry.0 != stat || entry.1.is_none() && stat.is_none() {
+            entry.0 = stat;
+            match (self.load_settings)(Some(&config)) {
+                Ok(settings) => {
+                    let fingerprint = settings_fingerprint(&settings);
+                    entry.1 = Some((settings, fingerprint));
+                }
+                Err(e) => eprintln!(
+                    "error: {e} (keeping the last good settings for {})",
+                    config.display()
+                ),
+            }
+        }
+        entry
+            .1
+            .clone()
+            .unwrap_or_else(|| (self.settings.clone(), self.fingerprint.clone()))
+    }
+
     /// Whether the take was converted from this content, under whatever settings (without
     /// `--reconvert`, a change of settings leaves old takes alone).
-    fn current_under_its_own_settings(&self, take: &BatchTake, stat: SourceStat) -> bool {
+    fn current_under_its_own_settings(
+        &self,
+        take: &BatchTake,
+        stat: SourceStat,
+        fingerprint: &str,
+    ) -> bool {
         self.ledger.latest(&take.rel).is_some_and(|e| {
             let fingerprint = if self.opts.reconvert {
-                &self.fingerprint
+                fingerprint
             } else {
                 &e.settings
             };
@@ -260,18 +316,13 @@ impl Watch<'_> {
     fn convert(&mut self, take: &BatchTake, stat: SourceStat) {
         self.pending.remove(&take.rel);
         self.done.insert(take.rel.clone(), stat);
-        if self.current_under_its_own_settings(take, stat) {
+        let (settings, fingerprint) = self.settings_for(take);
+        if self.current_under_its_own_settings(take, stat, &fingerprint) {
             self.summary.skipped += 1;
             return;
         }
         let started = Instant::now();
-        let result = process_take(
-            take,
-            &self.opts.out,
-            &self.settings,
-            &self.fingerprint,
-            &self.ledger,
-        );
+        let result = process_take(take, &self.opts.out, &settings, &fingerprint, &self.ledger);
         log(&result, started.elapsed());
         match result.status {
             TakeStatus::Converted => self.summary.converted += 1,
@@ -308,8 +359,10 @@ impl Watch<'_> {
                 continue;
             }
             if !wait_for_settle
-                || !self.pending.contains_key(&take.rel)
-                    && self.current_under_its_own_settings(take, stat)
+                || !self.pending.contains_key(&take.rel) && {
+                    let fingerprint = self.settings_for(take).1;
+                    self.current_under_its_own_settings(take, stat, &fingerprint)
+                }
             {
                 self.convert(take, stat);
                 continue;
@@ -405,6 +458,7 @@ pub fn run(
         done: HashMap::new(),
         pending: HashMap::new(),
         last_discover_error: None,
+        folder_settings: HashMap::new(),
         closed: Default::default(),
         summary: Summary::default(),
     };

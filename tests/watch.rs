@@ -458,3 +458,38 @@ fn three_hundred_captures_dropped_at_once() {
 fn polling_three_hundred_captures_dropped_at_once() {
     drop_300(&["--poll", "200"]);
 }
+
+/// A subfolder may hold its own `imubake.yaml`: its takes use it, the others the inbox's.
+#[test]
+fn a_subfolder_config_applies_to_its_takes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("inbox"), dir.path().join("out"));
+    fs::create_dir_all(inbox.join("glb_only")).unwrap();
+    let mapping = repo("samples/sou_wave.mapping.json");
+    let config = |formats: &str| {
+        format!(
+            "mapping: {}\nsmoothing: none\nformats: [{formats}]\n",
+            mapping.display()
+        )
+    };
+    fs::write(inbox.join("imubake.yaml"), config("bvh")).unwrap();
+    fs::write(inbox.join("glb_only/imubake.yaml"), config("glb")).unwrap();
+    fs::write(inbox.join("top.log"), sample()).unwrap();
+    fs::write(inbox.join("glb_only/sub.log"), sample()).unwrap();
+    let status = Command::new(env!("CARGO_BIN_EXE_imubake"))
+        .arg("watch")
+        .arg(&inbox)
+        .arg("--out")
+        .arg(&out)
+        .arg("--once")
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(out.join("top.bvh").is_file() && !out.join("top.glb").exists());
+    assert!(out.join("glb_only/sub.glb").is_file() && !out.join("glb_only/sub.bvh").exists());
+    // The configs themselves are not takes.
+    assert!(
+        !out.join("imubake.error.json").exists()
+            && !out.join("glb_only/imubake.error.json").exists()
+    );
+}
