@@ -73,7 +73,7 @@ proptest! {
                 // the caller keeps the input, with a warning. Never for ordinary motion with a
                 // linear filter: the guard must not hide the smoothing itself.
                 Err(why) => prop_assert!(
-                    !(linear && input.len() >= 100 && max_step_deg(&input) <= 10.0),
+                    !(linear && input.len() >= 100 && max_step_deg(&input) <= 5.0),
                     "{method} refused an ordinary track: {why:?}"
                 ),
                 Ok(out) => {

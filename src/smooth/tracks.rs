@@ -148,7 +148,7 @@ pub fn smooth_quaternions_in_place(
 }
 
 /// How much larger than the input's largest step (radians) a smoothed track's largest step may be.
-const MAX_ADDED_STEP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+const MAX_ADDED_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
 
 /// Smooths an angle series in degrees through (cos, sin) pairs; the result is unwrapped to stay
 /// within 180° of the input at every sample, so continuous tracks stay continuous.
