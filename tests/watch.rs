@@ -493,3 +493,67 @@ fn a_subfolder_config_applies_to_its_takes() {
             && !out.join("glb_only/imubake.error.json").exists()
     );
 }
+
+/// Waits up to `secs` for `path` to exist.
+fn wait_for(path: &Path, secs: u64) -> bool {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    while Instant::now() < deadline {
+        if path.exists() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    false
+}
+
+/// An edited inbox config is reloaded while the watcher runs: a bad edit keeps the last good
+/// settings, and with `--reconvert` a good edit converts the old takes again under it.
+#[test]
+fn an_edited_config_is_reloaded_and_a_bad_one_keeps_the_last_good() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("inbox"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    let mapping = repo("samples/sou_wave.mapping.json");
+    let config = |formats: &str| {
+        format!(
+            "mapping: {}\nsmoothing: none\nformats: [{formats}]\n",
+            mapping.display()
+        )
+    };
+    fs::write(inbox.join("imubake.yaml"), config("bvh")).unwrap();
+    fs::write(inbox.join("take.log"), sample()).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_imubake"))
+        .arg("watch")
+        .arg(&inbox)
+        .arg("--out")
+        .arg(&out)
+        .args(["--poll", "100", "--reconvert"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    assert!(
+        wait_for(&out.join("take.imubake.json"), 20),
+        "the backlog take converts"
+    );
+    assert!(out.join("take.bvh").is_file() && !out.join("take.glb").exists());
+    // A bad edit: reported, the last good settings stay (a new take still gets a BVH).
+    fs::write(inbox.join("imubake.yaml"), "formats: [png]\n").unwrap();
+    std::thread::sleep(Duration::from_millis(400));
+    fs::write(inbox.join("second.log"), sample()).unwrap();
+    assert!(
+        wait_for(&out.join("second.imubake.json"), 20),
+        "a new take converts under the last good settings"
+    );
+    assert!(out.join("second.bvh").is_file() && !out.join("second.glb").exists());
+    // A good edit with --reconvert: the old takes are converted again, now as GLB only.
+    fs::write(inbox.join("imubake.yaml"), config("glb")).unwrap();
+    assert!(
+        wait_for(&out.join("take.glb"), 20),
+        "the old take is reconverted under the new settings"
+    );
+    assert!(wait_for(&out.join("second.glb"), 20));
+    assert_eq!(interrupt(child), 0);
+    // Outputs the new settings no longer write are removed.
+    assert!(!out.join("take.bvh").exists(), "a stale BVH is left");
+}
