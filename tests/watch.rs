@@ -255,6 +255,15 @@ fn polling_converts_a_slowly_written_capture_once() {
 
 #[test]
 fn a_killed_watcher_restarts_without_duplicates_or_misses() {
+    killed_and_restarted(&["--settle", "500"]);
+}
+
+#[test]
+fn a_killed_polling_watcher_restarts_without_duplicates_or_misses() {
+    killed_and_restarted(&["--settle", "500", "--poll", "200"]);
+}
+
+fn killed_and_restarted(extra: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
     fs::create_dir_all(&inbox).unwrap();
@@ -262,7 +271,7 @@ fn a_killed_watcher_restarts_without_duplicates_or_misses() {
     for name in &names {
         fs::write(inbox.join(name), sample()).unwrap();
     }
-    let mut child = spawn(&inbox, &out, &["--settle", "500"]);
+    let mut child = spawn(&inbox, &out, extra);
     let deadline = Instant::now() + Duration::from_secs(15);
     while !visible(&out).iter().any(|n| n.ends_with(".imubake.json")) {
         assert!(Instant::now() < deadline, "nothing converted within 15 s");
@@ -278,7 +287,7 @@ fn a_killed_watcher_restarts_without_duplicates_or_misses() {
     };
     assert!(sidecars(&out) < names.len(), "killed after the last take");
 
-    let child = spawn(&inbox, &out, &["--settle", "500"]);
+    let child = spawn(&inbox, &out, extra);
     let deadline = Instant::now() + Duration::from_secs(15);
     while sidecars(&out) < names.len() {
         assert!(Instant::now() < deadline, "takes missed after the restart");
