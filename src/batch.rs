@@ -469,8 +469,14 @@ pub fn process_take(
         });
     let previous = ledger.latest(&take.rel);
     let stat = stat.ok();
+    // A failed conversion and a panic both end in an error report.
+    let result = match result {
+        Ok(Ok(outcome)) => Ok(outcome),
+        Ok(Err(error)) => Err(ErrorReport::from_convert_error(&take.rel, &error)),
+        Err(message) => Err(ErrorReport::from_message(&take.rel, &message)),
+    };
     match result {
-        Ok(Ok(outcome)) => {
+        Ok(outcome) => {
             let mut outputs: Vec<String> = outcome
                 .sidecar
                 .outputs
@@ -516,32 +522,16 @@ pub fn process_take(
             }
             result
         }
-        Ok(Err(error)) => {
-            let report = ErrorReport::from_convert_error(&take.rel, &error);
-            fail(
-                take,
-                out_root,
-                &out_dir,
-                report,
-                stat,
-                fingerprint,
-                started,
-                ledger,
-            )
-        }
-        Err(message) => {
-            let report = ErrorReport::from_message(&take.rel, &message);
-            fail(
-                take,
-                out_root,
-                &out_dir,
-                report,
-                stat,
-                fingerprint,
-                started,
-                ledger,
-            )
-        }
+        Err(report) => fail(
+            take,
+            out_root,
+            &out_dir,
+            report,
+            stat,
+            fingerprint,
+            started,
+            ledger,
+        ),
     }
 }
 
