@@ -261,6 +261,30 @@ fn detect_folder(path: &Path) -> Result<InputFormat, ReadError> {
     }
 }
 
+/// The columns of a group that belongs together (`qw,qx,qy,qz`, `Acc_X,Acc_Y,Acc_Z`), looked up
+/// with `find`: all of them, or `None` when the group is absent; a partly present group is `None`
+/// and its absent names are added to `missing`.
+pub(crate) fn column_group(
+    find: impl Fn(&str) -> Option<usize>,
+    wanted: &[&str],
+    missing: &mut Vec<String>,
+) -> Option<Vec<usize>> {
+    let found: Vec<Option<usize>> = wanted.iter().map(|n| find(n)).collect();
+    let present = found.iter().filter(|f| f.is_some()).count();
+    if present == 0 {
+        return None;
+    }
+    if present < wanted.len() {
+        for (f, n) in found.iter().zip(wanted) {
+            if f.is_none() {
+                missing.push(n.to_string());
+            }
+        }
+        return None;
+    }
+    Some(found.into_iter().flatten().collect())
+}
+
 /// A session folder's accepted files (path and name), and notes on the files passed over.
 pub(crate) type TakeFiles = (Vec<(PathBuf, String)>, Vec<String>);
 

@@ -38,7 +38,7 @@
 //! `--skip-lines N` drops data rows whose line number is at most N in each file.
 
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
-use super::{InputFormat, ReadError, ReadOptions, read_single_file, take_files};
+use super::{InputFormat, ReadError, ReadOptions, column_group, read_single_file, take_files};
 use crate::take::{ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg};
 use crate::world::World;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -203,22 +203,8 @@ impl Layout {
             ));
         }
         let find = |name: &str| names.iter().position(|n| n == name);
-        let group = |names_wanted: &[&str], missing: &mut Vec<String>| -> Option<Vec<usize>> {
-            let found: Vec<Option<usize>> = names_wanted.iter().map(|n| find(n)).collect();
-            let present = found.iter().filter(|f| f.is_some()).count();
-            if present == 0 {
-                return None;
-            }
-            if present < found.len() {
-                for (f, n) in found.iter().zip(names_wanted) {
-                    if f.is_none() {
-                        missing.push(n.to_string());
-                    }
-                }
-                return None;
-            }
-            Some(found.into_iter().flatten().collect())
-        };
+        let group =
+            |wanted: &[&str], missing: &mut Vec<String>| column_group(find, wanted, missing);
         let three = |v: Vec<usize>| -> Option<[usize; 3]> { v.try_into().ok() };
         let mut missing = Vec::new();
         let time = find("sampletimefine");

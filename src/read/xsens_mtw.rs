@@ -50,7 +50,7 @@
 
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
 use super::xsens_dot::{WrappingClock, parse_counter};
-use super::{InputFormat, ReadError, ReadOptions, read_single_file, take_files};
+use super::{InputFormat, ReadError, ReadOptions, column_group, read_single_file, take_files};
 use crate::take::{
     BuildError, ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg,
 };
@@ -206,23 +206,8 @@ impl Layout {
             let lower = name.to_ascii_lowercase();
             names.iter().position(|n| *n == lower)
         };
-        let mut missing: Vec<&str> = Vec::new();
-        let mut group = |wanted: &[&'static str]| -> Option<Vec<usize>> {
-            let found: Vec<Option<usize>> = wanted.iter().map(|n| find(n)).collect();
-            let present = found.iter().filter(|f| f.is_some()).count();
-            if present == 0 {
-                return None;
-            }
-            if present < wanted.len() {
-                for (f, n) in found.iter().zip(wanted) {
-                    if f.is_none() {
-                        missing.push(n);
-                    }
-                }
-                return None;
-            }
-            Some(found.into_iter().flatten().collect())
-        };
+        let mut missing: Vec<String> = Vec::new();
+        let mut group = |wanted: &[&str]| column_group(find, wanted, &mut missing);
         let quat = group(&["Quat_q0", "Quat_q1", "Quat_q2", "Quat_q3"]);
         let mat = group(&MAT_NAMES.concat());
         let rpy = group(&["Roll", "Pitch", "Yaw"]);
