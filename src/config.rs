@@ -13,7 +13,7 @@
 //! skip_lines: 0
 //! skip_seconds: 0
 //! world: ned             # override the format's world
-//! smoothing: butterworth:order=4,cutoff=6    # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
+//! smoothing: butterworth:order=4,cutoff=14   # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
 //! # or with per-bone overrides:
 //! # smoothing: {method: "butterworth:cutoff=4", bones: {LeftHand: none, Head: "gaussian:sigma=0.05"}}
 //! ```

@@ -53,8 +53,8 @@ pub struct SettingsArgs {
     /// Keep only START:END seconds of the take (either side optional).
     #[arg(long, value_name = "START:END")]
     trim: Option<Trim>,
-    /// Smoothing: none, butterworth[:order=4,cutoff=6[,causal]], gaussian[:sigma=0.02],
-    /// fft[:threshold=0.5,suppress=0.3] or fft:cutoff=8 [default: butterworth:order=4,cutoff=6]
+    /// Smoothing: none, butterworth[:order=4,cutoff=14[,causal]], gaussian[:sigma=0.02],
+    /// fft[:threshold=0.5,suppress=0.3] or fft:cutoff=8 [default: butterworth:order=4,cutoff=14]
     #[arg(long, value_name = "METHOD[:key=value,...]")]
     smooth: Option<imubake::smooth::Method>,
     /// Also write <stem>.report.html: each bone's angles before and after smoothing, the sensor

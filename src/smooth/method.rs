@@ -89,7 +89,7 @@ fn number(key: &str, value: Option<&str>) -> Result<f64, String> {
 impl FromStr for Method {
     type Err = String;
 
-    /// `none`, `butterworth[:order=4,cutoff=6[,causal]]`, `gaussian[:sigma=0.02]` (seconds),
+    /// `none`, `butterworth[:order=4,cutoff=14[,causal]]`, `gaussian[:sigma=0.02]` (seconds),
     /// `fft[:threshold=0.5,suppress=0.3]`, `fft:cutoff=6` (a plain low-pass), or both.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let (name, args) = s.trim().split_once(':').unwrap_or((s.trim(), ""));
