@@ -11,18 +11,25 @@ CACHE="${IMUBAKE_TEST_CACHE:-$HOME/.cache/imubake-test}"
 mkdir -p "$CACHE"
 step() { printf '\n== %s\n' "$*"; }
 
-# Python venv: bpy (real Blender 5.0), numpy, scipy, h5py. A stamp of the requirements file
-# decides whether the venv is current.
-req_stamp="$(sha256sum scripts/test-requirements.txt | cut -d' ' -f1)"
-if [ "$(cat "$CACHE/venv.stamp" 2>/dev/null)" != "$req_stamp" ] || [ ! -x "$CACHE/venv/bin/python" ]; then
-  step "installing the test venv into $CACHE/venv (bpy is about 1 GB the first time)"
-  rm -rf "$CACHE/venv"
-  python3 -m venv "$CACHE/venv"
-  "$CACHE/venv/bin/python" -m pip install --quiet --upgrade pip
-  "$CACHE/venv/bin/python" -m pip install --quiet -r scripts/test-requirements.txt
-  echo "$req_stamp" > "$CACHE/venv.stamp"
-fi
+# Python venvs, each current when its stamp matches its requirements file:
+#   venv              bpy 5.0.1 (real Blender 5.0), numpy, scipy, h5py: most tests
+#   venv-blender42    bpy 4.2 LTS: the Blender add-on is also tested in the oldest Blender it supports
+install_venv() { # name requirements-file
+  local dir="$CACHE/$1" stamp
+  stamp="$(sha256sum "$2" | cut -d' ' -f1)"
+  if [ "$(cat "$dir.stamp" 2>/dev/null)" != "$stamp" ] || [ ! -x "$dir/bin/python" ]; then
+    step "installing $2 into $dir (bpy is about 1 GB the first time)"
+    rm -rf "$dir"
+    python3 -m venv "$dir"
+    "$dir/bin/python" -m pip install --quiet --upgrade pip
+    "$dir/bin/python" -m pip install --quiet -r "$2"
+    echo "$stamp" > "$dir.stamp"
+  fi
+}
+install_venv venv scripts/test-requirements.txt
+install_venv venv-blender42 scripts/test-requirements-blender42.txt
 "$CACHE/venv/bin/python" -c 'import bpy, numpy, scipy, h5py; print("venv: Blender", bpy.app.version_string, "numpy", numpy.__version__, "scipy", scipy.__version__)'
+"$CACHE/venv-blender42/bin/python" -c 'import bpy; print("venv-blender42: Blender", bpy.app.version_string)'
 
 # Khronos glTF-Validator (npm package; run through scripts/gltf_validate.mjs).
 VALIDATOR_VERSION="2.0.0-dev.3.10"
@@ -34,6 +41,10 @@ if [ ! -f "$CACHE/node/node_modules/gltf-validator/package.json" ] \
 fi
 
 export IMUBAKE_PYTHON="$CACHE/venv/bin/python"
+export IMUBAKE_PYTHON_BLENDER42="$CACHE/venv-blender42/bin/python"
+
+step "building the Blender extension (dist/imubake-<version>.zip)"
+"$IMUBAKE_PYTHON" scripts/build_blender_addon.py dist
 export IMUBAKE_NODE_MODULES="$CACHE/node/node_modules"
 
 step "cargo fmt --check"

@@ -76,6 +76,17 @@ pub fn python() -> Option<PathBuf> {
     test_tool("IMUBAKE_PYTHON", "venv/bin/python", "", "test Python")
 }
 
+/// Python with Blender 4.2 LTS as `bpy` (a second venv set up by scripts/test.sh;
+/// `IMUBAKE_PYTHON_BLENDER42` overrides): the add-on is tested in both 4.2 and 5.0.
+pub fn python_blender42() -> Option<PathBuf> {
+    test_tool(
+        "IMUBAKE_PYTHON_BLENDER42",
+        "venv-blender42/bin/python",
+        "",
+        "Blender 4.2 test Python",
+    )
+}
+
 /// The compiled `imubake` binary.
 pub fn imubake_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_imubake"))

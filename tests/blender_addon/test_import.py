@@ -1,0 +1,190 @@
+"""File > Import > imubake take: exact scene rate, frame range, keys, and bone world matrices
+checked against an independent BVH reader (bvh_reference.py, numpy only)."""
+
+import json
+import math
+import os
+import shutil
+import tempfile
+import unittest
+
+import bpy
+import numpy as np
+
+import harness
+from bvh_reference import Y_UP_TO_Z_UP as C
+from bvh_reference import Bvh, angle_deg
+
+
+def import_op(path, **kw):
+    return bpy.ops.import_scene.imubake_take(filepath=path, **kw)
+
+
+def sidecar(name):
+    with open(harness.take(name), encoding="utf-8") as f:
+        return json.load(f)
+
+
+class ImportAtExactRate(unittest.TestCase):
+    def check_take(self, name, fmt):
+        scene = harness.fresh_scene()
+        # A longer scene than the take: the import must shorten it.
+        scene.frame_end = 5000
+        path = harness.take(name, fmt)
+        self.assertEqual(import_op(path), {"FINISHED"})
+        data = sidecar(name)
+        frames = data["frames"]
+        fps, base = harness.RATES[name]
+        self.assertEqual(scene.render.fps, fps)
+        self.assertAlmostEqual(scene.render.fps_base, base, places=6)
+        # fps / fps_base is the sidecar's rational rate.
+        rate = data["fps"]["num"] / data["fps"]["den"]
+        self.assertAlmostEqual(scene.render.fps / scene.render.fps_base, rate, delta=rate * 1e-6)
+        self.assertEqual((scene.frame_start, scene.frame_end), (1, frames))
+
+        arms = harness.armatures()
+        self.assertEqual(len(arms), 1)
+        arm = arms[0]
+        self.assertEqual(arm.name, name)
+        self.assertEqual(arm.animation_data.action.name, name)
+        curves = harness.fcurves(arm)
+        # Every animated bone (the GLB leaves out bones no sensor drives) has rotation curves.
+        self.assertGreater(len(curves), 16 * 3)
+        for fc in curves:
+            xs = [p.co[0] for p in fc.keyframe_points]
+            self.assertEqual(len(xs), frames, fc.data_path)
+            # One key on every frame 1..frames, exactly on the frame.
+            self.assertEqual(xs, [float(i) for i in range(1, frames + 1)], fc.data_path)
+
+        # Bone world matrices against the independent reader of the take's BVH: Blender frame
+        # n + 1 is take frame n; a bone's world rotation is C·R_bvh·Cᵀ times its rest rotation
+        # (rest rotations are identity in BVH), its head C·p_bvh.
+        bvh = Bvh(harness.take(name, "bvh"))
+        self.assertEqual(bvh.frames, frames)
+        worst_rot, worst_pos = 0.0, 0.0
+        for f in (0, frames // 3, frames - 1):
+            scene.frame_set(f + 1)
+            ref = bvh.world(f)
+            for pb in arm.pose.bones:
+                rot, pos = ref[pb.name]
+                want = C @ rot @ C.T @ harness.rest_rot(arm, pb.name)
+                worst_rot = max(worst_rot, angle_deg(harness.world_rot(arm, pb), want))
+                head = np.array(arm.matrix_world @ pb.head)
+                worst_pos = max(worst_pos, float(np.linalg.norm(head - C @ pos)))
+        self.assertLess(worst_rot, 0.01, "%s %s: worst bone rotation error %.4f°" % (name, fmt, worst_rot))
+        self.assertLess(worst_pos, 1e-4, "%s %s: worst head error %.6f m" % (name, fmt, worst_pos))
+        self.assert_no_flips(arm, frames)
+
+    def assert_no_flips(self, arm, frames):
+        """No bone turns by 90° or more between frames, and no Euler channel jumps by 180°+."""
+        for fc in harness.fcurves(arm):
+            if "rotation_euler" in fc.data_path:
+                values = [p.co[1] for p in fc.keyframe_points]
+                jump = max(abs(b - a) for a, b in zip(values, values[1:]))
+                self.assertLess(math.degrees(jump), 180.0, fc.data_path)
+        scene = bpy.context.scene
+        prev = None
+        for f in range(1, frames + 1, max(1, frames // 120)):
+            scene.frame_set(f)
+            now = {pb.name: harness.world_rot(arm, pb) for pb in arm.pose.bones}
+            if prev is not None:
+                for n in now:
+                    self.assertLess(angle_deg(now[n], prev[n]), 90.0, "%s at frame %d" % (n, f))
+            prev = now
+
+    def test_bvh_at_24(self):
+        self.check_take("walk_24", "imubake.json")
+
+    def test_bvh_at_2997(self):
+        self.check_take("walk_2997", "bvh")
+
+    def test_bvh_at_60(self):
+        self.check_take("walk_60", "imubake.json")
+
+    def test_bvh_at_120(self):
+        self.check_take("walk_120", "imubake.json")
+
+    def test_glb_at_2997_lands_on_frames(self):
+        # Blender's glTF importer alone would put key n at n * 1.002 at 29.97 fps.
+        self.check_take("walk_2997", "glb")
+
+    def test_glb_at_24(self):
+        self.check_take("walk_24", "glb")
+
+    def test_glb_euler_mode(self):
+        harness.fresh_scene()
+        self.assertEqual(import_op(harness.take("walk_60", "glb"), rotation_mode="ZYX"), {"FINISHED"})
+        arm = harness.armatures()[0]
+        self.assertEqual({pb.rotation_mode for pb in arm.pose.bones}, {"ZYX"})
+        self.assertFalse([fc for fc in harness.fcurves(arm) if "quaternion" in fc.data_path])
+
+
+class BadSidecars(unittest.TestCase):
+    def setUp(self):
+        self.dir = tempfile.mkdtemp()
+        for ext in ("bvh", "glb"):
+            shutil.copy(harness.take("walk_24", ext), os.path.join(self.dir, "t.%s" % ext))
+        self.good = sidecar("walk_24")
+        self.good["outputs"] = [{"format": "bvh", "path": "t.bvh"}, {"format": "glb", "path": "t.glb"}]
+
+    def write(self, data):
+        path = os.path.join(self.dir, "t.imubake.json")
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(data if isinstance(data, str) else json.dumps(data))
+        return path
+
+    def assert_refused(self, path, words):
+        scene = harness.fresh_scene()
+        scene.render.fps, scene.render.fps_base, scene.frame_end = 25, 1.0, 77
+        counts = (len(bpy.data.objects), len(bpy.data.actions), len(bpy.data.armatures))
+        with self.assertRaises(RuntimeError) as raised:
+            import_op(path)
+        message = str(raised.exception)
+        for w in words:
+            self.assertIn(w, message)
+        self.assertEqual((len(bpy.data.objects), len(bpy.data.actions), len(bpy.data.armatures)), counts)
+        self.assertEqual((scene.render.fps, scene.render.fps_base, scene.frame_end), (25, 1.0, 77))
+
+    def test_good_copy_imports(self):
+        harness.fresh_scene()
+        self.assertEqual(import_op(self.write(self.good)), {"FINISHED"})
+
+    def test_not_json(self):
+        self.assert_refused(self.write('{"fps": {"num": 24,'), ["t.imubake.json", "not valid JSON"])
+
+    def test_zero_denominator(self):
+        bad = dict(self.good, fps={"num": 24, "den": 0})
+        self.assert_refused(self.write(bad), ["fps.den", "positive integer"])
+
+    def test_frames_not_a_number(self):
+        bad = dict(self.good, frames="__import__('os').system('false')")
+        self.assert_refused(self.write(bad), ["frames", "int"])
+
+    def test_output_outside_folder(self):
+        bad = dict(self.good, outputs=[{"format": "bvh", "path": "../../etc/passwd"}])
+        self.assert_refused(self.write(bad), ["not inside the take's folder"])
+
+    def test_missing_output_file(self):
+        bad = dict(self.good, outputs=[{"format": "bvh", "path": "gone.bvh"}])
+        self.assert_refused(self.write(bad), ["gone.bvh", "missing"])
+
+    def test_bvh_without_sidecar(self):
+        self.assert_refused(os.path.join(self.dir, "t.bvh"), ["no sidecar", "t.imubake.json"])
+
+    def test_truncated_bvh_restores_scene(self):
+        with open(os.path.join(self.dir, "t.bvh"), "r+", encoding="utf-8") as f:
+            f.truncate(300)
+        self.assert_refused(self.write(self.good), ["t.bvh"])
+
+    def test_warnings_are_reported(self):
+        take_import = harness.submodule("take_import")
+        harness.fresh_scene()
+        data = dict(self.good, warnings=["sensor N5_1 is not in the mapping; ignored"],
+                    dropped_lines=[{"line": 3, "reason": "bad", "text": "x"}])
+        imported = take_import.import_take(bpy.context, self.write(data))
+        self.assertIn("sensor N5_1 is not in the mapping; ignored", imported.warnings)
+        self.assertTrue(any("1 line(s)" in w for w in imported.warnings))
+
+
+if __name__ == "__main__":
+    unittest.main()
