@@ -246,7 +246,12 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
         for n, m in saved_basis.items():
             pbs[n].matrix_basis = m
 
-    action = _write_action(target, action_name or source.name, values, root, start, ik_fk)
+    name = action_name or source.name
+    src_action = source.animation_data.action if source.animation_data else None
+    if src_action is not None and src_action.name == name:
+        # The imported take's action is temporary: the baked one gets the take's name.
+        src_action.name = name + " (imported)"
+    action = _write_action(target, name, values, root, start, ik_fk)
     return Retargeted(action, bone_map, ref_pose, root, scale)
 
 
