@@ -20,6 +20,24 @@ def import_op(path, **kw):
     return bpy.ops.import_scene.imubake_take(filepath=path, **kw)
 
 
+def capture_stdout(call):
+    """What `call` writes to file descriptor 1 (Blender's C code included)."""
+    import sys
+
+    sys.stdout.flush()
+    saved = os.dup(1)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 1)
+        try:
+            call()
+        finally:
+            sys.stdout.flush()
+            os.dup2(saved, 1)
+            os.close(saved)
+        tmp.seek(0)
+        return tmp.read().decode("utf-8", "replace")
+
+
 def sidecar(name):
     with open(harness.take(name), encoding="utf-8") as f:
         return json.load(f)
@@ -181,10 +199,32 @@ class BadSidecars(unittest.TestCase):
         harness.fresh_scene()
         data = dict(self.good, warnings=["sensor N5_1 is not in the mapping; ignored"],
                     dropped_lines=[{"line": 3, "reason": "bad", "text": "x"}])
-        imported = take_import.import_take(bpy.context, self.write(data))
+        path = self.write(data)
+        imported = take_import.import_take(bpy.context, path)
         self.assertIn("sensor N5_1 is not in the mapping; ignored", imported.warnings)
         self.assertTrue(any("1 line(s)" in w for w in imported.warnings))
+        # Through the operator: Blender prints a headless operator's reports on stdout (fd 1).
+        harness.fresh_scene()
+        printed = capture_stdout(lambda: self.assertEqual(import_op(path), {"FINISHED"}))
+        self.assertIn("t: sensor N5_1 is not in the mapping; ignored", printed)
 
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class Registration(unittest.TestCase):
+    def test_menu_entry_panel_and_clean_disable(self):
+        import addon_utils
+
+        ui = harness.submodule("ui")
+        self.assertTrue(hasattr(bpy.types, "IMPORT_SCENE_OT_imubake_take"))
+        self.assertTrue(hasattr(bpy.types, "IMUBAKE_PT_watch"))
+        self.assertIn(ui._menu_import, bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize())
+        addon_utils.disable(harness.MODULE, default_set=True)
+        try:
+            self.assertFalse(hasattr(bpy.types, "IMPORT_SCENE_OT_imubake_take"))
+            self.assertFalse(hasattr(bpy.types.Scene, "imubake_watch_folder"))
+        finally:
+            addon_utils.enable(harness.MODULE, default_set=True)
+        self.assertTrue(hasattr(bpy.types, "IMPORT_SCENE_OT_imubake_take"))
