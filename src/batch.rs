@@ -13,6 +13,7 @@ use std::collections::{BTreeMap, HashSet};
 use std::fs;
 use std::io;
 use std::path::{Component, Path, PathBuf};
+use std::time::{Duration, Instant};
 
 /// One take of a batch.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -404,6 +405,35 @@ pub struct TakeResult {
     /// Warnings of the conversion.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// How long [`process_take`] took (the ledger check, and the conversion if there was one).
+    #[serde(skip)]
+    pub duration: Duration,
+}
+
+impl TakeResult {
+    /// Logs the take (`tracing`): one line for a converted (info) or failed (error) take with its
+    /// duration, and one warning line per warning of its conversion; a skipped take only at
+    /// debug level.
+    pub fn log(&self) {
+        let source = self.source.as_str();
+        let duration_ms = u64::try_from(self.duration.as_millis()).unwrap_or(u64::MAX);
+        match self.status {
+            TakeStatus::Converted => {
+                tracing::info!(source, duration_ms, outputs = ?self.outputs, "converted")
+            }
+            TakeStatus::Failed => tracing::error!(
+                source,
+                duration_ms,
+                error_report = self.error_report.as_deref().unwrap_or(""),
+                reason = self.reason.as_deref().unwrap_or(""),
+                "failed"
+            ),
+            TakeStatus::Skipped => tracing::debug!(source, duration_ms, "current, skipped"),
+        }
+        for warning in &self.warnings {
+            tracing::warn!(source, "{warning}");
+        }
+    }
 }
 
 /// The extensions a take's outputs may have, the sidecar first (removed first: without it a take
@@ -430,6 +460,19 @@ fn remove_quietly(path: &Path) {
 /// `<stem>.error.json`; on failure the take's outputs are removed (sidecar first) and
 /// `<stem>.error.json` written.
 pub fn process_take(
+    take: &BatchTake,
+    out_root: &Path,
+    settings: &ConvertSettings,
+    fingerprint: &str,
+    ledger: &Ledger,
+) -> TakeResult {
+    let clock = Instant::now();
+    let mut result = process_take_untimed(take, out_root, settings, fingerprint, ledger);
+    result.duration = clock.elapsed();
+    result
+}
+
+fn process_take_untimed(
     take: &BatchTake,
     out_root: &Path,
     settings: &ConvertSettings,
@@ -498,6 +541,7 @@ pub fn process_take(
                 error_report: None,
                 reason: None,
                 warnings: outcome.sidecar.warnings.clone(),
+                duration: Duration::ZERO,
             };
             let entry = LedgerEntry {
                 source: take.rel.clone(),
@@ -546,6 +590,7 @@ fn skipped(take: &BatchTake, ledger: &Ledger) -> TakeResult {
         error_report: None,
         reason: None,
         warnings: Vec::new(),
+        duration: Duration::ZERO,
     }
 }
 
@@ -601,6 +646,7 @@ fn fail(
         error_report: Some(report_rel),
         reason: Some(reason),
         warnings: Vec::new(),
+        duration: Duration::ZERO,
     }
 }
 
@@ -637,7 +683,8 @@ impl std::fmt::Display for Summary {
 }
 
 /// Converts `takes` into `out_root` on `jobs` threads (0: one per core), calling `on_result` as
-/// each take finishes. Results are in the order of `takes`.
+/// each take finishes (logging is the caller's: [`TakeResult::log`]). Results are in the order of
+/// `takes`.
 pub fn run(
     takes: &[BatchTake],
     out_root: &Path,

@@ -9,14 +9,18 @@
 //! over two looks at least [`WatchOptions::settle`] apart (500 ms by default) — and, on Linux, no
 //! process still has it open for writing ([`held_for_writing`]: a writer pausing between chunks
 //! through one open file is waited for, however long it pauses). Changes are noticed by
-//! file-system events (`notify`) or by polling; either way the inbox is rescanned, so a missed
-//! event only delays a take.
+//! file-system events (`notify` through `notify-debouncer-full`, [`DEBOUNCE`]) or by polling;
+//! either way the inbox is rescanned, so a missed event only delays a take.
+//!
+//! Everything worth telling is a `tracing` event (one `converted`/`failed` line per take with its
+//! duration, [`crate::batch::TakeResult::log`]); the binary installs the subscriber.
 
-use crate::batch::{BatchTake, Summary, TakeResult, TakeStatus, discover, process_take};
+use crate::batch::{BatchTake, Summary, TakeStatus, discover, process_take};
 use crate::convert::{ConvertSettings, source_sha256};
 use crate::ledger::{Ledger, SourceStat, Status, settings_fingerprint};
-use notify::Watcher;
+use notify::RecursiveMode;
 use notify::event::{AccessKind, AccessMode, EventKind, ModifyKind, RenameMode};
+use notify_debouncer_full::{DebounceEventResult, new_debouncer};
 use std::collections::{HashMap, HashSet};
 use std::fs;
 use std::io;
@@ -24,9 +28,18 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
+use tracing::{error, info, warn};
 
 /// The config file an inbox may hold.
 pub const INBOX_CONFIG: &str = "imubake.yaml";
+
+/// The file-system event debouncer's timeout. `notify-debouncer-full` holds each event for this
+/// long after it happened (it is not a quiet period: a steady writer does not postpone it), so it
+/// adds straight to the close→sidecar latency, whose budget is 250 ms over `convert`. 50 ms is
+/// enough to pair a rename's two halves and to fold the burst one write produces (create,
+/// modifies, close-write) into one wake-up, and leaves most of the budget to the scan, the
+/// `/proc` check and the conversion.
+pub const DEBOUNCE: Duration = Duration::from_millis(50);
 
 #[derive(Debug, Clone)]
 pub struct WatchOptions {
@@ -197,13 +210,13 @@ impl Watch<'_> {
             Ok(settings) => {
                 let fingerprint = settings_fingerprint(&settings);
                 if fingerprint != self.fingerprint {
-                    eprintln!(
-                        "{}: settings changed{}",
-                        self.opts.config.display(),
+                    info!(
+                        config = %self.opts.config.display(),
+                        "settings changed; {}",
                         if self.opts.reconvert {
-                            "; reconverting the takes"
+                            "reconverting the takes"
                         } else {
-                            "; new takes use them (--reconvert to redo old ones)"
+                            "new takes use them (--reconvert to redo old ones)"
                         }
                     );
                     self.settings = settings;
@@ -213,7 +226,10 @@ impl Watch<'_> {
                     }
                 }
             }
-            Err(e) => eprintln!("error: {e} (keeping the last good settings)"),
+            Err(e) => error!(
+                config = %self.opts.config.display(),
+                "{e} (keeping the last good settings)"
+            ),
         }
     }
 
@@ -239,7 +255,7 @@ impl Watch<'_> {
             Err(e) => {
                 let msg = e.to_string();
                 if self.last_discover_error.as_ref() != Some(&msg) {
-                    eprintln!("error: {msg}");
+                    error!(inbox = %self.opts.inbox.display(), "{msg}");
                 }
                 self.last_discover_error = Some(msg);
                 Vec::new()
@@ -279,9 +295,9 @@ impl Watch<'_> {
                     let fingerprint = settings_fingerprint(&settings);
                     entry.1 = Some((settings, fingerprint));
                 }
-                Err(e) => eprintln!(
-                    "error: {e} (keeping the last good settings for {})",
-                    config.display()
+                Err(e) => error!(
+                    config = %config.display(),
+                    "{e} (keeping the last good settings for this folder)"
                 ),
             }
         }
@@ -321,9 +337,8 @@ impl Watch<'_> {
             self.summary.skipped += 1;
             return;
         }
-        let started = Instant::now();
         let result = process_take(take, &self.opts.out, &settings, &fingerprint, &self.ledger);
-        log(&result, started.elapsed());
+        result.log();
         match result.status {
             TakeStatus::Converted => self.summary.converted += 1,
             TakeStatus::Failed => self.summary.failed += 1,
@@ -332,7 +347,10 @@ impl Watch<'_> {
         if result.status != TakeStatus::Skipped {
             match Ledger::load(&self.opts.out) {
                 Ok(ledger) => self.ledger = ledger,
-                Err(e) => eprintln!("error: {}: {e}", self.ledger.path().display()),
+                Err(e) => error!(
+                    ledger = %self.ledger.path().display(),
+                    "cannot reload the ledger: {e}"
+                ),
             }
         }
     }
@@ -420,21 +438,31 @@ impl Watch<'_> {
     }
 }
 
-fn log(result: &TakeResult, took: Duration) {
-    let secs = took.as_secs_f64();
-    match result.status {
-        TakeStatus::Converted => eprintln!("{}: converted in {secs:.2} s", result.source),
-        TakeStatus::Failed => eprintln!(
-            "{}: failed in {secs:.2} s: {}",
-            result.source,
-            result.reason.as_deref().unwrap_or("")
-        ),
-        TakeStatus::Skipped => {}
-    }
-    for w in &result.warnings {
-        eprintln!("warning: {}: {w}", result.source);
+/// The paths a debounced event reports complete: closed after writing (Linux close-write), or
+/// renamed into place. The debouncer gives a rename it could pair (inotify's cookies; elsewhere
+/// file ids) as `Both` `[from, to]`, a move in from outside the inbox as `To`, and a rename some
+/// platform cannot tell apart as `Any` (into place when the path exists). It keeps close-write
+/// events (it drops only the modifications and repeated creates that follow a create, and keeps
+/// the last event of each kind per path), and when a take is written under a temporary name and
+/// renamed into place within one [`DEBOUNCE`] it moves the temporary name's events, close-write
+/// included, to the final name and reports that as created rather than renamed: the close-write
+/// still marks it complete.
+fn completed_paths(event: &notify::Event) -> Vec<PathBuf> {
+    match event.kind {
+        EventKind::Access(AccessKind::Close(AccessMode::Write))
+        | EventKind::Modify(ModifyKind::Name(RenameMode::To)) => event.paths.clone(),
+        EventKind::Modify(ModifyKind::Name(RenameMode::Both)) => {
+            event.paths.last().cloned().into_iter().collect()
+        }
+        EventKind::Modify(ModifyKind::Name(RenameMode::Any)) => {
+            event.paths.iter().filter(|p| p.exists()).cloned().collect()
+        }
+        _ => Vec::new(),
     }
 }
+
+/// What the debouncer tells the loop: something changed, and these paths are complete.
+type Wake = Vec<PathBuf>;
 
 /// Converts the inbox's backlog, then (unless `once`) follows it until `stop` is set, finishing
 /// the take in progress. `load_settings` gives the settings from a config file (or none); it is
@@ -467,40 +495,42 @@ pub fn run(
         return Ok(watch.summary);
     }
 
-    // File-system events only wake the loop early; the scan decides.
-    let (tx, rx) = mpsc::channel::<Option<PathBuf>>();
-    let _watcher = if opts.poll.is_none() {
+    // File-system events only wake the loop early; the scan decides. With --poll there is no
+    // watcher: the loop rescans every poll interval itself (a PollWatcher would walk and stat the
+    // inbox on its own clock, then the scan would do it again, and its events would arrive a
+    // debounce later, eating into the poll + 600 ms budget).
+    let (tx, rx) = mpsc::channel::<Wake>();
+    let debouncer = if opts.poll.is_none() {
         let tx = tx.clone();
-        let mut w = notify::recommended_watcher(move |res: notify::Result<notify::Event>| {
-            let close_write = EventKind::Access(AccessKind::Close(AccessMode::Write));
-            let renamed_to = EventKind::Modify(ModifyKind::Name(RenameMode::To));
-            match res {
-                // Closed after writing, or renamed into place: complete (unless still open).
-                Ok(event) if event.kind == close_write || event.kind == renamed_to => {
-                    for path in event.paths {
-                        let _ = tx.send(Some(path));
+        let mut debouncer = new_debouncer(DEBOUNCE, None, move |res: DebounceEventResult| {
+            let wake = match res {
+                Ok(events) => events.iter().flat_map(|e| completed_paths(e)).collect(),
+                Err(errors) => {
+                    // Dropped events and the like: the rescan this wake causes finds the takes.
+                    for e in errors {
+                        warn!("file-system events: {e}");
                     }
+                    Vec::new()
                 }
-                _ => {
-                    let _ = tx.send(None);
-                }
-            }
+            };
+            let _ = tx.send(wake);
         })
         .map_err(io::Error::other)?;
-        w.watch(&opts.inbox, notify::RecursiveMode::Recursive)
+        debouncer
+            .watch(&opts.inbox, RecursiveMode::Recursive)
             .map_err(io::Error::other)?;
         if opts.config.parent() != Some(opts.inbox.as_path())
             && let Some(dir) = opts.config.parent().filter(|d| d.is_dir())
         {
-            let _ = w.watch(dir, notify::RecursiveMode::NonRecursive);
+            let _ = debouncer.watch(dir, RecursiveMode::NonRecursive);
         }
-        Some(w)
+        Some(debouncer)
     } else {
         None
     };
-    eprintln!(
-        "watching {} ({}); Ctrl-C to stop",
-        opts.inbox.display(),
+    info!(
+        inbox = %opts.inbox.display(),
+        "watching ({}); Ctrl-C to stop",
         match opts.poll {
             Some(p) => format!("polling every {} ms", p.as_millis()),
             None => "file-system events".into(),
@@ -524,16 +554,12 @@ pub fn run(
             if left.is_zero() {
                 break;
             }
-            match rx.recv_timeout(left.min(Duration::from_millis(50))) {
-                // An event: rescan soon, gathering the burst that comes with it.
-                Ok(first) if opts.poll.is_none() => {
-                    std::thread::sleep(Duration::from_millis(30));
-                    for path in std::iter::once(first).chain(rx.try_iter()).flatten() {
-                        watch.closed.insert(path);
-                    }
-                    break;
-                }
-                _ => {}
+            // Events: the debouncer has already gathered the burst; rescan now.
+            if let Ok(first) = rx.recv_timeout(left.min(Duration::from_millis(50))) {
+                watch
+                    .closed
+                    .extend(std::iter::once(first).chain(rx.try_iter()).flatten());
+                break;
             }
         }
         if stop.load(Ordering::SeqCst) {
@@ -542,6 +568,9 @@ pub fn run(
         watch.scan(stop, true);
     }
     drop(tx);
+    if let Some(debouncer) = debouncer {
+        debouncer.stop();
+    }
     Ok(watch.summary)
 }
 
@@ -549,6 +578,66 @@ pub fn run(
 mod tests {
     use super::*;
     use std::io::Write;
+
+    /// The paths the real debouncer reports complete, until `quiet` passes without one.
+    fn drain(rx: &mpsc::Receiver<Wake>, quiet: Duration) -> HashSet<PathBuf> {
+        let mut paths = HashSet::new();
+        while let Ok(wake) = rx.recv_timeout(quiet) {
+            paths.extend(wake);
+        }
+        paths
+    }
+
+    /// Through `notify-debouncer-full`, a close-write and a rename into place still mark the take
+    /// complete, however the debouncer stitches the rename; a file still open for writing does
+    /// not.
+    #[test]
+    #[cfg(target_os = "linux")]
+    fn the_debouncer_keeps_close_write_and_renames_into_place() {
+        let dir = tempfile::tempdir().unwrap();
+        let (inbox, elsewhere) = (dir.path().join("in"), dir.path().join("elsewhere"));
+        fs::create_dir_all(&inbox).unwrap();
+        fs::create_dir_all(&elsewhere).unwrap();
+        let (tx, rx) = mpsc::channel::<Wake>();
+        let mut debouncer = new_debouncer(DEBOUNCE, None, move |res: DebounceEventResult| {
+            let events = res.unwrap();
+            let _ = tx.send(events.iter().flat_map(|e| completed_paths(e)).collect());
+        })
+        .unwrap();
+        debouncer.watch(&inbox, RecursiveMode::Recursive).unwrap();
+        let quiet = Duration::from_millis(400);
+
+        // Written through one handle and closed.
+        let mut f = fs::File::create(inbox.join("closed.log")).unwrap();
+        f.write_all(b"time_s\n").unwrap();
+        drop(f);
+        // Written under a temporary name and renamed into place at once (the debouncer moves the
+        // create and the close-write to the final name).
+        fs::write(inbox.join(".quick.log.tmp"), b"x").unwrap();
+        fs::rename(inbox.join(".quick.log.tmp"), inbox.join("quick.log")).unwrap();
+        // Open for writing: only its creation is seen.
+        let mut open = fs::File::create(inbox.join("open.log")).unwrap();
+        open.write_all(b"time_s\n").unwrap();
+        let seen = drain(&rx, quiet);
+        for name in ["closed.log", "quick.log"] {
+            assert!(seen.contains(&inbox.join(name)), "{name}: {seen:?}");
+        }
+        assert!(!seen.contains(&inbox.join("open.log")), "{seen:?}");
+
+        // A temporary file closed long before its rename: the rename pairs up as [from, to].
+        fs::write(inbox.join("slow.log.part"), b"x").unwrap();
+        drain(&rx, quiet);
+        fs::rename(inbox.join("slow.log.part"), inbox.join("slow.log")).unwrap();
+        // Moved in from outside the inbox; and the open file closed at last.
+        fs::write(elsewhere.join("moved.log"), b"x").unwrap();
+        fs::rename(elsewhere.join("moved.log"), inbox.join("moved.log")).unwrap();
+        drop(open);
+        let seen = drain(&rx, quiet);
+        for name in ["slow.log", "moved.log", "open.log"] {
+            assert!(seen.contains(&inbox.join(name)), "{name}: {seen:?}");
+        }
+        debouncer.stop();
+    }
 
     #[test]
     fn fdinfo_flags_are_octal() {

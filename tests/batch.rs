@@ -48,7 +48,7 @@ impl Run {
 fn batch_env(args: &[&str], env: &[(&str, &str)]) -> Run {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_imubake"));
     cmd.arg("batch").args(args);
-    for v in SHARD_VARS {
+    for v in SHARD_VARS.iter().chain(&["RUST_LOG", "IMUBAKE_LOG"]) {
         cmd.env_remove(v);
     }
     for (k, v) in env {
@@ -167,6 +167,44 @@ fn expected_outputs(good: &[&str], bad: &[&str]) -> BTreeSet<String> {
     set
 }
 
+/// The per-take log lines of a run's stderr, as (source, outcome), sorted. Every line that names a
+/// take's outcome must have the whole shape: `<UTC time>  INFO converted source="…" duration_ms=N
+/// outputs=[…]` or `<UTC time> ERROR failed source="…" duration_ms=N error_report="…"
+/// reason="…"`; stderr, not a terminal here, carries no colour codes (nor a progress bar).
+fn take_lines(stderr: &str) -> Vec<(String, String)> {
+    assert!(!stderr.contains('\x1b'), "ANSI codes on a pipe: {stderr}");
+    let shape = regex::Regex::new(
+        r#"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d+Z +(?:INFO (converted) source="([^"]+)" duration_ms=\d+ outputs=\[".+"\]|ERROR (failed) source="([^"]+)" duration_ms=\d+ error_report="[^"]+\.error\.json" reason=".+")$"#,
+    )
+    .unwrap();
+    let mut lines: Vec<(String, String)> = stderr
+        .lines()
+        .filter(|l| l.contains(" converted ") || l.contains(" failed "))
+        .map(|line| {
+            let c = shape
+                .captures(line)
+                .unwrap_or_else(|| panic!("a take's line of the wrong shape: {line}"));
+            match c.get(1) {
+                Some(status) => (c[2].to_string(), status.as_str().to_string()),
+                None => (c[4].to_string(), c[3].to_string()),
+            }
+        })
+        .collect();
+    lines.sort();
+    lines
+}
+
+/// (take, outcome) for each of `good` converted and `bad` failed, sorted.
+fn outcomes(good: &[&str], bad: &[&str]) -> Vec<(String, String)> {
+    let mut v: Vec<(String, String)> = good
+        .iter()
+        .map(|g| (g.to_string(), "converted".to_string()))
+        .chain(bad.iter().map(|b| (b.to_string(), "failed".to_string())))
+        .collect();
+    v.sort();
+    v
+}
+
 fn mtime(p: &Path) -> std::time::SystemTime {
     fs::metadata(p).unwrap().modified().unwrap()
 }
@@ -183,6 +221,13 @@ fn a_library_converts_skips_retries_and_reconverts_what_changed() {
     assert_eq!(run.code, 1, "a failed take fails the run: {}", run.stderr);
     assert_eq!(run.counts(), (17, 3, 0), "{}", run.stderr);
     assert_eq!(files(&out), expected_outputs(&GOOD, &BAD));
+    // One log line per take, with its duration.
+    assert_eq!(
+        take_lines(&run.stderr),
+        outcomes(&GOOD, &BAD),
+        "{}",
+        run.stderr
+    );
     let report: Value =
         serde_json::from_slice(&fs::read(out.join("garbage.error.json")).unwrap()).unwrap();
     assert_eq!(report["source"], "garbage.log");
@@ -212,6 +257,13 @@ fn a_library_converts_skips_retries_and_reconverts_what_changed() {
     let run = batch(&input, &out, &[]);
     assert_eq!(run.counts(), (0, 3, 17), "{}", run.stderr);
     assert_eq!(run.code, 1);
+    // Skipped takes are not logged (at the default level).
+    assert_eq!(
+        take_lines(&run.stderr),
+        outcomes(&[], &BAD),
+        "{}",
+        run.stderr
+    );
     assert_eq!(mtime(&out.join("a.bvh")), before);
     assert_eq!(files(&out), expected_outputs(&GOOD, &BAD));
 
@@ -443,7 +495,14 @@ fn folders_globs_sessions_and_collisions() {
     fs::write(input.join("sub/f.csv"), sample()).unwrap();
     let run = batch(&input, &out, &[]);
     assert_eq!(run.code, 2);
-    assert!(run.stderr.contains("sub/f"), "{}", run.stderr);
+    assert!(
+        run.stderr.lines().any(|l| l.contains(" ERROR ")
+            && l.contains("sub/f.csv")
+            && l.contains("sub/f.log")
+            && l.contains("would both write `sub/f.*`")),
+        "{}",
+        run.stderr
+    );
     assert!(!out.join("a.bvh").exists());
 }
 

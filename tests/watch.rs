@@ -1,5 +1,6 @@
 //! `imubake watch` on real folders: the backlog with `--once`, captures written slowly while the
-//! watcher runs (events and polling), a watcher killed mid-run and restarted.
+//! watcher runs (events and polling), a watcher killed mid-run and restarted, one log line per
+//! take.
 
 use serde_json::Value;
 use sha2::{Digest, Sha256};
@@ -41,7 +42,9 @@ fn watch_cmd(inbox: &Path, out: &Path, extra: &[&str]) -> Command {
         .arg("--out")
         .arg(out)
         .args(fast_args())
-        .args(extra);
+        .args(extra)
+        .env_remove("RUST_LOG")
+        .env_remove("IMUBAKE_LOG");
     cmd
 }
 
@@ -565,4 +568,137 @@ fn an_edited_config_is_reloaded_and_a_bad_one_keeps_the_last_good() {
     assert_eq!(interrupt(child), 0);
     // Outputs the new settings no longer write are removed.
     assert!(!out.join("take.bvh").exists(), "a stale BVH is left");
+}
+
+/// One per-take log line: `converted` or `failed`, the take, its duration in ms.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct TakeLine {
+    status: String,
+    source: String,
+    duration_ms: u64,
+}
+
+/// The per-take lines of a run's stderr. Every line that names a take's outcome must have the
+/// whole shape: `<UTC time>  INFO converted source="…" duration_ms=N outputs=[…]` or
+/// `<UTC time> ERROR failed source="…" duration_ms=N error_report="…" reason="…"`; and stderr,
+/// not a terminal here, carries no colour codes.
+fn take_lines(stderr: &str) -> Vec<TakeLine> {
+    assert!(!stderr.contains('\x1b'), "ANSI codes on a pipe: {stderr}");
+    let shape = regex::Regex::new(
+        r#"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d+Z +(?:INFO (converted) source="([^"]+)" duration_ms=(\d+) outputs=\[".+"\]|ERROR (failed) source="([^"]+)" duration_ms=(\d+) error_report="[^"]+\.error\.json" reason=".+")$"#,
+    )
+    .unwrap();
+    let mut lines = Vec::new();
+    for line in stderr.lines() {
+        if !line.contains(" converted ") && !line.contains(" failed ") {
+            continue;
+        }
+        let c = shape
+            .captures(line)
+            .unwrap_or_else(|| panic!("a take's line of the wrong shape: {line}"));
+        let (status, source, ms) = match c.get(1) {
+            Some(status) => (status, &c[2], &c[3]),
+            None => (c.get(4).unwrap(), &c[5], &c[6]),
+        };
+        lines.push(TakeLine {
+            status: status.as_str().to_string(),
+            source: source.to_string(),
+            duration_ms: ms.parse().unwrap(),
+        });
+    }
+    lines
+}
+
+/// Exactly one line per take, with its outcome, over a run: the backlog and takes that arrive
+/// while the watcher runs (renamed into place, written and closed). `IMUBAKE_LOG=warn` leaves only
+/// the failures.
+#[test]
+fn a_watch_run_logs_one_line_per_take_with_its_duration() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    fs::write(inbox.join("backlog.log"), sample()).unwrap();
+    fs::write(inbox.join("bad.log"), b"\0\0\0 not a capture").unwrap();
+    let log = dir.path().join("stderr.txt");
+    let child = watch_cmd(&inbox, &out, &[])
+        .stdout(Stdio::null())
+        .stderr(fs::File::create(&log).unwrap())
+        .spawn()
+        .expect("spawn imubake watch");
+    assert!(
+        wait_for(&out.join("backlog.imubake.json"), 15),
+        "the backlog"
+    );
+    assert!(wait_for(&out.join("bad.error.json"), 15));
+    // Renamed into place from a hidden temporary name; written and closed under its own name.
+    fs::write(inbox.join(".renamed.log.tmp"), sample()).unwrap();
+    fs::rename(inbox.join(".renamed.log.tmp"), inbox.join("renamed.log")).unwrap();
+    let mut f = fs::File::create(inbox.join("closed.log")).unwrap();
+    f.write_all(&sample()).unwrap();
+    drop(f);
+    assert!(wait_for(&out.join("renamed.imubake.json"), 15));
+    assert!(wait_for(&out.join("closed.imubake.json"), 15));
+    // Long enough for a second line to show.
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(interrupt(child), 0);
+
+    let stderr = fs::read_to_string(&log).unwrap();
+    assert!(
+        stderr
+            .lines()
+            .next()
+            .is_some_and(|l| l.contains("INFO watching (file-system events)")),
+        "{stderr}"
+    );
+    let mut lines = take_lines(&stderr);
+    lines.sort_by(|a, b| a.source.cmp(&b.source));
+    let outcomes: Vec<(&str, &str)> = lines
+        .iter()
+        .map(|l| (l.source.as_str(), l.status.as_str()))
+        .collect();
+    assert_eq!(
+        outcomes,
+        [
+            ("backlog.log", "converted"),
+            ("bad.log", "failed"),
+            ("closed.log", "converted"),
+            ("renamed.log", "converted"),
+        ],
+        "{stderr}"
+    );
+    // A conversion of this sample takes some milliseconds, never minutes.
+    for l in &lines {
+        assert!(l.duration_ms < 60_000, "{l:?}");
+    }
+    assert!(
+        lines
+            .iter()
+            .filter(|l| l.status == "converted")
+            .all(|l| l.duration_ms > 0),
+        "{stderr}"
+    );
+    assert_eq!(
+        stderr.lines().filter(|l| !l.contains(" WARN ")).count(),
+        lines.len() + 1,
+        "only the start line (and warnings) besides the takes' lines: {stderr}"
+    );
+
+    // At warn level only the failure is told; the counts still go to stdout.
+    fs::write(inbox.join("another.log"), sample()).unwrap();
+    let run = watch_cmd(&inbox, &out, &["--once"])
+        .env("IMUBAKE_LOG", "warn")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.contains("converted 1, failed 1, skipped 3"),
+        "{stdout}"
+    );
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    let lines = take_lines(&stderr);
+    assert_eq!(lines.len(), 1, "{stderr}");
+    assert_eq!(
+        (lines[0].source.as_str(), lines[0].status.as_str()),
+        ("bad.log", "failed")
+    );
 }

@@ -9,6 +9,7 @@ use serde::Serialize;
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use tracing::{error, info};
 
 #[derive(Debug, Args)]
 pub struct BatchArgs {
@@ -51,11 +52,11 @@ pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
         Some(s) => Some(s),
         None => match Shard::from_env(|k| std::env::var(k).ok()) {
             Ok(s) => s.map(|(s, from)| {
-                eprintln!("shard {s} (from {from})");
+                info!(shard = %s, variables = from, "shard from the environment");
                 s
             }),
             Err(e) => {
-                eprintln!("error: {e}");
+                error!("{e}");
                 return Ok(ExitCode::from(2));
             }
         },
@@ -65,7 +66,7 @@ pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
     let takes = match batch::discover(&args.inputs, Some(&args.out)) {
         Ok(t) => t,
         Err(e) => {
-            eprintln!("error: {e}");
+            error!("{e}");
             return Ok(ExitCode::from(2));
         }
     };
@@ -101,15 +102,9 @@ pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
     if let Some(s) = shard {
         bar.set_message(format!("shard {s} of {total} takes"));
     }
+    // One line per converted or failed take, with its duration (and its warnings), above the bar.
     let on_result = |r: &TakeResult| {
-        bar.suspend(|| {
-            for w in &r.warnings {
-                eprintln!("warning: {}: {w}", r.source);
-            }
-            if let Some(reason) = &r.reason {
-                eprintln!("error: {reason}");
-            }
-        });
+        bar.suspend(|| r.log());
         bar.inc(1);
     };
     let jobs = args.jobs.unwrap_or(0);

@@ -41,7 +41,7 @@ pub struct WatchArgs {
 
 pub fn run(args: WatchArgs) -> anyhow::Result<ExitCode> {
     if !args.inbox.is_dir() {
-        eprintln!("error: {}: not a folder", args.inbox.display());
+        tracing::error!(inbox = %args.inbox.display(), "not a folder");
         return Ok(ExitCode::from(2));
     }
     let user_config = args.settings.config().map(Path::to_path_buf);
