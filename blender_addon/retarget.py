@@ -171,8 +171,10 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
     if not bone_map:
         raise RetargetError(
             "no bone of %s matches a bone of %s; choose a bone map (JSON)" % (source.name, target.name))
-    src_parts = names.match_armature(src_names)
-    part_of_source = {b: p for p, b in src_parts.items()}
+    # Each pair's body part, from either side's names (a take on the sou12 rig has none).
+    part_of = {b: p for p, b in names.match_armature(tgt_names).items()}
+    part_of_source = {b: p for p, b in names.match_armature(src_names).items()}
+    part_of_pair = {s: part_of_source.get(s) or part_of.get(t) for s, t in bone_map.items()}
 
     scene = context.scene
     start = scene.frame_start if frame_start is None else frame_start
@@ -209,7 +211,7 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
                 pbs[n].matrix_basis = basis0[n]
         ref_pose, _ = tgt.solve(basis0, {}, {}, set(tgt.order))
         if reference == "AUTO":
-            ref_pose = _align_limbs(tgt, basis0, ref_pose, source, bone_map, part_of_source, to_target)
+            ref_pose = _align_limbs(tgt, basis0, ref_pose, source, bone_map, part_of_pair, to_target)
         if tgt.evaluated:
             # What Blender makes of the reference pose, constraints included (DEF bones too).
             bpy.context.view_layer.update()
@@ -217,7 +219,7 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
         reference_rot = {t: _rot(ref_pose[t]) for t in bone_map.values()}
 
         # Root motion: the hips' displacement since the source's rest, scaled by hip height.
-        src_hips = src_parts.get("Hips")
+        src_hips = next((s for s, p in part_of_pair.items() if p == "Hips"), None)
         root = bone_map.get(src_hips) if src_hips else None
         scale = None
         if root is not None:
@@ -255,11 +257,11 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
     return Retargeted(action, bone_map, ref_pose, root, scale)
 
 
-def _align_limbs(tgt, basis0, ref_pose, source, bone_map, part_of_source, to_target):
+def _align_limbs(tgt, basis0, ref_pose, source, bone_map, part_of_pair, to_target):
     """The rest (or current) pose with limb bones turned to the source's T-pose directions."""
     aligned = {}
     for s, t in bone_map.items():
-        if part_of_source.get(s) in ALIGNED_PARTS:
+        if part_of_pair.get(s) in ALIGNED_PARTS:
             b = source.data.bones[s]
             want = to_target @ (b.tail_local - b.head_local)
             if want.length > 1e-9:

@@ -11,7 +11,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// Makes the sample takes once per test process: `walk_24`, `walk_2997`, `walk_60`, `walk_120`.
+/// Makes the sample takes: `walk_24`, `walk_2997`, `walk_60`, `walk_120` on the mixamo rig, and
+/// `sou_wave` (paper 002's SOU log) on the sou12 rig.
 fn make_takes(dir: &Path) {
     let input = dir.join("in");
     std::fs::create_dir_all(&input).unwrap();
@@ -37,6 +38,15 @@ fn make_takes(dir: &Path) {
             String::from_utf8_lossy(&out.stderr)
         );
     }
+    let out = Command::new(common::imubake_bin())
+        .args(["convert", "--fps", "30", "--format", "bvh", "--mapping"])
+        .arg(common::repo_file("mappings/paper002_sou12.json"))
+        .arg("--out")
+        .arg(dir.join("takes"))
+        .arg(common::repo_file("samples/sou_wave.log"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "convert sou_wave: {out:?}");
 }
 
 fn build_zip(python: &Path, dir: &Path) -> PathBuf {

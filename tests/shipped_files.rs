@@ -19,6 +19,9 @@ fn shipped_mappings_resolve_on_their_rigs() {
     let mut seen = 0;
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
+        if path.is_dir() {
+            continue; // mappings/blender/: the Blender add-on's bone maps, tested there
+        }
         let MappingFile::Quaternion(m) = load_mapping(&path).unwrap() else {
             panic!("{}: expected a quaternion mapping", path.display());
         };

@@ -172,3 +172,30 @@ class RetargetRigify(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class RetargetWithBoneMap(unittest.TestCase):
+    def test_sou12_take_onto_mixamo_with_shipped_bone_map(self):
+        """A take on paper 002's sou12 rig has no humanoid names: mappings/blender/sou12_bones.json
+        maps it; the character's arms and legs follow, the hips carry the root motion."""
+        global TAKE
+        target = harness.mixamo_character()
+        bpy.context.view_layer.objects.active = target
+        repo = os.environ["IMUBAKE_REPO"]
+        bone_map_path = os.path.join(repo, "mappings", "blender", "sou12_bones.json")
+        result = bpy.ops.import_scene.imubake_take(filepath=harness.take("sou_wave"), reference="REST",
+                                                   bone_map=bone_map_path)
+        self.assertEqual(result, {"FINISHED"})
+        self.assertEqual([a.name for a in harness.armatures()], ["Character"])
+        sou = {"N0_0": "Hips", "N0_1": "Spine2", "N1_0": "RightArm", "N1_1": "RightForeArm",
+               "N2_0": "LeftArm", "N2_1": "LeftForeArm", "N3_0": "RightUpLeg", "N3_1": "RightLeg",
+               "N4_0": "LeftUpLeg", "N4_1": "LeftLeg", "N5_0": "Neck", "N5_1": "Head"}
+        bone_map = {s: "mixamorig:" + t for s, t in sou.items()}
+        rest = {b.name: np.array(b.matrix_local.to_3x3().normalized()) for b in target.data.bones}
+        saved, TAKE = TAKE, "sou_wave"
+        try:
+            follows(self, target, bone_map, lambda t: rest[t], (0, 300, 599))
+        finally:
+            TAKE = saved
+        keyed = {fc.data_path.split('"')[1] for fc in harness.fcurves(target) if fc.data_path.endswith("location")}
+        self.assertEqual(keyed, {"mixamorig:Hips"})
