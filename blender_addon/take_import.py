@@ -95,7 +95,8 @@ def set_scene_rate(scene, take):
     scene.frame_set(1)
 
 
-def _ensure_addon(module, operator_type):
+def ensure_addon(module, operator_type):
+    """Enables Blender's bundled add-on `module` unless its operator type is registered."""
     if not hasattr(bpy.types, operator_type):
         import addon_utils
 
@@ -112,7 +113,7 @@ def _new_armature(before, path):
 
 
 def _import_bvh(context, take, path):
-    _ensure_addon("io_anim_bvh", "IMPORT_ANIM_OT_bvh")
+    ensure_addon("io_anim_bvh", "IMPORT_ANIM_OT_bvh")
     before = {"objects": {o.as_pointer() for o in bpy.data.objects}}
     # Keys on frames 1.. one per BVH frame; the scene rate and range are set from the sidecar
     # afterwards (the importer's own update rounds the rate and never shortens the scene).
@@ -134,7 +135,7 @@ def _import_bvh(context, take, path):
 
 
 def _import_gltf(context, take, path, rotation_mode):
-    _ensure_addon("io_scene_gltf2", "IMPORT_SCENE_OT_gltf")
+    ensure_addon("io_scene_gltf2", "IMPORT_SCENE_OT_gltf")
     scene = context.scene
     before = {"objects": {o.as_pointer() for o in bpy.data.objects}}
     result = bpy.ops.import_scene.gltf(filepath=path)
