@@ -143,6 +143,26 @@ class RetargetRigify(unittest.TestCase):
         follows(self, target, RIGIFY_META, lambda t: np.array(result.reference[t].to_3x3().normalized()),
                 (0, frames // 3, frames - 1))
 
+    def test_metarig_with_a_pose_the_animator_set(self):
+        """Reference "CURRENT": the animator raised the arms by hand; that pose is the reference."""
+        from mathutils import Matrix
+
+        target = harness.rigify_metarig()
+        for side, sign in (("L", 1), ("R", -1)):
+            pb = target.pose.bones["upper_arm." + side]
+            pb.rotation_mode = "XYZ"
+            # Bone-local X of the metarig's upper arms points forward-ish: a turn about it lifts them.
+            pb.matrix_basis = Matrix.Rotation(0.5 * sign, 4, "X") @ pb.matrix_basis
+        bpy.context.view_layer.update()
+        posed = {b.name: np.array(b.matrix.to_3x3().normalized()) for b in target.pose.bones}
+        imported = import_take()
+        result = harness.submodule("retarget").retarget(bpy.context, imported.armature, target,
+                                                        reference="CURRENT")
+        for name in ("upper_arm.L", "upper_arm.R", "forearm.L", "spine.003"):
+            got = np.array(result.reference[name].to_3x3().normalized())
+            self.assertLess(angle_deg(got, posed[name]), 1e-4, name)
+        follows(self, target, RIGIFY_META, lambda t: posed[t], (0, imported.frames // 2))
+
     def test_generated_rig_bakes_fk_controls(self):
         target = harness.rigify_metarig()
         self.assertEqual(bpy.ops.pose.rigify_generate(), {"FINISHED"})
