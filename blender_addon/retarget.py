@@ -188,8 +188,7 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
     # hip-height ratio).
     to_target = _rot(target.matrix_world).inverted() @ _rot(source.matrix_world)
     to_target_t = to_target.transposed()
-    src_rest = {s: _rot(source.data.bones[s].matrix_local) for s in bone_map}
-    src_rest_inv = {s: r.transposed() for s, r in src_rest.items()}
+    src_rest_inv = {s: _rot(source.data.bones[s].matrix_local).transposed() for s in bone_map}
 
     # Reference pose of the target.
     pbs = target.pose.bones
@@ -228,7 +227,6 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
             root_rest = ref_pose[root].translation.copy()
 
         values = {n: [] for n in keyed}
-        locations = []
         for f in range(start, end + 1):
             scene.frame_set(f)
             desired = {}
@@ -242,8 +240,6 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
             _, basis = tgt.solve(basis0, desired, heads, keyed)
             for n in keyed:
                 values[n].append(basis[n])
-            if root is not None:
-                locations.append(basis[root].to_translation())
     finally:
         for n, m in saved_basis.items():
             pbs[n].matrix_basis = m
