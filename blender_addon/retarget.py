@@ -121,9 +121,8 @@ class _Target:
                     pending.clear()
                 parent_pose = pbs[p].matrix if p else Matrix.Identity(4)
             else:
-                parent_pose = pose.get(p) if p else Matrix.Identity(4)
-                if p and parent_pose is None:
-                    parent_pose = pbs[p].matrix
+                # Keyed sets hold every ancestor of their bones (`_chain_bones`).
+                parent_pose = pose[p] if p else Matrix.Identity(4)
             frame = parent_pose @ self.offset[n]
             if n in desired_rot:
                 b0 = basis0[n]
@@ -210,7 +209,7 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
                 pbs[n].matrix_basis = basis0[n]
         ref_pose, _ = tgt.solve(basis0, {}, {}, set(tgt.order))
         if reference == "AUTO":
-            ref_pose = _align_limbs(tgt, basis0, ref_pose, source, bone_map, part_of_pair, to_target)
+            ref_pose = _align_limbs(tgt, basis0, source, bone_map, part_of_pair, to_target)
         if tgt.evaluated:
             # What Blender makes of the reference pose, constraints included (DEF bones too).
             bpy.context.view_layer.update()
@@ -253,7 +252,7 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
     return Retargeted(action, bone_map, ref_pose, root, scale)
 
 
-def _align_limbs(tgt, basis0, ref_pose, source, bone_map, part_of_pair, to_target):
+def _align_limbs(tgt, basis0, source, bone_map, part_of_pair, to_target):
     """The rest (or current) pose with limb bones turned to the source's T-pose directions."""
     aligned = {}
     for s, t in bone_map.items():
@@ -262,8 +261,7 @@ def _align_limbs(tgt, basis0, ref_pose, source, bone_map, part_of_pair, to_targe
             want = to_target @ (b.tail_local - b.head_local)
             if want.length > 1e-9:
                 aligned[t] = want.normalized()
-    pose = {}
-    desired_rot = {}
+    pose, desired_rot, basis = {}, {}, {}
     # Parents first: each bone's direction is measured after its parents have turned.
     for n in tgt.order:
         p = tgt.parent[n]
@@ -275,16 +273,12 @@ def _align_limbs(tgt, basis0, ref_pose, source, bone_map, part_of_pair, to_targe
             desired_rot[n] = turn @ _rot(m)
             m = Matrix.Translation(m.translation) @ desired_rot[n].to_4x4()
         pose[n] = m
+        basis[n] = frame.inverted() @ m
     if tgt.evaluated:
-        solved, basis = tgt.solve(basis0, desired_rot, {}, set(tgt.order))
-        for n, m in basis.items():
-            basis0[n] = m
-        return solved
-    # Make the aligned pose the base the bake starts from.
-    for n in tgt.order:
-        p = tgt.parent[n]
-        frame = (pose[p] if p else Matrix.Identity(4)) @ tgt.offset[n]
-        basis0[n] = frame.inverted() @ pose[n]
+        # Constraints move parents: let Blender place each level before turning the next.
+        pose, basis = tgt.solve(basis0, desired_rot, {}, set(tgt.order))
+    # The aligned pose is the base the bake starts from.
+    basis0.update(basis)
     return pose
 
 
@@ -339,6 +333,25 @@ def _write_action(target, name, values, root, start, ik_fk):
         fc = compat.new_fcurve(target, 'pose.bones["%s"]["IK_FK"]' % n, 0, n)
         compat.set_keys(fc, [float(start)], [1.0], interpolation="CONSTANT")
     return action
+
+
+def bake_imported(context, imported, target, *, bone_map_path=None, reference="AUTO"):
+    """Bakes an imported take (`take_import.ImportedTake`) onto `target` as an action named after
+    the take, then removes the imported armature whatever happened. `bone_map_path`: a bone-map
+    JSON (see `names.load_bone_map`), else names are matched automatically. Raises RetargetError
+    or names.BoneMapError."""
+    try:
+        bone_map = None
+        if bone_map_path:
+            bone_map = names.load_bone_map(
+                bone_map_path,
+                [b.name for b in imported.armature.data.bones],
+                [b.name for b in target.data.bones],
+            )
+        return retarget(context, imported.armature, target, bone_map=bone_map, reference=reference,
+                        action_name=imported.name)
+    finally:
+        remove_armature(imported.armature)
 
 
 def remove_armature(obj):

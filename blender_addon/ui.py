@@ -72,20 +72,12 @@ class IMUBAKE_OT_import_take(bpy.types.Operator, ImportHelper):
             self.report({"INFO"}, "%s: %d frames at %s fps" % (imported.name, imported.frames, imported.take.fps))
             return {"FINISHED"}
         try:
-            bone_map = None
-            if self.bone_map:
-                bone_map = names.load_bone_map(
-                    bpy.path.abspath(self.bone_map),
-                    [b.name for b in imported.armature.data.bones],
-                    [b.name for b in target.data.bones],
-                )
-            result = retarget.retarget(context, imported.armature, target, bone_map=bone_map,
-                                       reference=self.reference, action_name=imported.name)
+            result = retarget.bake_imported(
+                context, imported, target, reference=self.reference,
+                bone_map_path=bpy.path.abspath(self.bone_map) if self.bone_map else None)
         except (retarget.RetargetError, names.BoneMapError) as e:
-            retarget.remove_armature(imported.armature)
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        retarget.remove_armature(imported.armature)
         context.view_layer.objects.active = target
         self.report({"INFO"}, "%s: %d frames baked onto %s (%d bones)"
                     % (result.action.name, imported.frames, target.name, len(result.bone_map)))

@@ -15,7 +15,7 @@ import bpy
 
 from . import sidecar as sc
 from .take_import import TakeError, import_take
-from .retarget import RetargetError, remove_armature, retarget
+from .retarget import RetargetError, bake_imported
 
 INTERVAL_S = 1.0
 
@@ -49,12 +49,7 @@ class Watcher:
             try:
                 imported = import_take(context, path)
                 if target is not None:
-                    try:
-                        result = retarget(context, imported.armature, target,
-                                          action_name=imported.name, **retarget_options)
-                    finally:
-                        remove_armature(imported.armature)
-                    action = result.action
+                    action = bake_imported(context, imported, target, **retarget_options).action
                 else:
                     action = imported.action
                 message = "imported %s (%d frames)" % (action.name, imported.frames)
