@@ -320,6 +320,28 @@ pub(crate) fn take_files(
     Ok((files, notes))
 }
 
+/// An error when two files of a session folder name the same sensor (`sensor_id` of each path).
+pub(crate) fn one_file_per_sensor(
+    dir: &Path,
+    files: &[(PathBuf, String)],
+    sensor_id: fn(&Path) -> String,
+) -> Result<(), ReadError> {
+    let mut ids: std::collections::HashMap<String, &str> = std::collections::HashMap::new();
+    for (file, name) in files {
+        let id = sensor_id(file);
+        if let Some(other) = ids.insert(id.clone(), name) {
+            return Err(ReadError::format(
+                dir,
+                format!(
+                    "`{other}` and `{name}` both name sensor `{id}`; expected one file per sensor. \
+                     Hint: move each recording's files into its own folder"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Reads a single-file take through a reader's byte-level entry, after the text checks.
 pub(crate) fn read_single_file(
     path: &Path,
@@ -359,5 +381,33 @@ pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> 
         InputFormat::XsensDot => xsens_dot::read(path, options),
         InputFormat::XsensMtw => xsens_mtw::read(path, options),
         InputFormat::XioSession => xio_session::read(path, options),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn two_files_of_one_sensor_are_refused() {
+        let files = |names: &[&str]| -> Vec<(PathBuf, String)> {
+            names
+                .iter()
+                .map(|n| (PathBuf::from("dot").join(n), n.to_string()))
+                .collect()
+        };
+        let ok = files(&["LFemur_20210820.csv", "RFemur_20210820.csv"]);
+        assert!(one_file_per_sensor(Path::new("dot"), &ok, xsens_dot::sensor_id).is_ok());
+        // DOT names a sensor by the text before the first `_`.
+        let twice = files(&["LFemur_20210820.csv", "LFemur_20210821.csv"]);
+        let e = one_file_per_sensor(Path::new("dot"), &twice, xsens_dot::sensor_id).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains(
+                "`LFemur_20210820.csv` and `LFemur_20210821.csv` both name sensor `LFemur`"
+            ),
+            "{msg}"
+        );
+        assert!(msg.starts_with("dot"), "{msg}");
     }
 }

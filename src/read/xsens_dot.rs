@@ -38,11 +38,13 @@
 //! `--skip-lines N` drops data rows whose line number is at most N in each file.
 
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
-use super::{InputFormat, ReadError, ReadOptions, column_group, read_single_file, take_files};
+use super::{
+    InputFormat, ReadError, ReadOptions, column_group, one_file_per_sensor, read_single_file,
+    take_files,
+};
 use crate::take::{ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg};
 use crate::world::World;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
-use std::collections::HashMap;
 use std::fs::{self, File};
 use std::io::Read;
 use std::path::Path;
@@ -324,19 +326,7 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
     for note in notes {
         take.warn(note);
     }
-    let mut ids: HashMap<String, String> = HashMap::new();
-    for (file, name) in &files {
-        if let Some(other) = ids.insert(sensor_id(file), name.clone()) {
-            return Err(ReadError::format(
-                path,
-                format!(
-                    "`{other}` and `{name}` both name sensor `{}`; expected one file per sensor. \
-                     Hint: move each recording's files into its own folder",
-                    sensor_id(file)
-                ),
-            ));
-        }
-    }
+    one_file_per_sensor(path, &files, sensor_id)?;
     // Anchor the clock at the earliest-starting file, so every file lands at or after it.
     let mut firsts = Vec::new();
     for (file, _) in &files {

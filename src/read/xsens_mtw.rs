@@ -50,13 +50,15 @@
 
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
 use super::xsens_dot::{WrappingClock, parse_counter};
-use super::{InputFormat, ReadError, ReadOptions, column_group, read_single_file, take_files};
+use super::{
+    InputFormat, ReadError, ReadOptions, column_group, one_file_per_sensor, read_single_file,
+    take_files,
+};
 use crate::take::{
     BuildError, ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg,
 };
 use crate::world::World;
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
-use std::collections::HashMap;
 use std::fs::{self, File};
 use std::io::Read;
 use std::path::Path;
@@ -320,19 +322,7 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
         "Xsens MTw",
         &format!("files with {EXPECTED_HEADER}"),
     )?;
-    let mut ids: HashMap<String, String> = HashMap::new();
-    for (file, name) in &files {
-        let id = sensor_id(file);
-        if let Some(other) = ids.insert(id.clone(), name.clone()) {
-            return Err(ReadError::format(
-                path,
-                format!(
-                    "`{other}` and `{name}` both name sensor `{id}`; expected one file per sensor. \
-                     Hint: move each recording's files into its own folder"
-                ),
-            ));
-        }
-    }
+    one_file_per_sensor(path, &files, sensor_id)?;
     // First pass: the update rate (one for the take) and each file's first counter value.
     let mut rate: Option<(f64, &str)> = None;
     let mut firsts = Vec::new();
