@@ -116,7 +116,7 @@ fn clock_reset_is_a_clear_error_naming_file_and_line() {
     let msg = err.to_string();
     assert!(msg.contains("clock_reset.log"), "{msg}");
     assert!(msg.contains("line 4"), "{msg}");
-    assert!(msg.contains("2.500 s"), "{msg}");
+    assert!(msg.contains("2.576 s"), "{msg}");
     assert!(msg.contains("clock was reset"), "{msg}");
 }
 

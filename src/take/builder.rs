@@ -1,9 +1,17 @@
 //! Collects rows as readers parse them and turns them into a [`Take`].
 //!
-//! Readers push samples in file order with their line numbers. Rows that arrive earlier than the
-//! previous row of the same stream are kept aside and sorted into place at the end (reported as
-//! repaired); rows repeating a time are dropped, the first kept (reported as dropped); a row more
-//! than [`CLOCK_RESET_S`] earlier than its predecessor is a clock reset and fails the take.
+//! Readers push samples in file order with their line numbers. Per stream of a sensor:
+//! - a row earlier than the previous row is kept aside and sorted into place at the end
+//!   (reported as repaired);
+//! - a row repeating a time is dropped, the first kept (reported as dropped);
+//! - a row more than [`CLOCK_RESET_S`] from the previous row is held until up to
+//!   [`LOOKAHEAD_ROWS`] more rows have come: when most of them continue from the previous row it
+//!   is a damaged timestamp, dropped and reported (`time out of sequence`); when they continue
+//!   from it, a forward jump is a gap and a backward jump a clock reset, which fails the take.
+//!   When the rows after such a jump continue from it and the only row before it is the
+//!   stream's first, that first row is the one dropped.
+//!
+//! So one damaged timestamp costs one sample, not the take.
 
 use super::{
     ImuSample, LineReport, OrientationTrack, Sensor, SourceInfo, Take, Track, YawPitchRollDeg,
@@ -14,8 +22,15 @@ use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-/// A step back in time larger than this (seconds) is a clock reset, not a late row.
+/// A step back in time larger than this (seconds) is a clock reset, not a late row; a jump
+/// larger than this either way is looked at with the rows that follow it.
 pub const CLOCK_RESET_S: f64 = 1.0;
+
+/// How many rows of a stream after a jump decide whether the jump was one damaged timestamp.
+pub const LOOKAHEAD_ROWS: usize = 8;
+
+const OUT_OF_SEQUENCE: &str = "time out of sequence: more than 1 s from the previous sample of \
+     the same sensor, while the samples after it continue from that one; dropped";
 
 const REPEATED_TIME: &str =
     "repeats the time of an earlier sample of the same sensor; the first is kept";
@@ -91,16 +106,47 @@ fn first_drop_hint(dropped: &[LineReport]) -> String {
     }
 }
 
-struct Late<T> {
+/// A row held aside with its report: a late row waiting to be sorted into place, a row whose
+/// time jumped, or a row after such a jump.
+struct Held<T> {
     raw_time: f64,
     value: T,
+    report: LineReport,
+}
+
+/// A row more than [`CLOCK_RESET_S`] from the previous row of its stream, and the rows after it
+/// (up to [`LOOKAHEAD_ROWS`]) that decide what it is: out of sequence when most of them continue
+/// from the previous row, else a gap (forward) or a clock reset (backward).
+struct Suspect<T> {
+    row: Held<T>,
+    following: Vec<Held<T>>,
+}
+
+/// What a stream did with a row besides keeping it.
+enum Event {
+    /// A repeated time: the row is dropped (the first is kept).
+    Duplicate(LineReport),
+    /// A time far from both neighbours: the row is dropped.
+    OutOfSequence(LineReport),
+    /// Earlier than the previous row: sorted into place at the end.
+    Late,
+}
+
+/// A backward jump that the following rows continue: the clock was reset.
+struct Reset {
+    previous: f64,
+    time: f64,
     report: LineReport,
 }
 
 struct Stream<T> {
     raw_times: Vec<f64>,
     values: Vec<T>,
-    late: Vec<Late<T>>,
+    late: Vec<Held<T>>,
+    suspect: Option<Suspect<T>>,
+    /// The first kept row's report: when the rows after it all sit far from it, it is the one out
+    /// of sequence.
+    first_report: Option<LineReport>,
 }
 
 impl<T> Default for Stream<T> {
@@ -109,45 +155,127 @@ impl<T> Default for Stream<T> {
             raw_times: Vec::new(),
             values: Vec::new(),
             late: Vec::new(),
+            suspect: None,
+            first_report: None,
         }
     }
 }
 
-enum Pushed {
-    Appended,
-    Duplicate,
-    Late,
-}
-
 impl<T> Stream<T> {
+    /// Takes a row in file order. `report` is called only when the row must be held or reported.
     fn push(
         &mut self,
         raw_time: f64,
         value: T,
         reset_units: f64,
         report: impl FnOnce() -> LineReport,
-    ) -> Result<Pushed, (f64, LineReport)> {
-        match self.raw_times.last() {
-            Some(&last) if raw_time <= last => {
-                if raw_time == last {
-                    return Ok(Pushed::Duplicate);
-                }
-                if last - raw_time > reset_units {
-                    return Err((last, report()));
-                }
-                self.late.push(Late {
+        events: &mut Vec<Event>,
+    ) -> Result<(), Reset> {
+        if let Some(suspect) = &mut self.suspect {
+            suspect.following.push(Held {
+                raw_time,
+                value,
+                report: report(),
+            });
+            if suspect.following.len() >= LOOKAHEAD_ROWS {
+                self.resolve(reset_units, events)?;
+            }
+            return Ok(());
+        }
+        let Some(&last) = self.raw_times.last() else {
+            self.first_report = Some(report());
+            self.raw_times.push(raw_time);
+            self.values.push(value);
+            return Ok(());
+        };
+        if raw_time > last && raw_time - last <= reset_units {
+            // The hot path: the next sample in order.
+            self.raw_times.push(raw_time);
+            self.values.push(value);
+        } else if raw_time == last {
+            events.push(Event::Duplicate(report()));
+        } else if (raw_time - last).abs() > reset_units {
+            self.suspect = Some(Suspect {
+                row: Held {
                     raw_time,
                     value,
                     report: report(),
-                });
-                Ok(Pushed::Late)
-            }
-            _ => {
-                self.raw_times.push(raw_time);
-                self.values.push(value);
-                Ok(Pushed::Appended)
-            }
+                },
+                following: Vec::new(),
+            });
+        } else {
+            self.late.push(Held {
+                raw_time,
+                value,
+                report: report(),
+            });
+            events.push(Event::Late);
         }
+        Ok(())
+    }
+
+    fn push_held(
+        &mut self,
+        row: Held<T>,
+        reset_units: f64,
+        events: &mut Vec<Event>,
+    ) -> Result<(), Reset> {
+        let Held {
+            raw_time,
+            value,
+            report,
+        } = row;
+        self.push(raw_time, value, reset_units, || report, events)
+    }
+
+    /// Decides what the suspect row is, then takes the rows held after it in order (which may
+    /// hold a new suspect).
+    fn resolve(&mut self, reset_units: f64, events: &mut Vec<Event>) -> Result<(), Reset> {
+        let Some(Suspect { row, following }) = self.suspect.take() else {
+            return Ok(());
+        };
+        let last = *self.raw_times.last().expect("a suspect follows a kept row");
+        let near_previous = following
+            .iter()
+            .filter(|f| (f.raw_time - last).abs() < (f.raw_time - row.raw_time).abs())
+            .count();
+        if following.is_empty() || 2 * near_previous > following.len() {
+            // The rows after it continue from the previous row (or there are none).
+            events.push(Event::OutOfSequence(row.report));
+        } else if self.raw_times.len() == 1 && self.late.is_empty() {
+            // The rows after it continue from it, and the only row before it is the stream's
+            // first: that one was out of sequence.
+            if let Some(first) = self.first_report.take() {
+                events.push(Event::OutOfSequence(first));
+            }
+            self.raw_times.clear();
+            self.values.clear();
+            self.first_report = Some(row.report);
+            self.raw_times.push(row.raw_time);
+            self.values.push(row.value);
+        } else if row.raw_time > last {
+            // A gap: the sensor was silent, then went on.
+            self.raw_times.push(row.raw_time);
+            self.values.push(row.value);
+        } else {
+            return Err(Reset {
+                previous: last,
+                time: row.raw_time,
+                report: row.report,
+            });
+        }
+        for f in following {
+            self.push_held(f, reset_units, events)?;
+        }
+        Ok(())
+    }
+
+    /// Resolves the rows still held at the end of the source.
+    fn flush(&mut self, reset_units: f64, events: &mut Vec<Event>) -> Result<(), Reset> {
+        while self.suspect.is_some() {
+            self.resolve(reset_units, events)?;
+        }
+        Ok(())
     }
 
     fn first_raw(&self) -> Option<f64> {
@@ -235,6 +363,39 @@ pub struct TakeBuilder {
     dropped: Vec<LineReport>,
     repaired: Vec<LineReport>,
     warnings: Vec<String>,
+    /// Scratch for what a push did besides keeping the row.
+    events: Vec<Event>,
+}
+
+/// Moves a stream's events into the dropped lines (late rows are reported when merged).
+fn settle_events(events: &mut Vec<Event>, dropped: &mut Vec<LineReport>) {
+    for event in events.drain(..) {
+        let report = match event {
+            Event::Duplicate(r) => LineReport {
+                reason: REPEATED_TIME.to_string(),
+                ..r
+            },
+            Event::OutOfSequence(r) => LineReport {
+                reason: OUT_OF_SEQUENCE.to_string(),
+                ..r
+            },
+            Event::Late => continue,
+        };
+        // A row carrying several sensors (a SOU line) is reported once.
+        if dropped.last() != Some(&report) {
+            dropped.push(report);
+        }
+    }
+}
+
+fn clock_reset(sensor: &str, r: Reset, seconds_per_unit: f64) -> BuildError {
+    BuildError::ClockReset {
+        location: r.report.location(),
+        sensor: sensor.to_string(),
+        previous: r.previous,
+        time: r.time,
+        back_s: (r.previous - r.time) * seconds_per_unit,
+    }
 }
 
 impl TakeBuilder {
@@ -257,6 +418,7 @@ impl TakeBuilder {
             dropped: Vec::new(),
             repaired: Vec::new(),
             warnings: Vec::new(),
+            events: Vec::new(),
         }
     }
 
@@ -374,28 +536,18 @@ impl TakeBuilder {
         stream: impl FnOnce(&mut SensorStreams) -> &mut Stream<T>,
     ) -> Result<(), BuildError> {
         let file = self.current_file.as_deref();
-        let sensor_streams = &mut self.sensors[sensor.0];
-        let id = &sensor_streams.id;
         let make_report = || LineReport::new(file, line, String::new(), raw);
-        let id_for_reason = id.clone();
-        match stream(sensor_streams).push(raw_time, value, self.reset_units, make_report) {
-            Ok(Pushed::Appended) | Ok(Pushed::Late) => Ok(()),
-            Ok(Pushed::Duplicate) => {
-                let report = LineReport::new(file, line, REPEATED_TIME, raw);
-                // A row carrying several sensors (a SOU line) is reported once.
-                if self.dropped.last() != Some(&report) {
-                    self.dropped.push(report);
-                }
-                Ok(())
-            }
-            Err((previous, report)) => Err(BuildError::ClockReset {
-                location: report.location(),
-                sensor: id_for_reason,
-                previous,
-                time: raw_time,
-                back_s: (previous - raw_time) * self.clock.seconds_per_unit(),
-            }),
-        }
+        let sensor_streams = &mut self.sensors[sensor.0];
+        let pushed = stream(sensor_streams).push(
+            raw_time,
+            value,
+            self.reset_units,
+            make_report,
+            &mut self.events,
+        );
+        let id = &self.sensors[sensor.0].id;
+        settle_events(&mut self.events, &mut self.dropped);
+        pushed.map_err(|r| clock_reset(id, r, self.clock.seconds_per_unit()))
     }
 
     /// Finishes the take: merges late rows, re-zeroes the clock at the earliest sample, and drops
@@ -406,12 +558,25 @@ impl TakeBuilder {
             format,
             world,
             clock,
-            sensors,
+            reset_units,
+            mut sensors,
             mut dropped,
             mut repaired,
             mut warnings,
+            mut events,
             ..
         } = self;
+        // Rows still held after a jump at the end of the source.
+        for s in &mut sensors {
+            let flushed = s
+                .orientation_q
+                .flush(reset_units, &mut events)
+                .and_then(|()| s.orientation_ypr.flush(reset_units, &mut events))
+                .and_then(|()| s.inertial.flush(reset_units, &mut events))
+                .and_then(|()| s.magnetometer.flush(reset_units, &mut events));
+            settle_events(&mut events, &mut dropped);
+            flushed.map_err(|r| clock_reset(&s.id, r, clock.seconds_per_unit()))?;
+        }
         let raw_start = sensors
             .iter()
             .flat_map(|s| {
@@ -542,5 +707,135 @@ impl Sensor {
         if let Some(t) = &mut self.magnetometer {
             t.shift_times(offset_s);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::take::OrientationTrack;
+
+    /// A one-sensor take from raw times in seconds, one row per line (line n + 1).
+    fn take_of(times: &[f64]) -> Result<Take, BuildError> {
+        let mut b = TakeBuilder::new(
+            "t.csv",
+            InputFormat::ImubakeCsv,
+            World::Enu,
+            ClockUnit::Seconds,
+        );
+        let s = b.sensor("a");
+        for (i, &t) in times.iter().enumerate() {
+            let line = format!("{t},a");
+            b.push_yaw_pitch_roll(
+                s,
+                t,
+                YawPitchRollDeg {
+                    yaw: i as f64,
+                    pitch: 0.0,
+                    roll: 0.0,
+                },
+                i as u64 + 1,
+                line.as_bytes(),
+            )?;
+        }
+        b.finish(0.0)
+    }
+
+    /// The kept samples as (absolute raw time, yaw = index of the row that carried it).
+    fn kept(take: &Take) -> Vec<(f64, usize)> {
+        let zero: f64 = take
+            .source()
+            .start_timestamp
+            .trim_end_matches(" s")
+            .parse()
+            .unwrap();
+        match take.sensors()[0].orientation() {
+            Some(OrientationTrack::YawPitchRollDeg(t)) => t
+                .iter()
+                .map(|(time, v)| (((time + zero) * 1e6).round() / 1e6, v.yaw as usize))
+                .collect(),
+            _ => panic!("expected yaw/pitch/roll"),
+        }
+    }
+
+    fn dropped_lines(take: &Take) -> Vec<u64> {
+        take.dropped_lines().iter().map(|d| d.line).collect()
+    }
+
+    const STEADY: [f64; 12] = [
+        10.0, 10.1, 10.2, 10.3, 10.4, 10.5, 10.6, 10.7, 10.8, 10.9, 11.0, 11.1,
+    ];
+
+    fn with(i: usize, t: f64) -> Vec<f64> {
+        let mut v = STEADY.to_vec();
+        v[i] = t;
+        v
+    }
+
+    #[test]
+    fn one_damaged_timestamp_costs_one_sample_forward_or_back() {
+        for bad in [1000.0, 2.0, -5.0] {
+            let take = take_of(&with(4, bad)).unwrap();
+            assert_eq!(dropped_lines(&take), [5], "time {bad}");
+            assert!(
+                take.dropped_lines()[0]
+                    .reason
+                    .starts_with("time out of sequence")
+            );
+            let expected: Vec<(f64, usize)> = STEADY
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != 4)
+                .map(|(i, &t)| (t, i))
+                .collect();
+            assert_eq!(kept(&take), expected, "time {bad}");
+        }
+    }
+
+    #[test]
+    fn a_damaged_first_or_last_row_is_dropped_too() {
+        for (i, bad) in [(0, 5000.0), (0, 0.0), (11, 5000.0), (11, 1.0)] {
+            let take = take_of(&with(i, bad)).unwrap();
+            assert_eq!(dropped_lines(&take), [i as u64 + 1], "row {i} at {bad}");
+            assert_eq!(kept(&take).len(), 11);
+            assert!(kept(&take).iter().all(|&(_, k)| k != i));
+        }
+    }
+
+    #[test]
+    fn a_jump_the_following_rows_continue_is_a_gap_or_a_clock_reset() {
+        // Forward by 30 s and on from there: a gap, every row kept.
+        let gap: Vec<f64> = STEADY
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| if i >= 6 { t + 30.0 } else { t })
+            .collect();
+        let take = take_of(&gap).unwrap();
+        assert!(take.dropped_lines().is_empty());
+        assert_eq!(kept(&take).len(), 12);
+        // Back by 5 s and on from there: the clock was reset at row 7 (line 7).
+        let reset: Vec<f64> = STEADY
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| if i >= 6 { t - 5.0 } else { t })
+            .collect();
+        let e = take_of(&reset).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.contains("line 7") && msg.contains("4.900 s"), "{msg}");
+        // Even with only two rows after it.
+        let e = take_of(&reset[..9]).unwrap_err();
+        assert!(e.to_string().contains("line 7"), "{e}");
+    }
+
+    #[test]
+    fn late_rows_and_repeats_after_a_damaged_row_keep_their_rules() {
+        // Row 5 damaged, row 7 late by one step, row 9 repeats row 8.
+        let mut times = with(4, 99.0);
+        times.swap(6, 7);
+        times[9] = times[8];
+        let take = take_of(&times).unwrap();
+        assert_eq!(dropped_lines(&take), [5, 10]);
+        assert_eq!(take.repaired_lines().len(), 1);
+        assert_eq!(take.repaired_lines()[0].line, 8);
     }
 }
