@@ -13,9 +13,10 @@
 mod common;
 
 use common::{PAPER000_SENSORS, write_log};
-use imubake::batch::{Summary, discover, run};
+use imubake::batch::{DiscoverOptions, Summary, discover, run};
 use imubake::convert::ConvertSettings;
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 fn main() {
@@ -39,7 +40,9 @@ fn main() {
         ..ConvertSettings::default()
     };
     settings.pipeline.fps = "60".parse().expect("fps");
-    let library = discover(std::slice::from_ref(&input), None).expect("discover");
+    let library = discover(std::slice::from_ref(&input), DiscoverOptions::default())
+        .expect("discover")
+        .takes;
     assert_eq!(library.len(), takes);
     println!(
         "{takes} one-minute takes (16 sensors at 100 Hz, {:.1} MB each) → BVH + GLB at 60 fps",
@@ -50,7 +53,15 @@ fn main() {
     for jobs in [1, 2] {
         let out = dir.path().join(format!("out{jobs}"));
         let start = Instant::now();
-        let results = run(&library, &out, &settings, jobs, &|_| {}).expect("batch");
+        let results = run(
+            &library,
+            &out,
+            &settings,
+            jobs,
+            &AtomicBool::new(false),
+            &|_| {},
+        )
+        .expect("batch");
         let secs = start.elapsed().as_secs_f64();
         let summary = Summary::of(&results);
         assert_eq!(summary.converted, takes, "{summary}");
@@ -63,7 +74,15 @@ fn main() {
         throughput.push(rate);
         if jobs == 2 {
             let start = Instant::now();
-            let results = run(&library, &out, &settings, jobs, &|_| {}).expect("rerun");
+            let results = run(
+                &library,
+                &out,
+                &settings,
+                jobs,
+                &AtomicBool::new(false),
+                &|_| {},
+            )
+            .expect("rerun");
             let summary = Summary::of(&results);
             assert_eq!(summary.skipped, takes, "{summary}");
             println!(

@@ -98,12 +98,7 @@ impl Config {
             message,
         };
         let text = std::fs::read_to_string(path).map_err(|e| err(format!("cannot read: {e}")))?;
-        let mut config: Config = if text.trim().is_empty() {
-            Config::default()
-        } else {
-            serde_yaml::from_str(&text)
-                .map_err(|e| err(format!("{e}; see README, \"Configuration\"")))?
-        };
+        let mut config = Config::parse(&text).map_err(err)?;
         let base = path.parent().unwrap_or(Path::new(""));
         if let Some(m) = config.mapping.as_ref().filter(|m| m.is_relative()) {
             config.mapping = Some(base.join(m));
@@ -119,6 +114,17 @@ impl Config {
             }
         }
         config.validate().map_err(err)?;
+        Ok(config)
+    }
+
+    /// Parses and checks a config's text (paths in it stay as written).
+    pub fn parse(text: &str) -> Result<Config, String> {
+        let config: Config = if text.trim().is_empty() {
+            Config::default()
+        } else {
+            serde_yaml::from_str(text).map_err(|e| format!("{e}; see README, \"Configuration\""))?
+        };
+        config.validate()?;
         Ok(config)
     }
 
@@ -169,6 +175,7 @@ impl Config {
         s.read.skip_lines = self.skip_lines.unwrap_or(0);
         s.read.skip_seconds = self.skip_seconds.unwrap_or(0.0);
         s.read.world = self.world;
+        s.world_from = self.world.map(|_| crate::world::WorldFrom::Config);
         if let Some(smoothing) = self.smoothing.as_ref().and_then(|e| e.to_smoothing().ok()) {
             s.pipeline.smoothing = smoothing;
         }

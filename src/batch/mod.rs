@@ -82,14 +82,15 @@ impl TakeResult {
         let source = self.source.as_str();
         let duration_ms = u64::try_from(self.duration.as_millis()).unwrap_or(u64::MAX);
         match self.status {
+            // The sidecar lists the lines dropped and repaired; the log says how many.
             TakeStatus::Converted if self.dropped_lines + self.repaired_lines > 0 => {
                 tracing::info!(
                     source,
                     duration_ms,
-                    outputs = ?self.outputs,
                     dropped_lines = self.dropped_lines,
                     repaired_lines = self.repaired_lines,
-                    "converted (the sidecar lists the lines dropped and repaired)"
+                    outputs = ?self.outputs,
+                    "converted"
                 )
             }
             TakeStatus::Converted => {
@@ -193,4 +194,3 @@ pub fn run(
             .collect()
     }))
 }
-

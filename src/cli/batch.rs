@@ -3,13 +3,19 @@
 use super::convert::SettingsArgs;
 use anyhow::Context;
 use clap::Args;
-use imubake::batch::{self, Shard, Summary, TakeResult, TakeStatus};
+use imubake::batch::{self, DiscoverOptions, Shard, Summary, TakeResult, TakeStatus};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tracing::{error, info};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+/// The exit code of a batch stopped by SIGINT or SIGTERM (the shell's 128 + SIGINT).
+const INTERRUPTED: i32 = 130;
+use tracing::{debug, error, info, warn};
 
 #[derive(Debug, Args)]
 pub struct BatchArgs {
@@ -32,6 +38,10 @@ pub struct BatchArgs {
     /// List the takes of this shard (relative paths) and exit without converting.
     #[arg(long)]
     list: bool,
+    /// Follow symlinks whose targets are outside the input folders (by default they are skipped
+    /// with a warning).
+    #[arg(long)]
+    follow_symlinks: bool,
     #[command(flatten)]
     settings: SettingsArgs,
     /// Print the result as JSON on stdout: {"converted", "failed", "skipped", "shard", "takes"}.
@@ -61,10 +71,28 @@ pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
             }
         },
     };
+    if let Err(e) = super::check_out_folder(&args.out) {
+        error!("{e}");
+        return Ok(ExitCode::from(2));
+    }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
-    let takes = match batch::discover(&args.inputs, Some(&args.out)) {
-        Ok(t) => t,
+    let options = DiscoverOptions {
+        exclude: Some(&args.out),
+        follow_symlinks: args.follow_symlinks,
+    };
+    let takes = match batch::discover(&args.inputs, options) {
+        Ok(found) => {
+            for skipped in &found.skipped {
+                let path = skipped.path.display();
+                if skipped.reason.is_warning() {
+                    warn!(path = %path, "{}", skipped.reason);
+                } else {
+                    debug!(path = %path, "{}", skipped.reason);
+                }
+            }
+            found.takes
+        }
         Err(e) => {
             error!("{e}");
             return Ok(ExitCode::from(2));
@@ -108,7 +136,26 @@ pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
         bar.inc(1);
     };
     let jobs = args.jobs.unwrap_or(0);
-    let results = batch::run(&takes, &args.out, &settings, jobs, &on_result)
+    // SIGINT/SIGTERM: no new take starts; those in progress may finish within the grace period,
+    // then their writes are abandoned (temporary files removed, nothing recorded) and the
+    // process exits.
+    let stop = super::stop_on_signals()?;
+    {
+        let stop = Arc::clone(&stop);
+        std::thread::spawn(move || {
+            while !stop.load(Ordering::SeqCst) {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            std::thread::sleep(imubake::watch::FINISH_GRACE);
+            let removed = imubake::write::abandon_writes();
+            warn!(
+                "stopped: takes still converting were abandoned ({} temporary file(s) removed)",
+                removed.len()
+            );
+            std::process::exit(INTERRUPTED);
+        });
+    }
+    let results = batch::run(&takes, &args.out, &settings, jobs, &stop, &on_result)
         .with_context(|| format!("{}: cannot run the batch", args.out.display()))?;
     bar.finish_and_clear();
 
@@ -124,6 +171,11 @@ pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
         writeln!(stdout).context("writing to stdout")?;
     } else {
         writeln!(stdout, "{summary}").context("writing to stdout")?;
+    }
+    if stop.load(Ordering::SeqCst) {
+        let left = takes.len() - results.len();
+        warn!("stopped by a signal; {left} take(s) not started");
+        return Ok(ExitCode::from(INTERRUPTED as u8));
     }
     let failed = results.iter().any(|r| r.status == TakeStatus::Failed);
     Ok(if failed {
