@@ -51,17 +51,24 @@ pub struct LedgerEntry {
     pub settings: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// Inode change time, ns since the Unix epoch (a session folder: the latest of its entries);
+    /// absent in lines written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ctime_ns: Option<u64>,
     /// When the conversion started, ns since the Unix epoch.
     pub converted_at_ns: u64,
     #[serde(default)]
     pub imubake_version: String,
 }
 
-/// A source's size and modification time, the cheap half of "has it changed".
+/// A source's size, modification time and inode change time, the cheap half of "has it
+/// changed". The ctime catches a rewrite whose mtime was put back (`touch -d`, `cp -p`): no tool
+/// can set it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SourceStat {
     pub size: u64,
     pub mtime_ns: Option<u64>,
+    pub ctime_ns: Option<u64>,
 }
 
 impl SourceStat {
@@ -72,6 +79,7 @@ impl SourceStat {
         let mut stat = SourceStat {
             size: if meta.is_dir() { 0 } else { meta.len() },
             mtime_ns: mtime_ns(&meta),
+            ctime_ns: ctime_ns(&meta),
         };
         if meta.is_dir() {
             stat_dir(path, &mut stat)?;
@@ -87,10 +95,12 @@ fn stat_dir(dir: &Path, stat: &mut SourceStat) -> io::Result<()> {
             continue;
         }
         let meta = fs::metadata(entry.path())?;
-        stat.mtime_ns = match (stat.mtime_ns, mtime_ns(&meta)) {
+        let latest = |a: Option<u64>, b: Option<u64>| match (a, b) {
             (Some(a), Some(b)) => Some(a.max(b)),
             _ => None,
         };
+        stat.mtime_ns = latest(stat.mtime_ns, mtime_ns(&meta));
+        stat.ctime_ns = latest(stat.ctime_ns, ctime_ns(&meta));
         if meta.is_dir() {
             stat_dir(&entry.path(), stat)?;
         } else {
@@ -103,6 +113,21 @@ fn stat_dir(dir: &Path, stat: &mut SourceStat) -> io::Result<()> {
 fn mtime_ns(meta: &fs::Metadata) -> Option<u64> {
     let t = meta.modified().ok()?;
     u64::try_from(t.duration_since(UNIX_EPOCH).ok()?.as_nanos()).ok()
+}
+
+fn ctime_ns(meta: &fs::Metadata) -> Option<u64> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let secs = u64::try_from(meta.ctime()).ok()?;
+        let nanos = u64::try_from(meta.ctime_nsec()).ok()?;
+        secs.checked_mul(1_000_000_000)?.checked_add(nanos)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = meta;
+        None
+    }
 }
 
 /// Now, ns since the Unix epoch.
@@ -118,30 +143,82 @@ pub fn now_ns() -> u64 {
 /// checked.
 const RACY_NS: u64 = 2_000_000_000;
 
-/// SHA-256 (hex) of what decides a conversion's result besides the capture: the settings' debug
-/// text, the imubake version, and the contents of the mapping file and of a rig file.
+/// The version of what a settings fingerprint means. Bump it when a change of imubake makes the
+/// same settings produce different outputs (a new default, a changed stage, a fixed bug in a
+/// writer): every ledger entry under an older schema then reconverts once, with one log line
+/// saying why. Adding a setting whose default keeps today's outputs needs no bump (add it to
+/// [`FingerprintInput`] only with a value that leaves the fingerprint of its default unchanged,
+/// or bump).
+///
+/// Schema 0 was a hash of the settings' `Debug` text and the crate version (any release
+/// reconverted everything); 1 is [`FingerprintInput`].
+pub const FINGERPRINT_SCHEMA: u32 = 1;
+
+/// What decides a conversion's outputs besides the capture, in a stable serialisation: field
+/// names and values, not Rust's `Debug` text; the mapping and rig files by content, not by path.
+#[derive(Serialize)]
+struct FingerprintInput<'a> {
+    input_format: Option<&'static str>,
+    skip_lines: u64,
+    skip_seconds: f64,
+    world: Option<crate::world::World>,
+    /// SHA-256 of the mapping file's content.
+    mapping: Option<String>,
+    /// A built-in rig's name, or `file:` and the SHA-256 of a rig file's content.
+    rig: Option<String>,
+    fps: [u64; 2],
+    trim: Option<[Option<f64>; 2]>,
+    root: &'a str,
+    smoothing: serde_json::Value,
+    formats: Vec<&'static str>,
+    units: &'static str,
+    report: bool,
+}
+
+fn file_sha256(path: &Path) -> String {
+    match fs::read(path) {
+        Ok(bytes) => hex(&Sha256::digest(&bytes)),
+        Err(_) => "(unreadable)".to_string(),
+    }
+}
+
+/// `<schema>:<SHA-256 of the settings' stable serialisation>`.
 pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
-    let mut h = Sha256::new();
-    h.update(env!("CARGO_PKG_VERSION").as_bytes());
-    h.update([0]);
-    h.update(format!("{settings:?}").as_bytes());
-    let mut file = |path: &Path| {
-        h.update([0]);
-        match fs::read(path) {
-            Ok(bytes) => h.update(&bytes),
-            Err(_) => h.update(b"(unreadable)"),
-        }
+    let p = &settings.pipeline;
+    let input = FingerprintInput {
+        input_format: settings.read.format.map(|f| f.name()),
+        skip_lines: settings.read.skip_lines,
+        skip_seconds: settings.read.skip_seconds,
+        world: settings.read.world,
+        mapping: settings.mapping.as_deref().map(file_sha256),
+        rig: settings.rig.as_ref().map(|rig| {
+            let path = Path::new(rig);
+            if path.is_file() {
+                format!("file:{}", file_sha256(path))
+            } else {
+                rig.clone()
+            }
+        }),
+        fps: [p.fps.num(), p.fps.den()],
+        trim: p
+            .trim
+            .map(|t| [Some(t.start_s), (t.end_s < f64::MAX).then_some(t.end_s)]),
+        root: p.root.label(),
+        smoothing: serde_json::to_value(&p.smoothing).unwrap_or_default(),
+        formats: settings.formats.iter().map(|f| f.name()).collect(),
+        units: settings.units.name(),
+        report: settings.report,
     };
-    if let Some(m) = &settings.mapping {
-        file(m);
-    }
-    if let Some(rig) = &settings.rig {
-        let p = Path::new(rig);
-        if p.is_file() {
-            file(p);
-        }
-    }
-    hex(&h.finalize())
+    let json = serde_json::to_vec(&input).expect("the fingerprint input serialises");
+    format!("{FINGERPRINT_SCHEMA}:{}", hex(&Sha256::digest(&json)))
+}
+
+/// The schema a fingerprint was written under (0: before schemas, a bare SHA-256).
+pub fn fingerprint_schema(fingerprint: &str) -> u32 {
+    fingerprint
+        .split_once(':')
+        .and_then(|(schema, _)| schema.parse().ok())
+        .unwrap_or(0)
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -213,6 +290,27 @@ impl Ledger {
         &self.path
     }
 
+    /// How many sources' latest entries were written under an older fingerprint schema (they
+    /// convert again once).
+    pub fn older_schema_count(&self) -> usize {
+        self.latest
+            .values()
+            .filter(|e| fingerprint_schema(&e.settings) < FINGERPRINT_SCHEMA)
+            .count()
+    }
+
+    /// Logs one line when entries of an older fingerprint schema are about to convert again.
+    pub fn report_older_schema(&self) {
+        let older = self.older_schema_count();
+        if older > 0 {
+            tracing::info!(
+                ledger = %self.path.display(),
+                "{older} take(s) were converted by an earlier imubake whose settings fingerprint \
+                 meant something else (schema < {FINGERPRINT_SCHEMA}); they convert again once"
+            );
+        }
+    }
+
     /// Lines that did not parse (a torn last line) and were ignored.
     pub fn skipped_lines(&self) -> usize {
         self.skipped_lines
@@ -233,13 +331,14 @@ impl Ledger {
 
     /// Whether `source` (relative path, with `stat` now) is converted and current under
     /// `fingerprint`. Size and mtime are checked first; `hash` (the source's SHA-256) is computed
-    /// only when the size is the same but the mtime differs, is unknown, or is too close to the
-    /// conversion to be trusted.
+    /// only when the size is the same but the mtime or ctime differs, is unknown, or is too close
+    /// to the conversion to be trusted — or when `force_hash` says the source was seen written.
     pub fn is_current(
         &self,
         source: &str,
         stat: SourceStat,
         fingerprint: &str,
+        force_hash: bool,
         hash: impl FnOnce() -> io::Result<String>,
     ) -> io::Result<Freshness> {
         let Some(entry) = self.latest.get(source) else {
@@ -256,23 +355,28 @@ impl Ledger {
         {
             return Ok(Freshness::Stale);
         }
+        // A ctime recorded then must be the same now (lines written before it was recorded
+        // have none).
+        let same_ctime = entry.ctime_ns.is_none() || entry.ctime_ns == stat.ctime_ns;
         let trusted_mtime = match (entry.mtime_ns, stat.mtime_ns) {
             (Some(then), Some(now)) => {
-                then == now && then.saturating_add(RACY_NS) < entry.converted_at_ns
+                then == now && same_ctime && then.saturating_add(RACY_NS) < entry.converted_at_ns
             }
             _ => false,
         };
+        let trusted_mtime = trusted_mtime && !force_hash;
         if trusted_mtime {
             return Ok(Freshness::Current);
         }
         if hash()? != entry.sha256 {
             return Ok(Freshness::Stale);
         }
-        if entry.mtime_ns == stat.mtime_ns {
+        if entry.mtime_ns == stat.mtime_ns && entry.ctime_ns == stat.ctime_ns {
             Ok(Freshness::Current)
         } else {
             let mut touched = entry.clone();
             touched.mtime_ns = stat.mtime_ns;
+            touched.ctime_ns = stat.ctime_ns;
             Ok(Freshness::CurrentTouched(touched))
         }
     }
@@ -295,8 +399,11 @@ impl Ledger {
             *guard = Some(self.open_for_append()?);
         }
         let file = guard.as_mut().expect("opened above");
-        file.write_all(&line)?;
-        file.sync_data()
+        // A process abandoning an unfinished take records nothing of it.
+        crate::write::unless_abandoned(|| {
+            file.write_all(&line)?;
+            file.sync_data()
+        })
     }
 
     fn open_for_append(&self) -> io::Result<File> {
@@ -328,6 +435,7 @@ mod tests {
             source: source.into(),
             size: 5,
             mtime_ns: Some(1),
+            ctime_ns: Some(1),
             sha256: sha.into(),
             outputs: vec![format!("{source}.bvh")],
             status,
@@ -374,19 +482,24 @@ mod tests {
         let stat = SourceStat {
             size: 5,
             mtime_ns: Some(1),
+            ctime_ns: Some(1),
         };
         let no_hash = || -> io::Result<String> { panic!("hashed") };
         assert_eq!(
-            ledger.is_current("a", stat, "fp", no_hash).unwrap(),
+            ledger.is_current("a", stat, "fp", false, no_hash).unwrap(),
             Freshness::Current
         );
         assert_eq!(
-            ledger.is_current("a", stat, "other", no_hash).unwrap(),
+            ledger
+                .is_current("a", stat, "other", false, no_hash)
+                .unwrap(),
             Freshness::Stale
         );
         let bigger = SourceStat { size: 6, ..stat };
         assert_eq!(
-            ledger.is_current("a", bigger, "fp", no_hash).unwrap(),
+            ledger
+                .is_current("a", bigger, "fp", false, no_hash)
+                .unwrap(),
             Freshness::Stale
         );
         let touched = SourceStat {
@@ -395,27 +508,83 @@ mod tests {
         };
         assert!(matches!(
             ledger
-                .is_current("a", touched, "fp", || Ok("h".into()))
+                .is_current("a", touched, "fp", false, || Ok("h".into()))
                 .unwrap(),
             Freshness::CurrentTouched(e) if e.mtime_ns == Some(2)
         ));
         assert_eq!(
             ledger
-                .is_current("a", touched, "fp", || Ok("new".into()))
+                .is_current("a", touched, "fp", false, || Ok("new".into()))
+                .unwrap(),
+            Freshness::Stale
+        );
+        // The same mtime with a new ctime (a rewrite whose mtime was put back), or a look forced
+        // by a write event: the hash decides.
+        let rewritten = SourceStat {
+            ctime_ns: Some(7),
+            ..stat
+        };
+        assert_eq!(
+            ledger
+                .is_current("a", rewritten, "fp", false, || Ok("new".into()))
+                .unwrap(),
+            Freshness::Stale
+        );
+        assert!(matches!(
+            ledger
+                .is_current("a", rewritten, "fp", false, || Ok("h".into()))
+                .unwrap(),
+            Freshness::CurrentTouched(e) if e.ctime_ns == Some(7)
+        ));
+        assert_eq!(
+            ledger
+                .is_current("a", stat, "fp", true, || Ok("new".into()))
                 .unwrap(),
             Freshness::Stale
         );
         fs::remove_file(dir.path().join("a.bvh")).unwrap();
         assert_eq!(
-            ledger.is_current("a", stat, "fp", no_hash).unwrap(),
+            ledger.is_current("a", stat, "fp", false, no_hash).unwrap(),
             Freshness::Stale,
             "a missing output makes the take stale"
         );
         ledger.append(entry("f", Status::Failed, "h")).unwrap();
         assert_eq!(
-            ledger.is_current("f", stat, "fp", no_hash).unwrap(),
+            ledger.is_current("f", stat, "fp", false, no_hash).unwrap(),
             Freshness::Stale,
             "failed takes are retried"
         );
+    }
+
+    #[test]
+    fn fingerprints_are_stable_and_say_their_schema() {
+        let dir = tempfile::tempdir().unwrap();
+        let mapping = dir.path().join("m.json");
+        fs::write(&mapping, "{}").unwrap();
+        let settings = ConvertSettings {
+            mapping: Some(mapping.clone()),
+            ..ConvertSettings::default()
+        };
+        let fp = settings_fingerprint(&settings);
+        assert_eq!(fingerprint_schema(&fp), FINGERPRINT_SCHEMA);
+        assert_eq!(fp, settings_fingerprint(&settings.clone()));
+        // The mapping counts by content, not by path.
+        let moved = dir.path().join("moved.json");
+        fs::write(&moved, "{}").unwrap();
+        let elsewhere = ConvertSettings {
+            mapping: Some(moved),
+            ..settings.clone()
+        };
+        assert_eq!(fp, settings_fingerprint(&elsewhere));
+        fs::write(&mapping, "{ }").unwrap();
+        assert_ne!(fp, settings_fingerprint(&settings));
+        let mut other = settings.clone();
+        other.pipeline.fps = "60".parse().unwrap();
+        assert_ne!(
+            settings_fingerprint(&other),
+            settings_fingerprint(&settings)
+        );
+        // Fingerprints written before schemas were bare SHA-256s.
+        assert_eq!(fingerprint_schema(&"ab".repeat(32)), 0);
     }
 }

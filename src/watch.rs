@@ -2,8 +2,9 @@
 //! the same ledger and per-take conversion as `batch` ([`crate::batch::process_take`]).
 //!
 //! Takes are found with [`crate::batch::discover`] (each top-level file or session folder of the
-//! inbox is one take); hidden and temporary names (`.*`, `*.part`, `*.tmp`, `*~`,
-//! `*.crdownload`) and the inbox's `imubake.yaml` are ignored. A take is complete when its file
+//! inbox is one take; FIFOs, devices, symlinks out of the inbox, symlink cycles and config,
+//! mapping and rig files are not, each reported once); hidden and temporary names (`.*`,
+//! `*.part`, `*.tmp`, `*~`, `*.crdownload`) are ignored. A take is complete when its file
 //! is closed after writing or renamed into place (file-system events), or when its size and
 //! modification time (a session folder: summed over its files, the latest mtime) stay the same
 //! over two looks at least [`WatchOptions::settle`] apart (500 ms by default) — and, on Linux, no
@@ -12,12 +13,21 @@
 //! file-system events (`notify` through `notify-debouncer-full`, [`DEBOUNCE`]) or by polling;
 //! either way the inbox is rescanned, so a missed event only delays a take.
 //!
+//! Each conversion runs on a worker thread while this one keeps watching the stop flag: told to
+//! stop (SIGINT, SIGTERM), the watcher lets a take in progress finish for up to [`FINISH_GRACE`],
+//! then abandons it ([`crate::write::abandon_writes`]: its temporary files removed, no ledger
+//! line) and returns.
+//!
 //! Everything worth telling is a `tracing` event (one `converted`/`failed` line per take with its
 //! duration, [`crate::batch::TakeResult::log`]); the binary installs the subscriber.
 
-use crate::batch::{BatchTake, Summary, TakeStatus, discover, process_take};
+use crate::batch::{
+    BatchTake, DiscoverOptions, Skipped, Summary, TakeResult, TakeStatus, discover, process_take,
+};
 use crate::convert::{ConvertSettings, source_sha256};
-use crate::ledger::{Ledger, SourceStat, Status, settings_fingerprint};
+use crate::ledger::{
+    FINGERPRINT_SCHEMA, Ledger, SourceStat, Status, fingerprint_schema, settings_fingerprint,
+};
 use notify::RecursiveMode;
 use notify::event::{AccessKind, AccessMode, EventKind, ModifyKind, RenameMode};
 use notify_debouncer_full::{DebounceEventResult, new_debouncer};
@@ -25,13 +35,17 @@ use std::collections::{HashMap, HashSet};
 use std::fs;
 use std::io;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
-use tracing::{error, info, warn};
+use tracing::{debug, error, info, warn};
 
 /// The config file an inbox may hold.
-pub const INBOX_CONFIG: &str = "imubake.yaml";
+pub const INBOX_CONFIG: &str = crate::batch::FOLDER_CONFIG;
+
+/// How long a take in progress may go on after a stop signal before it is abandoned.
+pub const FINISH_GRACE: Duration = Duration::from_secs(2);
 
 /// The file-system event debouncer's timeout. `notify-debouncer-full` holds each event for this
 /// long after it happened (it is not a quiet period: a steady writer does not postpone it), so it
@@ -58,6 +72,8 @@ pub struct WatchOptions {
     pub settle: Duration,
     /// The config file to follow (`--config`, else `<inbox>/imubake.yaml`).
     pub config: PathBuf,
+    /// Follow symlinks whose targets are outside the inbox.
+    pub follow_symlinks: bool,
 }
 
 impl WatchOptions {
@@ -71,6 +87,7 @@ impl WatchOptions {
             reconvert: false,
             settle: Duration::from_millis(500),
             config,
+            follow_symlinks: false,
         }
     }
 }
@@ -175,18 +192,24 @@ struct Watch<'a> {
     settings: ConvertSettings,
     fingerprint: String,
     config_seen: Option<SourceStat>,
-    ledger: Ledger,
-    /// Takes handled at this size and mtime.
+    /// Shared with the conversion's worker thread.
+    ledger: Arc<Ledger>,
+    /// Takes handled at this size, mtime and ctime.
     done: HashMap<String, SourceStat>,
     /// Takes seen changing.
     pending: HashMap<String, Pending>,
     last_discover_error: Option<String>,
+    /// Entries passed over by discovery and already reported (each is reported once while it
+    /// stays).
+    reported: HashSet<Skipped>,
     /// A subfolder's own `imubake.yaml`: its stat when loaded, and its settings and fingerprint
     /// (the last good ones when it became bad).
     folder_settings: HashMap<PathBuf, FolderSettings>,
     /// Files (or folders) reported closed after writing or renamed into place since the last
     /// scan.
     closed: HashSet<PathBuf>,
+    /// A take was abandoned after a stop signal: the watch is over.
+    abandoned: bool,
     summary: Summary,
 }
 
@@ -212,11 +235,11 @@ impl Watch<'_> {
                 if fingerprint != self.fingerprint {
                     info!(
                         config = %self.opts.config.display(),
-                        "settings changed; {}",
+                        "settings changed; takes that failed are retried, {}",
                         if self.opts.reconvert {
-                            "reconverting the takes"
+                            "and converted takes are reconverted"
                         } else {
-                            "new takes use them (--reconvert to redo old ones)"
+                            "new takes use them (--reconvert to redo converted ones)"
                         }
                     );
                     self.settings = settings;
@@ -234,20 +257,34 @@ impl Watch<'_> {
     }
 
     fn takes(&mut self) -> Vec<BatchTake> {
-        match discover(std::slice::from_ref(&self.opts.inbox), Some(&self.opts.out)) {
-            Ok(takes) => {
+        let options = DiscoverOptions {
+            exclude: Some(&self.opts.out),
+            follow_symlinks: self.opts.follow_symlinks,
+        };
+        match discover(std::slice::from_ref(&self.opts.inbox), options) {
+            Ok(found) => {
                 self.last_discover_error = None;
+                let now: HashSet<Skipped> = found.skipped.into_iter().collect();
+                for skipped in now.difference(&self.reported) {
+                    let path = skipped.path.display();
+                    if skipped.reason.is_warning() {
+                        warn!(path = %path, "{}", skipped.reason);
+                    } else {
+                        debug!(path = %path, "{}", skipped.reason);
+                    }
+                }
+                self.reported = now;
                 let config = self.opts.config.canonicalize().ok();
-                takes
+                found
+                    .takes
                     .into_iter()
                     .filter(|t| {
                         let temp = Path::new(&t.rel)
                             .components()
                             .any(|c| is_temporary_name(&c.as_os_str().to_string_lossy()));
-                        // The inbox's config, a subfolder's own, or --config inside the inbox.
-                        let is_config = t.path.file_name().is_some_and(|n| n == INBOX_CONFIG)
-                            || config.is_some()
-                                && t.path.canonicalize().ok().as_ref() == config.as_ref();
+                        // --config inside the inbox, even while it does not parse.
+                        let is_config = config.is_some()
+                            && t.path.canonicalize().ok().as_ref() == config.as_ref();
                         !temp && !is_config
                     })
                     .collect()
@@ -308,49 +345,125 @@ impl Watch<'_> {
     }
 
     /// Whether the take was converted from this content, under whatever settings (without
-    /// `--reconvert`, a change of settings leaves old takes alone).
+    /// `--reconvert`, a change of settings leaves converted takes alone) of this fingerprint
+    /// schema (a ledger line of an older schema converts again). `force_hash`: the source was
+    /// seen written, so its hash decides whatever its size and times say.
     fn current_under_its_own_settings(
         &self,
         take: &BatchTake,
         stat: SourceStat,
         fingerprint: &str,
+        force_hash: bool,
     ) -> bool {
         self.ledger.latest(&take.rel).is_some_and(|e| {
-            let fingerprint = if self.opts.reconvert {
-                fingerprint
-            } else {
+            let own_settings =
+                !self.opts.reconvert && fingerprint_schema(&e.settings) == FINGERPRINT_SCHEMA;
+            let fingerprint = if own_settings {
                 &e.settings
+            } else {
+                fingerprint
             };
             e.status == Status::Converted
                 && self
                     .ledger
-                    .is_current(&take.rel, stat, fingerprint, || source_sha256(&take.path))
+                    .is_current(&take.rel, stat, fingerprint, force_hash, || {
+                        source_sha256(&take.path)
+                    })
                     .is_ok_and(|f| f.is_current())
         })
     }
 
-    fn convert(&mut self, take: &BatchTake, stat: SourceStat) {
+    /// Whether the take's last conversion failed under other settings than its own now (a
+    /// capture dropped before its `imubake.yaml`): it is tried again.
+    fn failed_under_other_settings(&mut self, take: &BatchTake) -> bool {
+        let failed_with = match self.ledger.latest(&take.rel) {
+            Some(e) if e.status == Status::Failed => e.settings.clone(),
+            _ => return false,
+        };
+        failed_with != self.settings_for(take).1
+    }
+
+    fn convert(&mut self, take: &BatchTake, stat: SourceStat, force_hash: bool, stop: &AtomicBool) {
         self.pending.remove(&take.rel);
         self.done.insert(take.rel.clone(), stat);
         let (settings, fingerprint) = self.settings_for(take);
-        if self.current_under_its_own_settings(take, stat, &fingerprint) {
+        if self.current_under_its_own_settings(take, stat, &fingerprint, force_hash) {
             self.summary.skipped += 1;
             return;
         }
-        let result = process_take(take, &self.opts.out, &settings, &fingerprint, &self.ledger);
+        let Some(result) = self.convert_on_worker(take, settings, fingerprint, stop) else {
+            return;
+        };
         result.log();
         match result.status {
             TakeStatus::Converted => self.summary.converted += 1,
             TakeStatus::Failed => self.summary.failed += 1,
             TakeStatus::Skipped => self.summary.skipped += 1,
+            TakeStatus::Abandoned => self.summary.abandoned += 1,
         }
         if result.status != TakeStatus::Skipped {
             match Ledger::load(&self.opts.out) {
-                Ok(ledger) => self.ledger = ledger,
+                Ok(ledger) => self.ledger = Arc::new(ledger),
                 Err(e) => error!(
                     ledger = %self.ledger.path().display(),
                     "cannot reload the ledger: {e}"
                 ),
+            }
+        }
+    }
+
+    /// Converts a take on a worker thread while watching `stop`: after a stop signal the take
+    /// may finish within [`FINISH_GRACE`], else its writes are abandoned and `None` returned.
+    fn convert_on_worker(
+        &mut self,
+        take: &BatchTake,
+        settings: ConvertSettings,
+        fingerprint: String,
+        stop: &AtomicBool,
+    ) -> Option<TakeResult> {
+        let (tx, rx) = mpsc::channel();
+        let ledger = Arc::clone(&self.ledger);
+        let (job, out) = (take.clone(), self.opts.out.clone());
+        let spawned = std::thread::Builder::new()
+            .name(format!("convert {}", take.rel))
+            .spawn(move || {
+                let _ = tx.send(process_take(&job, &out, &settings, &fingerprint, &ledger));
+            });
+        if let Err(e) = spawned {
+            error!(
+                source = take.rel.as_str(),
+                "cannot start a conversion thread: {e}"
+            );
+            return None;
+        }
+        let mut stopped_at: Option<Instant> = None;
+        loop {
+            match rx.recv_timeout(Duration::from_millis(20)) {
+                Ok(result) => return Some(result),
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    error!(
+                        source = take.rel.as_str(),
+                        "the conversion thread ended without a result"
+                    );
+                    return None;
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {}
+            }
+            if stop.load(Ordering::SeqCst) {
+                let at = *stopped_at.get_or_insert_with(Instant::now);
+                if at.elapsed() >= FINISH_GRACE {
+                    let removed = crate::write::abandon_writes();
+                    let result = TakeResult::new(take.rel.clone(), TakeStatus::Abandoned);
+                    result.log();
+                    debug!(
+                        source = take.rel.as_str(),
+                        "removed {} temporary file(s)",
+                        removed.len()
+                    );
+                    self.summary.abandoned += 1;
+                    self.abandoned = true;
+                    return None;
+                }
             }
         }
     }
@@ -365,24 +478,28 @@ impl Watch<'_> {
         self.pending.retain(|rel, _| live.contains(rel.as_str()));
         self.done.retain(|rel, _| live.contains(rel.as_str()));
         // Settled or closed: complete unless some process still has them open for writing.
-        let mut candidates: Vec<(&BatchTake, SourceStat, PathBuf)> = Vec::new();
+        let mut candidates: Vec<(&BatchTake, SourceStat, PathBuf, bool)> = Vec::new();
         for take in &takes {
-            if stop.load(Ordering::SeqCst) {
+            if stop.load(Ordering::SeqCst) || self.abandoned {
                 return;
             }
             let Ok(stat) = SourceStat::of(&take.path) else {
                 continue;
             };
-            if self.done.get(&take.rel) == Some(&stat) {
+            // Written (an event) or changed since this watcher handled it: its hash decides.
+            let written = self.closed.contains(&take.path);
+            let seen = self.done.get(&take.rel).copied();
+            if seen == Some(stat) && !written && !self.failed_under_other_settings(take) {
                 continue;
             }
+            let force_hash = written || seen.is_some();
             if !wait_for_settle
                 || !self.pending.contains_key(&take.rel) && {
                     let fingerprint = self.settings_for(take).1;
-                    self.current_under_its_own_settings(take, stat, &fingerprint)
+                    self.current_under_its_own_settings(take, stat, &fingerprint, force_hash)
                 }
             {
-                self.convert(take, stat);
+                self.convert(take, stat, force_hash, stop);
                 continue;
             }
             let closed = self.closed.remove(&take.path);
@@ -409,13 +526,13 @@ impl Watch<'_> {
                 .path
                 .canonicalize()
                 .unwrap_or_else(|_| take.path.clone());
-            candidates.push((take, stat, canonical));
+            candidates.push((take, stat, canonical, force_hash));
         }
         self.closed.clear();
-        let paths: Vec<PathBuf> = candidates.iter().map(|(_, _, p)| p.clone()).collect();
+        let paths: Vec<PathBuf> = candidates.iter().map(|(_, _, p, _)| p.clone()).collect();
         let held = held_for_writing(&paths);
-        for (take, stat, canonical) in candidates {
-            if stop.load(Ordering::SeqCst) {
+        for (take, stat, canonical, force_hash) in candidates {
+            if stop.load(Ordering::SeqCst) || self.abandoned {
                 return;
             }
             if held.contains(&canonical) {
@@ -424,7 +541,7 @@ impl Watch<'_> {
                 }
                 continue;
             }
-            self.convert(take, stat);
+            self.convert(take, stat, force_hash, stop);
         }
     }
 
@@ -476,18 +593,22 @@ pub fn run(
     let config_seen = config_stat(&opts.config);
     let config_arg = opts.config.is_file().then_some(opts.config.as_path());
     let settings = load_settings(config_arg).map_err(io::Error::other)?;
+    let ledger = Ledger::load(&opts.out)?;
+    ledger.report_older_schema();
     let mut watch = Watch {
         opts,
         load_settings,
         fingerprint: settings_fingerprint(&settings),
         settings,
         config_seen,
-        ledger: Ledger::load(&opts.out)?,
+        ledger: Arc::new(ledger),
         done: HashMap::new(),
         pending: HashMap::new(),
         last_discover_error: None,
+        reported: HashSet::new(),
         folder_settings: HashMap::new(),
         closed: Default::default(),
+        abandoned: false,
         summary: Summary::default(),
     };
     if opts.once {
@@ -538,7 +659,7 @@ pub fn run(
     );
     // The backlog: current takes are done at once, the others once they are settled.
     watch.scan(stop, true);
-    while !stop.load(Ordering::SeqCst) {
+    while !stop.load(Ordering::SeqCst) && !watch.abandoned {
         // Until the next poll (events: a fallback rescan) or the next take to settle, if sooner.
         let until_settle = watch
             .next_settle()

@@ -6,10 +6,13 @@ mod inspect;
 mod simulate;
 mod watch;
 
+use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 use imubake::read::{InputFormat, ReadOptions};
 use imubake::world::World;
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -60,6 +63,11 @@ impl ReadArgs {
         options
     }
 
+    /// Whether `--world` was given.
+    pub fn sets_world(&self) -> bool {
+        self.world.is_some()
+    }
+
     /// Overrides `options` (e.g. from a config file) with the flags given.
     pub fn apply(&self, options: &mut ReadOptions) {
         if self.input_format.is_some() {
@@ -86,6 +94,27 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
         _ => Err(format!("`{s}` is not a number of seconds ≥ 0")),
     }
+}
+
+/// A flag set by SIGINT or SIGTERM.
+pub fn stop_on_signals() -> anyhow::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, Arc::clone(&stop))
+            .context("cannot install the signal handlers")?;
+    }
+    Ok(stop)
+}
+
+/// `--out` must be a folder (created if missing), not an existing file.
+pub fn check_out_folder(out: &std::path::Path) -> Result<(), String> {
+    if out.exists() && !out.is_dir() {
+        return Err(format!(
+            "--out {}: is a file; expected a folder (created if missing)",
+            out.display()
+        ));
+    }
+    Ok(())
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {

@@ -7,8 +7,6 @@ use imubake::convert::ConvertSettings;
 use imubake::watch::{self, WatchOptions};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 #[derive(Debug, Args)]
@@ -34,6 +32,10 @@ pub struct WatchArgs {
     /// When the settings change (imubake.yaml edited), reconvert the takes converted before.
     #[arg(long)]
     reconvert: bool,
+    /// Follow symlinks whose targets are outside the inbox (by default they are skipped with a
+    /// warning).
+    #[arg(long)]
+    follow_symlinks: bool,
     /// Settings flags; without --config, <inbox>/imubake.yaml is the config when it exists.
     #[command(flatten)]
     settings: SettingsArgs,
@@ -44,18 +46,18 @@ pub fn run(args: WatchArgs) -> anyhow::Result<ExitCode> {
         tracing::error!(inbox = %args.inbox.display(), "not a folder");
         return Ok(ExitCode::from(2));
     }
+    if let Err(e) = super::check_out_folder(&args.out) {
+        tracing::error!("{e}");
+        return Ok(ExitCode::from(2));
+    }
     let user_config = args.settings.config().map(Path::to_path_buf);
     let mut opts = WatchOptions::new(args.inbox.clone(), args.out.clone(), user_config.clone());
     opts.poll = args.poll.map(Duration::from_millis);
     opts.once = args.once;
     opts.settle = Duration::from_millis(args.settle);
     opts.reconvert = args.reconvert;
-
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, Arc::clone(&stop))
-            .context("cannot install the signal handlers")?;
-    }
+    opts.follow_symlinks = args.follow_symlinks;
+    let stop = super::stop_on_signals()?;
     // `--config` wins; else the inbox's imubake.yaml the watcher passes in. Flags override both.
     let load = |config: Option<&Path>| -> Result<ConvertSettings, String> {
         args.settings

@@ -9,6 +9,81 @@ pub mod sidecar;
 use std::fs;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// The temporary files being written in this process, and whether the process has abandoned its
+/// writes (it was told to stop and a conversion did not finish in time).
+struct Temps {
+    abandoned: bool,
+    paths: Vec<PathBuf>,
+}
+
+static TEMPS: Mutex<Temps> = Mutex::new(Temps {
+    abandoned: false,
+    paths: Vec::new(),
+});
+
+fn temps() -> std::sync::MutexGuard<'static, Temps> {
+    TEMPS.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The error of a write refused because the process abandoned its writes.
+pub fn abandoned_error() -> io::Error {
+    io::Error::new(
+        io::ErrorKind::Interrupted,
+        "stopped before the take finished; nothing of it was kept",
+    )
+}
+
+/// Abandons this process's writes, for a process about to exit in the middle of a conversion:
+/// every temporary file being written is removed, and from now on no temporary file is created
+/// and none is renamed into place ([`write_atomic`] fails), and [`unless_abandoned`] refuses.
+/// Returns the temporary files removed. Creation and rename happen under the same lock, so
+/// nothing of an unfinished take appears after this returns.
+pub fn abandon_writes() -> Vec<PathBuf> {
+    let mut temps = temps();
+    temps.abandoned = true;
+    let paths = std::mem::take(&mut temps.paths);
+    for p in &paths {
+        let _ = fs::remove_file(p);
+    }
+    paths
+}
+
+/// Whether [`abandon_writes`] was called.
+pub fn writes_abandoned() -> bool {
+    temps().abandoned
+}
+
+/// Runs `f` (a ledger append, say) unless the writes were abandoned, holding the lock so that
+/// an abandonment waits for it to finish.
+pub fn unless_abandoned<T>(f: impl FnOnce() -> io::Result<T>) -> io::Result<T> {
+    let temps = temps();
+    if temps.abandoned {
+        return Err(abandoned_error());
+    }
+    let result = f();
+    drop(temps);
+    result
+}
+
+/// The extensions a take's outputs may have, the sidecar first (removed first: without it a take
+/// is not complete).
+pub const OUTPUT_SUFFIXES: [&str; 6] = [
+    ".imubake.json",
+    ".bvh",
+    ".glb",
+    ".gltf",
+    ".bin",
+    ".report.html",
+];
+
+/// Removes every output of take `stem` in `dir`, the sidecar first; missing files are fine.
+pub fn remove_take_outputs(dir: &Path, stem: &str) {
+    for suffix in OUTPUT_SUFFIXES {
+        let _ = fs::remove_file(dir.join(format!("{stem}{suffix}")));
+    }
+}
 
 /// The hidden temporary name for `path`: `<dir>/.<file name>.tmp`.
 pub fn temp_path(path: &Path) -> PathBuf {
@@ -26,16 +101,30 @@ pub fn write_atomic(
     write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> io::Result<()> {
     let tmp = temp_path(path);
-    let result = (|| {
+    let file = {
+        let mut temps = temps();
+        if temps.abandoned {
+            return Err(abandoned_error());
+        }
         let file = fs::File::create(&tmp)?;
+        temps.paths.push(tmp.clone());
+        file
+    };
+    let result = (|| {
         let mut out = io::BufWriter::with_capacity(1 << 20, file);
         write(&mut out)?;
         let file = out.into_inner().map_err(|e| e.into_error())?;
         file.sync_all()?;
+        let mut temps = temps();
+        temps.paths.retain(|p| p != &tmp);
+        if temps.abandoned {
+            return Err(abandoned_error());
+        }
         fs::rename(&tmp, path)
     })();
     if result.is_err() {
         let _ = fs::remove_file(&tmp);
+        temps().paths.retain(|p| p != &tmp);
     }
     result
 }
