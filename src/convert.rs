@@ -11,17 +11,21 @@ use crate::mapping::{
 use crate::pipeline::calibrate::HeadingSource;
 use crate::pipeline::legacy::LegacyAnimation;
 use crate::pipeline::{self, Converted, PipelineError, PipelineOptions};
-use crate::read::{ReadError, ReadOptions, read_take};
+use crate::read::{
+    ReadError, ReadOptions, check_text, is_stream, read_stream, read_take, read_take_from_bytes,
+    sniff,
+};
 use crate::report::{BoneSeries, ReportInput, render_report};
 use crate::rig::file::RigLoadError;
 use crate::rig::{LengthUnit, Rig, load_rig};
 use crate::rotation::euler::filter_track;
 use crate::take::{LineReport, Take};
+use crate::world::{World, WorldFrom};
 use crate::write::gltf::{GltfWriteError, to_glb, to_gltf};
 use crate::write::sidecar::{
     OutputRecord, PipelineRecord, RigRecord, Sidecar, SourceRecord, TrimRecord,
 };
-use crate::write::write_atomic;
+use crate::write::{remove_take_outputs, write_atomic};
 use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -76,6 +80,8 @@ pub struct ConvertSettings {
     pub units: LengthUnit,
     /// Also write `<stem>.report.html`.
     pub report: bool,
+    /// Where `read.world` came from (`--world` or the config file), when it is set.
+    pub world_from: Option<WorldFrom>,
 }
 
 impl Default for ConvertSettings {
@@ -88,6 +94,7 @@ impl Default for ConvertSettings {
             formats: vec![OutputFormat::Bvh, OutputFormat::Glb],
             units: LengthUnit::Metres,
             report: false,
+            world_from: None,
         }
     }
 }
@@ -338,16 +345,26 @@ fn mapping_record(
     }
 }
 
-/// Converts one take into `out_dir`.
-pub fn convert(
-    input: &Path,
-    out_dir: &Path,
-    settings: &ConvertSettings,
-) -> Result<ConvertOutcome, ConvertError> {
-    // Hash the source on the second core while the first parses it.
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Reads the take and the SHA-256 of its source. A file or folder is hashed on the second core
+/// while the first parses it, once a file has passed the text check (so a huge binary file is
+/// refused without being read); a stream (FIFO, process substitution) is read once into memory,
+/// then hashed and parsed.
+fn read_and_hash(input: &Path, options: &ReadOptions) -> Result<(Take, String), ReadError> {
+    if is_stream(input) {
+        let bytes = read_stream(input)?;
+        let sha256 = hex(&Sha256::digest(&bytes));
+        return Ok((read_take_from_bytes(&bytes, input, options)?, sha256));
+    }
+    if input.is_file() {
+        check_text(input, &sniff(input)?)?;
+    }
     let (take, sha256) = std::thread::scope(|scope| {
         let hasher = scope.spawn(|| source_sha256(input));
-        let take = read_take(input, &settings.read);
+        let take = read_take(input, options);
         let sha = hasher
             .join()
             .unwrap_or_else(|_| Err(io::Error::other("hashing thread panicked")));
@@ -358,6 +375,45 @@ pub fn convert(
         path: input.to_path_buf(),
         source: e,
     })?;
+    Ok((take, sha256))
+}
+
+/// The world of a take's sensors and where it came from: `--world` or the config file's
+/// (`settings.read.world`, which the reader already applied), else the mapping's, else the
+/// format's own.
+fn resolve_world(
+    take: &Take,
+    settings: &ConvertSettings,
+    mapping_world: Option<World>,
+) -> (World, WorldFrom) {
+    match (settings.read.world, mapping_world) {
+        (Some(w), _) => (w, settings.world_from.unwrap_or(WorldFrom::Flag)),
+        (None, Some(w)) => (w, WorldFrom::Mapping),
+        (None, None) => (take.source().world, WorldFrom::Format),
+    }
+}
+
+/// Converts one take into `out_dir`. A failure after the outputs were started (a full disk, say)
+/// removes every output of the take, the sidecar first, so no partial take is left behind; a
+/// failure before that leaves an earlier conversion's outputs as they were.
+pub fn convert(
+    input: &Path,
+    out_dir: &Path,
+    settings: &ConvertSettings,
+) -> Result<ConvertOutcome, ConvertError> {
+    convert_unclean(input, out_dir, settings).inspect_err(|e| {
+        if matches!(e, ConvertError::Write { .. } | ConvertError::Gltf { .. }) {
+            remove_take_outputs(out_dir, &take_stem(input));
+        }
+    })
+}
+
+fn convert_unclean(
+    input: &Path,
+    out_dir: &Path,
+    settings: &ConvertSettings,
+) -> Result<ConvertOutcome, ConvertError> {
+    let (take, sha256) = read_and_hash(input, &settings.read)?;
     let file_mapping = match &settings.mapping {
         Some(path) => match load_mapping(path)? {
             MappingFile::Quaternion(m) => Some((m, path.clone())),
@@ -373,6 +429,8 @@ pub fn convert(
         .unwrap_or_else(|| PathBuf::from("(sensors matched to bones by name)"));
     let mut pipeline_options = settings.pipeline.clone();
     pipeline_options.keep_unsmoothed |= settings.report;
+    let (world, world_from) = resolve_world(&take, settings, mapping.world);
+    pipeline_options.world = Some(world);
     let converted = pipeline::run(&take, &rig, &mapping, &mapping_name, &pipeline_options)
         .map_err(|source| ConvertError::Pipeline {
             input: input.to_path_buf(),
@@ -421,6 +479,7 @@ pub fn convert(
             sha256,
             format: source_format,
             world: converted.world,
+            world_from,
             start_timestamp,
         },
         fps: animation.fps(),
@@ -607,11 +666,13 @@ fn convert_legacy(
         source,
     })?;
     // What the sidecar needs of the take; its samples are freed before the outputs are built.
+    let (world, world_from) = resolve_world(&take, settings, None);
     let source = SourceRecord {
         path: input.to_string_lossy().into_owned(),
         sha256,
         format: take.source().format,
-        world: take.source().world,
+        world,
+        world_from,
         start_timestamp: take.source().start_timestamp.clone(),
     };
     let TakeFacts {

@@ -64,6 +64,20 @@ impl Fps {
         (n as f64 * self.den as f64) / self.num as f64
     }
 
+    /// The first frame at or after `t_s` (a tolerance of 1e-9 frame counts a time on a frame up to
+    /// float noise as on it).
+    pub fn first_frame_at_or_after(self, t_s: f64) -> u64 {
+        (t_s * self.num as f64 / self.den as f64 - 1e-9)
+            .ceil()
+            .max(0.0) as u64
+    }
+
+    /// The last frame at or before `t_s` (the same tolerance), `None` before frame 0.
+    pub fn last_frame_at_or_before(self, t_s: f64) -> Option<u64> {
+        let f = (t_s * self.num as f64 / self.den as f64 + 1e-9).floor();
+        (f >= 0.0).then_some(f as u64)
+    }
+
     /// Frames on the grid from t = 0 to `last_s` inclusive: floor(last_s · fps) + 1.
     pub fn frame_count(self, last_s: f64) -> u64 {
         if !(last_s.is_finite() && last_s > 0.0) {

@@ -55,6 +55,17 @@ impl fmt::Display for World {
     }
 }
 
+/// Where a take's world came from, in precedence order: `--world`, the config file's `world`,
+/// the mapping's `world`, the format's own (its default, or what the file declares).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WorldFrom {
+    Flag,
+    Config,
+    Mapping,
+    Format,
+}
+
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("unknown world frame `{0}`; expected one of enu, ned, nwu, opensim")]
 pub struct UnknownWorld(pub String);

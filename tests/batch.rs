@@ -174,7 +174,7 @@ fn expected_outputs(good: &[&str], bad: &[&str]) -> BTreeSet<String> {
 fn take_lines(stderr: &str) -> Vec<(String, String)> {
     assert!(!stderr.contains('\x1b'), "ANSI codes on a pipe: {stderr}");
     let shape = regex::Regex::new(
-        r#"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d+Z +(?:INFO (converted) source="([^"]+)" duration_ms=\d+ outputs=\[".+"\]|ERROR (failed) source="([^"]+)" duration_ms=\d+ error_report="[^"]+\.error\.json" reason=".+")$"#,
+        r#"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d+Z +(?:INFO (converted) source="([^"]+)" duration_ms=\d+(?: dropped_lines=\d+ repaired_lines=\d+)? outputs=\[".+"\]|ERROR (failed) source="([^"]+)" duration_ms=\d+ error_report="[^"]+\.error\.json" reason=".+")$"#,
     )
     .unwrap();
     let mut lines: Vec<(String, String)> = stderr
@@ -534,4 +534,39 @@ fn a_torn_ledger_line_is_ignored() {
     assert_eq!(batch(&input, &out, &[]).counts(), (1, 0, 3));
     let ledger = Ledger::load(&out).unwrap();
     assert_eq!((ledger.len(), ledger.skipped_lines()), (4, 1));
+}
+
+/// A folder symlink cycle (`ln -s .. in/sub/up`) is walked once, with one warning, and an
+/// inbox's `imubake.yaml` and a mapping kept beside the takes are not takes.
+#[test]
+#[cfg(unix)]
+fn a_symlink_cycle_and_settings_files_are_not_takes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("in");
+    fs::create_dir_all(input.join("sub")).unwrap();
+    fs::write(input.join("a.log"), sample()).unwrap();
+    fs::write(input.join("sub/b.log"), sample()).unwrap();
+    std::os::unix::fs::symlink("..", input.join("sub/up")).unwrap();
+    fs::write(input.join("imubake.yaml"), "smoothing: none\n").unwrap();
+    fs::copy(
+        repo("samples/sou_wave.mapping.json"),
+        input.join("mapping.json"),
+    )
+    .unwrap();
+    fs::copy(repo("rigs/sou12.yaml"), input.join("sub/body.yml")).unwrap();
+    let out = tmp.path().join("out");
+    let run = batch(&input, &out, &[]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert_eq!(run.counts(), (2, 0, 0), "{}", run.stdout);
+    assert_eq!(
+        files(&out),
+        expected_outputs(&["a.log", "sub/b.log"], &[]),
+        "no bogus failures or nested folders"
+    );
+    let cycle_warnings = run
+        .stderr
+        .lines()
+        .filter(|l| l.contains(" WARN ") && l.contains("symlink cycle"))
+        .count();
+    assert_eq!(cycle_warnings, 1, "{}", run.stderr);
 }

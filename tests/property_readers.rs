@@ -98,3 +98,197 @@ fn paper_regex_examples_by_hand() {
         assert_eq!(sou::format_problem(line.as_bytes()).is_none(), ok, "{line}");
     }
 }
+
+mod one_line_edits {
+    //! Changing one data line of a valid take (any edit but inserting NUL bytes) costs at most
+    //! that line's samples: every other sample keeps its sensor, value and time (issue 10). The
+    //! one exception the rule cannot avoid is documented: when the edited line is itself a valid
+    //! sample of a sensor at a time that sensor already has, the two cannot be told apart and the
+    //! first in the file is kept.
+
+    use imubake::read::{ReadOptions, imubake_csv, sou};
+    use imubake::take::{OrientationTrack, Take};
+    use proptest::prelude::*;
+    use std::collections::BTreeMap;
+    use std::path::Path;
+
+    /// (sensor, time in µs on the source's own clock) → the sample's values.
+    type Samples = BTreeMap<(String, i64), [u64; 4]>;
+
+    fn source_zero_s(take: &Take) -> f64 {
+        let text = &take.source().start_timestamp;
+        let (value, unit) = text.split_once(' ').unwrap();
+        let v: f64 = value.parse().unwrap();
+        match unit {
+            "s" => v,
+            "ms" => v * 1e-3,
+            _ => panic!("unexpected unit in {text}"),
+        }
+    }
+
+    fn samples(take: &Take) -> Samples {
+        let zero = source_zero_s(take);
+        let mut out = Samples::new();
+        for s in take.sensors() {
+            let key = |t: f64| (s.id().to_string(), ((t + zero) * 1e6).round() as i64);
+            match s.orientation() {
+                Some(OrientationTrack::Quaternion(track)) => {
+                    for (t, q) in track.iter() {
+                        let q = q.into_inner();
+                        out.insert(key(t), [q.w, q.i, q.j, q.k].map(f64::to_bits));
+                    }
+                }
+                Some(OrientationTrack::YawPitchRollDeg(track)) => {
+                    for (t, v) in track.iter() {
+                        out.insert(key(t), [v.yaw, v.pitch, v.roll, 0.0].map(f64::to_bits));
+                    }
+                }
+                None => {}
+            }
+        }
+        out
+    }
+
+    /// The (sensor, µs) keys a line names when it reads as data: CSV `time_s,sensor,…`, SOU
+    /// `ms,ID,…` (two sensors). Loose on purpose: a key named by a line that is then dropped
+    /// only widens what the test allows for that line.
+    fn keys_of_line(line: &str, sou_format: bool) -> Vec<(String, i64)> {
+        let fields: Vec<&str> = line.trim_end_matches('\r').split(',').collect();
+        if fields.len() < 2 {
+            return Vec::new();
+        }
+        let Ok(t) = fields[0].trim().parse::<f64>() else {
+            return Vec::new();
+        };
+        if !t.is_finite() {
+            return Vec::new();
+        }
+        if sou_format {
+            let us = (t * 1e3).round() as i64;
+            vec![
+                (format!("{}_0", fields[1]), us),
+                (format!("{}_1", fields[1]), us),
+            ]
+        } else {
+            vec![(fields[1].to_string(), (t * 1e6).round() as i64)]
+        }
+    }
+
+    fn base(sou_format: bool) -> String {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let (file, lines) = if sou_format {
+            ("samples/sou_wave.log", 240)
+        } else {
+            ("samples/walk.csv", 403)
+        };
+        let text = std::fs::read_to_string(root.join(file)).unwrap();
+        text.lines().take(lines).map(|l| format!("{l}\n")).collect()
+    }
+
+    fn read(bytes: &[u8], sou_format: bool) -> Result<Take, String> {
+        let r = if sou_format {
+            sou::read_from(bytes, Path::new("e.log"), &ReadOptions::default())
+        } else {
+            imubake_csv::read_from(bytes, Path::new("e.csv"), &ReadOptions::default())
+        };
+        r.map_err(|e| e.to_string())
+    }
+
+    /// An edit of one line: substitute, insert or delete a byte (never a NUL), cut the line, or
+    /// replace one digit with another (times and values stay numbers: the hard case).
+    #[derive(Debug, Clone)]
+    enum Edit {
+        Substitute(prop::sample::Index, u8),
+        Insert(prop::sample::Index, u8),
+        Delete(prop::sample::Index),
+        Cut(prop::sample::Index),
+        Digit(prop::sample::Index, u8),
+    }
+
+    fn edit() -> impl Strategy<Value = Edit> {
+        let byte = 1u8..=255;
+        prop_oneof![
+            (any::<prop::sample::Index>(), byte.clone()).prop_map(|(i, b)| Edit::Substitute(i, b)),
+            (any::<prop::sample::Index>(), byte).prop_map(|(i, b)| Edit::Insert(i, b)),
+            any::<prop::sample::Index>().prop_map(Edit::Delete),
+            any::<prop::sample::Index>().prop_map(Edit::Cut),
+            (any::<prop::sample::Index>(), 0u8..10).prop_map(|(i, d)| Edit::Digit(i, d)),
+            (any::<prop::sample::Index>(), 0u8..10).prop_map(|(i, d)| Edit::Digit(i, d)),
+        ]
+    }
+
+    fn apply(line: &mut Vec<u8>, e: &Edit) {
+        if line.is_empty() {
+            if let Edit::Insert(_, b) | Edit::Substitute(_, b) = e {
+                line.push(*b);
+            }
+            return;
+        }
+        match e {
+            Edit::Substitute(i, b) => {
+                let i = i.index(line.len());
+                line[i] = *b;
+            }
+            Edit::Insert(i, b) => line.insert(i.index(line.len() + 1), *b),
+            Edit::Delete(i) => {
+                line.remove(i.index(line.len()));
+            }
+            Edit::Cut(i) => line.truncate(i.index(line.len())),
+            Edit::Digit(i, d) => {
+                let digits: Vec<usize> = (0..line.len())
+                    .filter(|&k| line[k].is_ascii_digit())
+                    .collect();
+                if !digits.is_empty() {
+                    line[digits[i.index(digits.len())]] = b'0' + d;
+                }
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(600))]
+
+        #[test]
+        fn one_edited_line_costs_at_most_its_own_samples(
+            sou_format in any::<bool>(),
+            which in any::<prop::sample::Index>(),
+            edits in proptest::collection::vec(edit(), 1..5),
+        ) {
+            let text = base(sou_format);
+            let lines: Vec<&str> = text.lines().collect();
+            // Data lines only: not the CSV's comments and header.
+            let data: Vec<usize> = (0..lines.len())
+                .filter(|&i| sou_format || !(lines[i].starts_with('#') || lines[i].starts_with("time_s")))
+                .collect();
+            let at = data[which.index(data.len())];
+            let mut line = lines[at].as_bytes().to_vec();
+            for e in &edits {
+                apply(&mut line, e);
+            }
+            let edited_line = String::from_utf8_lossy(&line).into_owned();
+            let mut bytes = Vec::new();
+            for (i, l) in lines.iter().enumerate() {
+                if i == at { bytes.extend_from_slice(&line); } else { bytes.extend_from_slice(l.as_bytes()); }
+                bytes.push(b'\n');
+            }
+            let original = samples(&read(text.as_bytes(), sou_format).unwrap());
+            let edited = read(&bytes, sou_format)
+                .map_err(|e| TestCaseError::fail(format!("{e}\nedited line {}: {edited_line:?}", at + 1)))?;
+            let edited = samples(&edited);
+            // What the line may cost or add: its own samples, and what the edited text names.
+            let mut allowed: Vec<(String, i64)> = keys_of_line(lines[at], sou_format);
+            for piece in edited_line.split(['\n', '\r']) {
+                allowed.extend(keys_of_line(piece, sou_format));
+            }
+            for (key, value) in &original {
+                if allowed.contains(key) { continue; }
+                prop_assert_eq!(edited.get(key), Some(value),
+                    "sample {:?} lost or changed by editing line {} into {:?}", key, at + 1, edited_line);
+            }
+            for key in edited.keys() {
+                prop_assert!(original.contains_key(key) || allowed.contains(key),
+                    "sample {:?} appeared from editing line {} into {:?}", key, at + 1, edited_line);
+            }
+        }
+    }
+}

@@ -579,13 +579,14 @@ struct TakeLine {
 }
 
 /// The per-take lines of a run's stderr. Every line that names a take's outcome must have the
-/// whole shape: `<UTC time>  INFO converted source="…" duration_ms=N outputs=[…]` or
+/// whole shape: `<UTC time>  INFO converted source="…" duration_ms=N [dropped_lines=N
+/// repaired_lines=N] outputs=[…]` or
 /// `<UTC time> ERROR failed source="…" duration_ms=N error_report="…" reason="…"`; and stderr,
 /// not a terminal here, carries no colour codes.
 fn take_lines(stderr: &str) -> Vec<TakeLine> {
     assert!(!stderr.contains('\x1b'), "ANSI codes on a pipe: {stderr}");
     let shape = regex::Regex::new(
-        r#"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d+Z +(?:INFO (converted) source="([^"]+)" duration_ms=(\d+) outputs=\[".+"\]|ERROR (failed) source="([^"]+)" duration_ms=(\d+) error_report="[^"]+\.error\.json" reason=".+")$"#,
+        r#"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d+Z +(?:INFO (converted) source="([^"]+)" duration_ms=(\d+)(?: dropped_lines=\d+ repaired_lines=\d+)? outputs=\[".+"\]|ERROR (failed) source="([^"]+)" duration_ms=(\d+) error_report="[^"]+\.error\.json" reason=".+")$"#,
     )
     .unwrap();
     let mut lines = Vec::new();
@@ -701,4 +702,359 @@ fn a_watch_run_logs_one_line_per_take_with_its_duration() {
         (lines[0].source.as_str(), lines[0].status.as_str()),
         ("bad.log", "failed")
     );
+}
+
+/// `imubake watch <inbox> --out <out> <args>`, with nothing else (no mapping).
+fn bare_watch(inbox: &Path, out: &Path, args: &[&str]) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_imubake"));
+    cmd.arg("watch")
+        .arg(inbox)
+        .arg("--out")
+        .arg(out)
+        .args(args)
+        .env_remove("RUST_LOG")
+        .env_remove("IMUBAKE_LOG");
+    cmd
+}
+
+/// SIGTERM, then the exit code (within `secs`).
+fn terminate(mut child: Child, secs: u64) -> i32 {
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status.code().unwrap_or(-1);
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("the watcher did not stop within {secs} s of SIGTERM");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The issue's reproduction: a symlink to /dev/zero and a FIFO in the inbox, then a good take:
+/// the good take converts, each bad entry is warned about once, and SIGTERM stops the watcher.
+#[cfg(unix)]
+fn special_files_do_not_stall(extra: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    let log = dir.path().join("stderr.txt");
+    let child = watch_cmd(&inbox, &out, extra)
+        .stdout(Stdio::null())
+        .stderr(fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(800));
+    std::os::unix::fs::symlink("/dev/zero", inbox.join("z.log")).unwrap();
+    assert!(
+        Command::new("mkfifo")
+            .arg(inbox.join("p.log"))
+            .status()
+            .unwrap()
+            .success()
+    );
+    std::thread::sleep(Duration::from_millis(2000));
+    fs::write(inbox.join("g2.log"), sample()).unwrap();
+    assert!(
+        wait_for(&out.join("g2.imubake.json"), 20),
+        "a good take after a FIFO and /dev/zero converts"
+    );
+    // Several rescans later, still one warning each.
+    std::thread::sleep(Duration::from_millis(2500));
+    assert_eq!(terminate(child, 10), 0);
+    let stderr = fs::read_to_string(&log).unwrap();
+    let warned = |name: &str| {
+        stderr
+            .lines()
+            .filter(|l| l.contains(" WARN ") && l.contains(name))
+            .count()
+    };
+    assert_eq!(warned("p.log"), 1, "{stderr}");
+    assert_eq!(warned("z.log"), 1, "{stderr}");
+    assert!(stderr.contains("is a FIFO, not a regular file"), "{stderr}");
+    assert!(stderr.contains("symlink to something outside"), "{stderr}");
+    assert_eq!(visible(&out), ["g2.bvh", "g2.imubake.json"]);
+
+    // --once and batch finish too.
+    let run = watch_cmd(&inbox, &out, &["--once"]).output().unwrap();
+    assert_eq!(run.status.code(), Some(0));
+    let run = Command::new(env!("CARGO_BIN_EXE_imubake"))
+        .arg("batch")
+        .arg(&inbox)
+        .arg("--out")
+        .arg(dir.path().join("batch_out"))
+        .args(fast_args())
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(0));
+}
+
+#[test]
+#[cfg(unix)]
+fn a_fifo_and_dev_zero_in_the_inbox_do_not_stall_the_watcher() {
+    special_files_do_not_stall(&[]);
+}
+
+#[test]
+#[cfg(unix)]
+fn a_fifo_and_dev_zero_in_a_polled_inbox_do_not_stall_the_watcher() {
+    special_files_do_not_stall(&["--poll", "200"]);
+}
+
+/// A symlink to a file outside the inbox is not followed: nothing of the target reaches an
+/// output or the log (the target is a log whose debug line would be reported if it were read).
+/// With --follow-symlinks it is read, which shows the check would catch a leak.
+#[test]
+#[cfg(unix)]
+fn a_symlink_out_of_the_inbox_is_never_read() {
+    const SECRET: &str = "SECRET-4d1f9c-outside-the-inbox";
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, outside) = (dir.path().join("in"), dir.path().join("outside"));
+    fs::create_dir_all(&inbox).unwrap();
+    fs::create_dir_all(&outside).unwrap();
+    let mut secret = format!("{SECRET}\n").into_bytes();
+    secret.extend(sample());
+    fs::write(outside.join("private.log"), &secret).unwrap();
+    std::os::unix::fs::symlink(outside.join("private.log"), inbox.join("leak.log")).unwrap();
+    fs::write(inbox.join("good.log"), sample()).unwrap();
+
+    let leaked = |out: &Path, stderr: &str| -> bool {
+        fn walk(dir: &Path, found: &mut bool) {
+            for e in fs::read_dir(dir).into_iter().flatten().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    walk(&p, found);
+                } else if fs::read(&p).is_ok_and(|b| String::from_utf8_lossy(&b).contains(SECRET)) {
+                    *found = true;
+                }
+            }
+        }
+        let mut found = stderr.contains(SECRET);
+        walk(out, &mut found);
+        found
+    };
+    let out = dir.path().join("out");
+    let run = watch_cmd(&inbox, &out, &["--once"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{stderr}");
+    assert!(!leaked(&out, &stderr), "{stderr}");
+    assert!(
+        stderr.contains("leak.log") && stderr.contains("outside"),
+        "{stderr}"
+    );
+    assert_eq!(visible(&out), ["good.bvh", "good.imubake.json"]);
+
+    let batch_out = dir.path().join("batch_out");
+    let run = Command::new(env!("CARGO_BIN_EXE_imubake"))
+        .arg("batch")
+        .arg(&inbox)
+        .arg("--out")
+        .arg(&batch_out)
+        .args(fast_args())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{stderr}");
+    assert!(!leaked(&batch_out, &stderr), "{stderr}");
+
+    let followed = dir.path().join("followed");
+    let run = watch_cmd(&inbox, &followed, &["--once", "--follow-symlinks"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{stderr}");
+    assert!(
+        leaked(&followed, &stderr),
+        "--follow-symlinks reads the target"
+    );
+}
+
+/// A long take that cannot finish within the 2 s grace after SIGTERM is abandoned: the watcher
+/// exits 0, no temporary file is left, no ledger line and no output of the take exist. (Two
+/// minutes of the walk sample smoothed with a 40 s Gaussian: tens of seconds of work in a file
+/// of 13 MB.)
+#[test]
+fn sigterm_during_a_long_take_abandons_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    let walk = fs::read_to_string(repo("samples/walk.csv")).unwrap();
+    let mut long = std::io::BufWriter::new(fs::File::create(inbox.join("long.csv")).unwrap());
+    writeln!(long, "time_s,sensor,qw,qx,qy,qz").unwrap();
+    for k in 0..10 {
+        for line in walk.lines().filter(|l| !l.starts_with(['#', 't'])) {
+            let (t, rest) = line.split_once(',').unwrap();
+            let t: f64 = t.parse().unwrap();
+            writeln!(long, "{:.6},{rest}", t + 12.0 * k as f64).unwrap();
+        }
+    }
+    drop(long);
+    let log = dir.path().join("stderr.txt");
+    let mapping = repo("mappings/paper000_16imu_mixamo.json");
+    let started = Instant::now();
+    let args = [
+        "--mapping",
+        mapping.to_str().unwrap(),
+        "--smooth",
+        "gaussian:sigma=40",
+    ];
+    let child = bare_watch(&inbox, &out, &args)
+        .stdout(Stdio::null())
+        .stderr(fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    // The backlog take settles (500 ms) and its conversion starts.
+    std::thread::sleep(Duration::from_millis(1500));
+    let code = terminate(child, 10);
+    let took = started.elapsed();
+    let stderr = fs::read_to_string(&log).unwrap();
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stderr.contains("abandoned"), "{stderr}");
+    assert!(took < Duration::from_secs(8), "stopped after {took:?}");
+    let left: Vec<String> = fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n != ".imubake")
+        .collect();
+    assert!(left.is_empty(), "left in the output folder: {left:?}");
+    assert!(
+        ledger(&out).is_empty(),
+        "no ledger line for an abandoned take"
+    );
+}
+
+/// A capture dropped before the inbox's `imubake.yaml` fails for want of a mapping; when the
+/// config arrives, it is tried again.
+#[test]
+fn a_take_that_failed_for_lack_of_settings_is_retried_when_they_arrive() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    fs::write(inbox.join("early.log"), sample()).unwrap();
+    let child = bare_watch(&inbox, &out, &["--poll", "100", "--format", "bvh"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    assert!(wait_for(&out.join("early.error.json"), 20));
+    let report = fs::read_to_string(out.join("early.error.json")).unwrap();
+    assert!(report.contains("no mapping given"), "{report}");
+    fs::write(
+        inbox.join("imubake.yaml"),
+        format!(
+            "mapping: {}\n",
+            repo("samples/sou_wave.mapping.json").display()
+        ),
+    )
+    .unwrap();
+    assert!(
+        wait_for(&out.join("early.imubake.json"), 20),
+        "the failed take is retried under the new settings"
+    );
+    assert!(!out.join("early.error.json").exists());
+    assert_eq!(interrupt(child), 0);
+}
+
+/// A capture rewritten with the same size and its modification time put back, within 2 s of its
+/// conversion: converted again (events: the close-write; polling: the ctime changed).
+fn same_size_rewrite(extra: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    let take = inbox.join("take.log");
+    fs::write(&take, sample()).unwrap();
+    let mtime = fs::metadata(&take).unwrap().modified().unwrap();
+    let child = spawn(&inbox, &out, extra);
+    assert!(wait_for(&out.join("take.imubake.json"), 20));
+    let first = sidecar_sha(&out, "take");
+    // One digit of the first data line changed: same size.
+    let text = String::from_utf8(sample()).unwrap();
+    let at = text
+        .find("5234872,N0,90.38")
+        .expect("the sample's first data line");
+    let mut edited = text.into_bytes();
+    edited[at + "5234872,N0,90.3".len()] = b'9';
+    {
+        let mut f = fs::OpenOptions::new().write(true).open(&take).unwrap();
+        f.write_all(&edited).unwrap();
+        f.set_modified(mtime).unwrap();
+    }
+    assert_eq!(fs::metadata(&take).unwrap().modified().unwrap(), mtime);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while sidecar_sha(&out, "take") == first {
+        assert!(Instant::now() < deadline, "the rewrite was not converted");
+        std::thread::sleep(Duration::from_millis(50));
+        while !out.join("take.imubake.json").exists() {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+    assert_eq!(sidecar_sha(&out, "take"), sha256_hex(&edited));
+    assert_eq!(interrupt(child), 0);
+}
+
+#[test]
+fn a_same_size_rewrite_with_its_mtime_restored_is_converted_again() {
+    same_size_rewrite(&[]);
+}
+
+#[test]
+fn a_polled_same_size_rewrite_with_its_mtime_restored_is_converted_again() {
+    same_size_rewrite(&["--poll", "200"]);
+}
+
+/// A ledger written before settings fingerprints had a schema (a bare SHA-256): each take converts
+/// again once, with one log line saying why, and not again after that.
+#[test]
+fn an_older_ledger_reconverts_each_take_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    for name in ["a.log", "b.log"] {
+        fs::write(inbox.join(name), sample()).unwrap();
+    }
+    let run = watch_cmd(&inbox, &out, &["--once"]).output().unwrap();
+    assert!(run.status.success());
+    // Rewrite the ledger as the previous release wrote it: fingerprints without a schema.
+    let path = out.join(".imubake/ledger.jsonl");
+    let old: String = fs::read_to_string(&path)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let mut v: Value = serde_json::from_str(l).unwrap();
+            v["settings"] = Value::from("ab".repeat(32));
+            v.as_object_mut().unwrap().remove("ctime_ns");
+            format!("{v}\n")
+        })
+        .collect();
+    fs::write(&path, old).unwrap();
+    let run = watch_cmd(&inbox, &out, &["--once"]).output().unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        stdout.contains("converted 2, failed 0, skipped 0"),
+        "{stdout}"
+    );
+    assert_eq!(
+        stderr
+            .lines()
+            .filter(|l| l.contains("converted by an earlier imubake"))
+            .count(),
+        1,
+        "{stderr}"
+    );
+    assert!(stderr.contains("2 take(s)"), "{stderr}");
+    let run = watch_cmd(&inbox, &out, &["--once"]).output().unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.contains("converted 0, failed 0, skipped 2"),
+        "{stdout}"
+    );
+    let ledger = ledger(&out);
+    assert_eq!(ledger["a.log"].len(), 2, "{:?}", ledger["a.log"]);
 }

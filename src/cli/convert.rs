@@ -61,6 +61,10 @@ pub struct SettingsArgs {
     /// rates and the warnings.
     #[arg(long)]
     report: bool,
+    /// Convert even when frames × joints exceed 5·10⁷ (about 1 GB of BVH; usually a mistyped
+    /// --fps).
+    #[arg(long)]
+    force: bool,
     #[command(flatten)]
     read: ReadArgs,
 }
@@ -91,6 +95,10 @@ impl SettingsArgs {
             None => ConvertSettings::default(),
         };
         self.read.apply(&mut settings.read);
+        if self.read.sets_world() {
+            settings.world_from = Some(imubake::world::WorldFrom::Flag);
+        }
+        settings.pipeline.force |= self.force;
         if self.mapping.is_some() {
             settings.mapping = self.mapping.clone();
         }
@@ -129,6 +137,10 @@ impl SettingsArgs {
 }
 
 pub fn run(args: ConvertArgs) -> anyhow::Result<ExitCode> {
+    if let Err(e) = super::check_out_folder(&args.out) {
+        eprintln!("error: {e}");
+        return Ok(ExitCode::from(2));
+    }
     let mut stems: HashMap<String, &PathBuf> = HashMap::new();
     for input in &args.inputs {
         if let Some(other) = stems.insert(take_stem(input), input) {
@@ -149,6 +161,18 @@ pub fn run(args: ConvertArgs) -> anyhow::Result<ExitCode> {
             Ok(outcome) => {
                 for w in &outcome.sidecar.warnings {
                     eprintln!("warning: {}: {w}", input.display());
+                }
+                let (dropped, repaired) = (
+                    outcome.sidecar.dropped_lines.len(),
+                    outcome.sidecar.repaired_lines.len(),
+                );
+                if dropped + repaired > 0 {
+                    eprintln!(
+                        "note: {}: dropped {dropped} line{}, repaired {repaired}; see {}",
+                        input.display(),
+                        if dropped == 1 { "" } else { "s" },
+                        outcome.sidecar_path.display()
+                    );
                 }
                 if !args.json {
                     let outputs: Vec<_> = outcome

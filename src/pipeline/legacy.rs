@@ -340,6 +340,10 @@ pub fn run(
         .map(|(t, _)| t.last_time_s())
         .fold(0.0, f64::max);
     let (first, frames) = super::frame_range(options.fps, t_last, options.trim)?;
+    let times: Vec<&[f64]> = relative.values().map(|(t, _)| t.times_s()).collect();
+    super::check_frame_rate(options, &times, frames, rig.len(), &mut warnings)?;
+    let names: Vec<&str> = relative.keys().map(String::as_str).collect();
+    warnings.extend(super::long_gaps(&names, &times, options.fps, first, frames));
 
     let mut not_smoothed: Vec<String> = Vec::new();
     let mut euler_deg = vec![vec![[0.0; 3]; frames]; rig.len()];

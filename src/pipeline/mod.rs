@@ -37,6 +37,17 @@ pub struct Trim {
     pub end_s: f64,
 }
 
+impl std::fmt::Display for Trim {
+    /// `start:end` as given, an open end left empty.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:", self.start_s)?;
+        if self.end_s < f64::MAX {
+            write!(f, "{}", self.end_s)?;
+        }
+        Ok(())
+    }
+}
+
 impl std::str::FromStr for Trim {
     type Err = String;
     /// `start:end` in seconds; either side may be empty (`:10`, `2.5:`).
@@ -72,6 +83,11 @@ pub struct PipelineOptions {
     pub smoothing: Smoothing,
     /// Also produce the local rotations without smoothing (for the report).
     pub keep_unsmoothed: bool,
+    /// Allow more than [`MAX_KEYFRAMES`] keyframes.
+    pub force: bool,
+    /// The sensors' world when the user set it (`--world`, the config file): over the mapping's
+    /// and the take's.
+    pub world: Option<World>,
 }
 
 impl Default for PipelineOptions {
@@ -82,6 +98,8 @@ impl Default for PipelineOptions {
             root: RootMode::Fixed,
             smoothing: Smoothing::default(),
             keep_unsmoothed: false,
+            force: false,
+            world: None,
         }
     }
 }
@@ -127,13 +145,21 @@ pub enum PipelineError {
         pose: String,
         known: String,
     },
+    #[error("--trim {trim} keeps no frame of the take (frames run from 0 s to {end_take_s:.3} s)")]
+    EmptyTrim { trim: Trim, end_take_s: f64 },
     #[error(
-        "--trim {start_s}:{end_s} keeps no frame of the take (frames run from 0 s to {end_take_s:.3} s)"
+        "--fps {fps} over {frames} frames × {joints} joints is {cells} keyframes (about {mb} MB of BVH), \
+         more than the {max} allowed without --force. Hint: a lower --fps (the fastest mapped sensor \
+         samples at {sensor_hz:.1} Hz), or --force"
     )]
-    EmptyTrim {
-        start_s: f64,
-        end_s: f64,
-        end_take_s: f64,
+    TooManyFrames {
+        fps: Fps,
+        frames: usize,
+        joints: usize,
+        cells: usize,
+        mb: usize,
+        max: usize,
+        sensor_hz: f64,
     },
     #[error(transparent)]
     Animation(#[from] AnimationError),
@@ -243,17 +269,128 @@ pub(crate) fn frame_range(
     let Some(trim) = trim else {
         return Ok((0, total));
     };
-    let (num, den) = (fps.num() as f64, fps.den() as f64);
-    let first = (trim.start_s * num / den - 1e-9).ceil().max(0.0) as usize;
-    let last = ((trim.end_s.min(1e12) * num / den + 1e-9).floor() as usize).min(total - 1);
+    let first = fps.first_frame_at_or_after(trim.start_s) as usize;
+    let last = (fps
+        .last_frame_at_or_before(trim.end_s.min(1e12))
+        .unwrap_or(0) as usize)
+        .min(total - 1);
     if first > last || first >= total {
         return Err(PipelineError::EmptyTrim {
-            start_s: trim.start_s,
-            end_s: trim.end_s,
+            trim,
             end_take_s: fps.frame_time_of(total as u64 - 1),
         });
     }
     Ok((first, last - first + 1))
+}
+
+/// Frames × joints above this (about 1 GB of BVH) are refused unless `force`.
+pub const MAX_KEYFRAMES: usize = 50_000_000;
+
+/// A gap in a sensor's samples longer than this is a warning naming the frames interpolated
+/// across it.
+pub const LONG_GAP_S: f64 = 1.0;
+
+/// The mean rate of a track's sample times, Hz (`None` for a single sample).
+fn mean_rate_hz(times: &[f64]) -> Option<f64> {
+    let n = times.len();
+    (n > 1 && times[n - 1] > times[0]).then(|| (n - 1) as f64 / (times[n - 1] - times[0]))
+}
+
+/// Warns when the frame rate is more than twice the fastest mapped sensor's (the frames between
+/// samples are interpolation, not data); refuses more than [`MAX_KEYFRAMES`] keyframes unless
+/// `options.force`.
+fn check_frame_rate(
+    options: &PipelineOptions,
+    times: &[&[f64]],
+    frames: usize,
+    joints: usize,
+    warnings: &mut Vec<String>,
+) -> Result<(), PipelineError> {
+    let fastest = times
+        .iter()
+        .filter_map(|t| mean_rate_hz(t))
+        .fold(0.0, f64::max);
+    let fps = options.fps.as_f64();
+    if fastest > 0.0 && fps > 2.0 * fastest {
+        warnings.push(format!(
+            "--fps {} is more than twice the fastest mapped sensor's rate ({fastest:.1} Hz): most \
+             frames are interpolated between samples",
+            options.fps
+        ));
+    }
+    let cells = frames.saturating_mul(joints);
+    if cells > MAX_KEYFRAMES && !options.force {
+        return Err(PipelineError::TooManyFrames {
+            fps: options.fps,
+            frames,
+            joints,
+            cells,
+            // About 22 bytes per keyframe of text in the BVH.
+            mb: cells / 1_000_000 * 22,
+            max: MAX_KEYFRAMES,
+            sensor_hz: fastest,
+        });
+    }
+    Ok(())
+}
+
+/// A warning for each stretch longer than [`LONG_GAP_S`] in which a mapped sensor has no sample,
+/// naming the frames interpolated across it (frame numbers of the output, after `--trim`); gaps
+/// that all sensors share are one warning.
+fn long_gaps(
+    sensors: &[&str],
+    times: &[&[f64]],
+    fps: Fps,
+    first: usize,
+    frames: usize,
+) -> Vec<String> {
+    // (start, end) → sensors, in order of first appearance.
+    let mut gaps: Vec<((f64, f64), Vec<&str>)> = Vec::new();
+    for (id, t) in sensors.iter().zip(times) {
+        for w in t.windows(2).filter(|w| w[1] - w[0] > LONG_GAP_S) {
+            let key = (w[0], w[1]);
+            // The same stretch in another sensor (within a sample's worth) counts as one gap.
+            match gaps
+                .iter_mut()
+                .find(|(k, _)| (k.0 - key.0).abs() < 0.1 && (k.1 - key.1).abs() < 0.1)
+            {
+                Some((_, ids)) => ids.push(id),
+                None => gaps.push((key, vec![id])),
+            }
+        }
+    }
+    let last_frame = first + frames - 1;
+    gaps.into_iter()
+        .filter_map(|((start, end), ids)| {
+            // Frames strictly inside the gap, on the output's numbering.
+            let a = (fps.first_frame_at_or_after(start) as usize).max(first);
+            let b = (fps.last_frame_at_or_before(end)? as usize).min(last_frame);
+            let inside = if a > b {
+                "no frame falls inside it".to_string()
+            } else {
+                format!(
+                    "frames {}–{} are interpolated across it",
+                    a - first,
+                    b - first
+                )
+            };
+            let who = if ids.len() == sensors.len() && sensors.len() > 1 {
+                "all sensors".to_string()
+            } else if ids.len() <= 4 {
+                format!(
+                    "sensor{} {}",
+                    if ids.len() == 1 { "" } else { "s" },
+                    ids.join(", ")
+                )
+            } else {
+                format!("{} sensors ({}, …)", ids.len(), ids[..3].join(", "))
+            };
+            Some(format!(
+                "a {:.1} s gap in {who} from {start:.3} s to {end:.3} s: {inside}",
+                end - start
+            ))
+        })
+        .collect()
 }
 
 /// Maps `f` over `items` on up to as many threads as there are cores, keeping the order.
@@ -303,7 +440,10 @@ pub fn run(
 ) -> Result<Converted, PipelineError> {
     let file = mapping_file.display().to_string();
     let mut warnings = Vec::new();
-    let world = mapping.world.unwrap_or(take.source().world);
+    let world = options
+        .world
+        .or(mapping.world)
+        .unwrap_or(take.source().world);
     let to_rig = world.to_rig();
     let resolved = mapping.resolve(rig, mapping_file)?;
 
@@ -424,6 +564,10 @@ pub fn run(
         .map(|t| t.last_time_s())
         .fold(0.0, f64::max);
     let (first, frames) = frame_range(options.fps, t_last, options.trim)?;
+    let times: Vec<&[f64]> = bone_tracks.iter().map(|t| t.times_s()).collect();
+    check_frame_rate(options, &times, frames, rig.len(), &mut warnings)?;
+    let names: Vec<&str> = sensors.iter().map(|s| s.sensor.as_str()).collect();
+    warnings.extend(long_gaps(&names, &times, options.fps, first, frames));
     // Per sensor (independent, so spread over the cores): 3b. smoothing at the sensor's own rate
     // (smooth::tracks explains why), then resampling onto the frame grid.
     let per_sensor = parallel_map(sensors.iter().zip(bone_tracks).collect(), |(s, track)| {

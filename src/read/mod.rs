@@ -212,14 +212,16 @@ pub fn detect_format(path: &Path) -> Result<InputFormat, ReadError> {
     }
     let head = sniff(path)?;
     check_text(path, &head)?;
-    detect_bytes(&head).ok_or_else(|| {
-        ReadError::format(
-            path,
-            "unknown capture format; expected a SOU log (`timestamp_ms,SOU_ID,yaw1,...`), an imubake CSV \
-             (header with time_s|time_ms|time_us and sensor), an OpenSense .sto, a Movella DOT CSV or an \
-             Xsens MTw .txt. Hint: name the format with --input-format",
-        )
-    })
+    detect_bytes(&head).ok_or_else(|| unknown_format(path))
+}
+
+fn unknown_format(path: &Path) -> ReadError {
+    ReadError::format(
+        path,
+        "unknown capture format; expected a SOU log (`timestamp_ms,SOU_ID,yaw1,...`), an imubake CSV \
+         (header with time_s|time_ms|time_us and sensor), an OpenSense .sto, a Movella DOT CSV or an \
+         Xsens MTw .txt. Hint: name the format with --input-format",
+    )
 }
 
 /// Detects a single-file format from its first bytes.
@@ -368,8 +370,60 @@ pub(crate) fn visible_files(dir: &Path) -> Result<Vec<PathBuf>, ReadError> {
     Ok(files)
 }
 
-/// Reads one take from a file or session folder.
+/// How much of a stream (a FIFO, a device) is checked for NUL bytes before the rest is read.
+pub const STREAM_CHECK_BYTES: usize = 1 << 20;
+
+/// Whether `path` is a stream to read once (a FIFO, `/dev/stdin`, a process substitution) rather
+/// than a regular file or a folder, which can be opened again.
+pub fn is_stream(path: &Path) -> bool {
+    fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
+}
+
+/// Reads a stream to its end, refusing it as binary when its first [`STREAM_CHECK_BYTES`] hold a
+/// NUL byte (so `/dev/zero` is refused after 1 MiB instead of read forever).
+pub fn read_stream(path: &Path) -> Result<Vec<u8>, ReadError> {
+    let mut file = fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
+    let mut bytes = Vec::new();
+    file.by_ref()
+        .take(STREAM_CHECK_BYTES as u64)
+        .read_to_end(&mut bytes)
+        .map_err(|e| ReadError::io(path, e))?;
+    check_text(path, &bytes)?;
+    file.read_to_end(&mut bytes)
+        .map_err(|e| ReadError::io(path, e))?;
+    Ok(bytes)
+}
+
+/// Reads one take from a single file's bytes (a stream read with [`read_stream`]).
+pub fn read_take_from_bytes(
+    bytes: &[u8],
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Take, ReadError> {
+    let head = &bytes[..bytes.len().min(SNIFF_BYTES)];
+    check_text(path, head)?;
+    let format = match options.format {
+        Some(f) => f,
+        None => detect_bytes(head).ok_or_else(|| unknown_format(path))?,
+    };
+    match format {
+        InputFormat::Sou => sou::read_from(bytes, path, options),
+        InputFormat::ImubakeCsv => imubake_csv::read_from(bytes, path, options),
+        InputFormat::OpensenseSto => opensense_sto::read_from(bytes, path, options),
+        InputFormat::XsensDot => xsens_dot::read_from(bytes, path, options),
+        InputFormat::XsensMtw => xsens_mtw::read_from(bytes, path, options),
+        InputFormat::XioSession => Err(ReadError::format(
+            path,
+            "an x-IMU3 session is a folder; a stream cannot hold one. Hint: pass the session folder",
+        )),
+    }
+}
+
+/// Reads one take from a file, a session folder, or a stream (FIFO, process substitution).
 pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    if is_stream(path) {
+        return read_take_from_bytes(&read_stream(path)?, path, options);
+    }
     let format = match options.format {
         Some(f) => f,
         None => detect_format(path)?,

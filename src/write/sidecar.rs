@@ -32,6 +32,8 @@ pub struct SourceRecord {
     pub format: crate::read::InputFormat,
     /// The world the sensors were read in (the mapping's `world` when it overrides the format's).
     pub world: crate::world::World,
+    /// Where the world came from: `flag`, `config`, `mapping` or `format`.
+    pub world_from: crate::world::WorldFrom,
     pub start_timestamp: String,
 }
 
