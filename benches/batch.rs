@@ -49,19 +49,15 @@ fn main() {
         bytes as f64 / 1e6
     );
 
+    let never_stop = AtomicBool::new(false);
+    let batch = |out: &Path, jobs: usize| {
+        run(&library, out, &settings, jobs, &never_stop, &|_| {}).expect("batch")
+    };
     let mut throughput = Vec::new();
     for jobs in [1, 2] {
         let out = dir.path().join(format!("out{jobs}"));
         let start = Instant::now();
-        let results = run(
-            &library,
-            &out,
-            &settings,
-            jobs,
-            &AtomicBool::new(false),
-            &|_| {},
-        )
-        .expect("batch");
+        let results = batch(&out, jobs);
         let secs = start.elapsed().as_secs_f64();
         let summary = Summary::of(&results);
         assert_eq!(summary.converted, takes, "{summary}");
@@ -74,15 +70,7 @@ fn main() {
         throughput.push(rate);
         if jobs == 2 {
             let start = Instant::now();
-            let results = run(
-                &library,
-                &out,
-                &settings,
-                jobs,
-                &AtomicBool::new(false),
-                &|_| {},
-            )
-            .expect("rerun");
+            let results = batch(&out, jobs);
             let summary = Summary::of(&results);
             assert_eq!(summary.skipped, takes, "{summary}");
             println!(

@@ -22,7 +22,8 @@
 //! duration, [`crate::batch::TakeResult::log`]); the binary installs the subscriber.
 
 use crate::batch::{
-    BatchTake, DiscoverOptions, Skipped, Summary, TakeResult, TakeStatus, discover, process_take,
+    BatchTake, DiscoverOptions, Skipped, Summary, TakeJob, TakeResult, TakeStatus, discover,
+    process_take,
 };
 use crate::convert::{ConvertSettings, source_sha256};
 use crate::ledger::{
@@ -423,11 +424,17 @@ impl Watch<'_> {
     ) -> Option<TakeResult> {
         let (tx, rx) = mpsc::channel();
         let ledger = Arc::clone(&self.ledger);
-        let (job, out) = (take.clone(), self.opts.out.clone());
+        let (owned_take, out) = (take.clone(), self.opts.out.clone());
         let spawned = std::thread::Builder::new()
             .name(format!("convert {}", take.rel))
             .spawn(move || {
-                let _ = tx.send(process_take(&job, &out, &settings, &fingerprint, &ledger));
+                let job = TakeJob {
+                    out_root: &out,
+                    settings: &settings,
+                    fingerprint: &fingerprint,
+                    ledger: &ledger,
+                };
+                let _ = tx.send(process_take(&owned_take, &job));
             });
         if let Err(e) = spawned {
             error!(

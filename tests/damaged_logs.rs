@@ -29,6 +29,21 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// `imubake convert <input> --mapping <paper 000's> --out <out> <extra>`.
+fn convert_with_walk_mapping(input: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mapping = repo_file(WALK_MAPPING);
+    let mut args = vec![
+        "convert",
+        s(input),
+        "--mapping",
+        s(&mapping),
+        "--out",
+        s(out),
+    ];
+    args.extend(extra);
+    run(&args)
+}
+
 fn sidecar(out: &Path, stem: &str) -> Value {
     let text = fs::read_to_string(out.join(format!("{stem}.imubake.json"))).expect("sidecar");
     serde_json::from_str(&text).expect("sidecar parses")
@@ -73,14 +88,7 @@ fn one_corrupted_timestamp_costs_one_line() {
     });
     fs::write(&g, &text).unwrap();
     let out = tmp.path().join("o");
-    let o = run(&[
-        "convert",
-        s(&g),
-        "--mapping",
-        s(&repo_file(WALK_MAPPING)),
-        "--out",
-        s(&out),
-    ]);
+    let o = convert_with_walk_mapping(&g, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let side = sidecar(&out, "g");
     let dropped = side["dropped_lines"].as_array().unwrap();
@@ -100,14 +108,7 @@ fn one_corrupted_timestamp_costs_one_line() {
     );
     // And the take is the clean take's length (the bad time did not stretch it to 11 days).
     let clean = tmp.path().join("clean");
-    let o = run(&[
-        "convert",
-        s(&repo_file(WALK)),
-        "--mapping",
-        s(&repo_file(WALK_MAPPING)),
-        "--out",
-        s(&clean),
-    ]);
+    let o = convert_with_walk_mapping(&repo_file(WALK), &clean, &[]);
     assert!(o.status.success());
     assert_eq!(side["frames"], sidecar(&clean, "walk")["frames"]);
 }
@@ -129,16 +130,7 @@ fn a_long_gap_is_a_warning_naming_its_frames() {
     let gap = tmp.path().join("gap.csv");
     fs::write(&gap, shifted).unwrap();
     let out = tmp.path().join("o");
-    let o = run(&[
-        "convert",
-        s(&gap),
-        "--mapping",
-        s(&repo_file(WALK_MAPPING)),
-        "--out",
-        s(&out),
-        "--fps",
-        "10",
-    ]);
+    let o = convert_with_walk_mapping(&gap, &out, &["--fps", "10"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let err = stderr(&o);
     let line = err
@@ -158,16 +150,7 @@ fn a_full_disk_leaves_nothing_of_the_take() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("o");
     // An earlier conversion's outputs, to be replaced.
-    let o = run(&[
-        "convert",
-        s(&repo_file(WALK)),
-        "--mapping",
-        s(&repo_file(WALK_MAPPING)),
-        "--out",
-        s(&out),
-        "--format",
-        "glb,bvh",
-    ]);
+    let o = convert_with_walk_mapping(&repo_file(WALK), &out, &["--format", "glb,bvh"]);
     assert!(o.status.success());
     assert_eq!(
         visible_files(&out),
@@ -227,26 +210,12 @@ fn a_stream_is_read_once_and_converts_like_its_file() {
         })
     };
     let (from_fifo, from_file) = (tmp.path().join("fifo"), tmp.path().join("file"));
-    let o = run(&[
-        "convert",
-        s(&fifo),
-        "--mapping",
-        s(&repo_file(WALK_MAPPING)),
-        "--out",
-        s(&from_fifo),
-    ]);
+    let o = convert_with_walk_mapping(&fifo, &from_fifo, &[]);
     writer.join().unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     let walk_copy = tmp.path().join("take2.csv");
     fs::copy(repo_file(WALK), &walk_copy).unwrap();
-    let o = run(&[
-        "convert",
-        s(&walk_copy),
-        "--mapping",
-        s(&repo_file(WALK_MAPPING)),
-        "--out",
-        s(&from_file),
-    ]);
+    let o = convert_with_walk_mapping(&walk_copy, &from_file, &[]);
     assert!(o.status.success());
     assert_eq!(
         fs::read(from_fifo.join("take.bvh")).unwrap(),
@@ -275,18 +244,8 @@ fn absurd_frame_rates_are_caught() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("o");
     let walk = s(&repo_file(WALK)).to_string();
-    let mapping = s(&repo_file(WALK_MAPPING)).to_string();
     // The walk's sensors sample at about 100 Hz: 240 fps is mostly interpolation.
-    let o = run(&[
-        "convert",
-        &walk,
-        "--mapping",
-        &mapping,
-        "--out",
-        s(&out),
-        "--fps",
-        "240",
-    ]);
+    let o = convert_with_walk_mapping(&repo_file(WALK), &out, &["--fps", "240"]);
     assert!(o.status.success());
     assert!(
         stderr(&o).contains("--fps 240 is more than twice the fastest mapped sensor's rate"),
@@ -306,16 +265,7 @@ fn absurd_frame_rates_are_caught() {
         }
     }
     fs::write(&long, doubled).unwrap();
-    let o = run(&[
-        "convert",
-        s(&long),
-        "--mapping",
-        &mapping,
-        "--out",
-        s(&out),
-        "--fps",
-        "100000",
-    ]);
+    let o = convert_with_walk_mapping(&long, &out, &["--fps", "100000"]);
     assert_eq!(o.status.code(), Some(1));
     let err = stderr(&o);
     assert!(
@@ -391,25 +341,15 @@ fn the_world_comes_from_the_flag_then_the_config_then_the_mapping_then_the_forma
 fn messages_say_what_is_wrong_once() {
     let tmp = tempfile::tempdir().unwrap();
     let walk = s(&repo_file(WALK)).to_string();
-    let mapping = s(&repo_file(WALK_MAPPING)).to_string();
     let out = tmp.path().join("o");
-    let o = run(&[
-        "convert",
-        &walk,
-        "--mapping",
-        &mapping,
-        "--out",
-        s(&out),
-        "--trim",
-        "20:",
-    ]);
+    let o = convert_with_walk_mapping(&repo_file(WALK), &out, &["--trim", "20:"]);
     let err = stderr(&o);
     assert!(err.contains("--trim 20: keeps no frame"), "{err}");
     assert!(!err.contains("179769"), "{err}");
 
     let file = tmp.path().join("a_file");
     fs::write(&file, "x").unwrap();
-    let o = run(&["convert", &walk, "--mapping", &mapping, "--out", s(&file)]);
+    let o = convert_with_walk_mapping(&repo_file(WALK), &file, &[]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("expected a folder"), "{}", stderr(&o));
     for (cmd, input) in [("batch", walk.as_str()), ("watch", s(tmp.path()))] {

@@ -11,7 +11,7 @@ pub use discover::{
     BatchTake, DiscoverError, DiscoverOptions, Discovery, FOLDER_CONFIG, SkipReason, Skipped,
     discover, is_session_folder, settings_file_kind, slash,
 };
-pub use process::process_take;
+pub use process::{TakeJob, process_take};
 pub use shard::Shard;
 
 use crate::convert::ConvertSettings;
@@ -187,7 +187,13 @@ pub fn run(
                 if stop.load(Ordering::SeqCst) {
                     return None;
                 }
-                let r = process_take(take, out_root, settings, &fingerprint, &ledger);
+                let job = TakeJob {
+                    out_root,
+                    settings,
+                    fingerprint: &fingerprint,
+                    ledger: &ledger,
+                };
+                let r = process_take(take, &job);
                 on_result(&r);
                 Some(r)
             })

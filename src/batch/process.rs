@@ -21,26 +21,30 @@ fn remove_quietly(path: &Path) {
 /// ledger: outputs of an earlier conversion that the new one did not write are removed, and so is
 /// `<stem>.error.json`; on failure the take's outputs are removed (sidecar first) and
 /// `<stem>.error.json` written.
-pub fn process_take(
-    take: &BatchTake,
-    out_root: &Path,
-    settings: &ConvertSettings,
-    fingerprint: &str,
-    ledger: &Ledger,
-) -> TakeResult {
+pub fn process_take(take: &BatchTake, job: &TakeJob<'_>) -> TakeResult {
     let clock = Instant::now();
-    let mut result = process_take_untimed(take, out_root, settings, fingerprint, ledger);
+    let mut result = process_take_untimed(take, job);
     result.duration = clock.elapsed();
     result
 }
 
-fn process_take_untimed(
-    take: &BatchTake,
-    out_root: &Path,
-    settings: &ConvertSettings,
-    fingerprint: &str,
-    ledger: &Ledger,
-) -> TakeResult {
+/// What every take of a run shares: where outputs go, the settings and their fingerprint, the
+/// ledger.
+#[derive(Debug, Clone, Copy)]
+pub struct TakeJob<'a> {
+    pub out_root: &'a Path,
+    pub settings: &'a ConvertSettings,
+    pub fingerprint: &'a str,
+    pub ledger: &'a Ledger,
+}
+
+fn process_take_untimed(take: &BatchTake, job: &TakeJob<'_>) -> TakeResult {
+    let TakeJob {
+        out_root,
+        settings,
+        fingerprint,
+        ledger,
+    } = *job;
     let out_dir = out_root.join(&take.out_dir);
     let stat = SourceStat::of(&take.path);
     if let Ok(stat) = stat {
@@ -134,16 +138,7 @@ fn process_take_untimed(
             }
             result
         }
-        Err(report) => fail(
-            take,
-            out_root,
-            &out_dir,
-            report,
-            stat,
-            fingerprint,
-            started,
-            ledger,
-        ),
+        Err(report) => fail(take, job, &out_dir, report, stat, started),
     }
 }
 
@@ -157,17 +152,20 @@ fn skipped(take: &BatchTake, ledger: &Ledger) -> TakeResult {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
 fn fail(
     take: &BatchTake,
-    out_root: &Path,
+    job: &TakeJob<'_>,
     out_dir: &Path,
     report: ErrorReport,
     stat: Option<SourceStat>,
-    fingerprint: &str,
     started: u64,
-    ledger: &Ledger,
 ) -> TakeResult {
+    let TakeJob {
+        out_root,
+        fingerprint,
+        ledger,
+        ..
+    } = *job;
     // No outputs of an earlier version stay beside the error: the sidecar first.
     crate::write::remove_take_outputs(out_dir, &take.stem);
     if let Some(prev) = ledger.latest(&take.rel) {
