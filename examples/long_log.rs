@@ -13,7 +13,11 @@ fn main() {
         std::process::exit(2);
     };
     let minutes: usize = args.next().and_then(|m| m.parse().ok()).unwrap_or(60);
-    match common::write_log(std::path::Path::new(&out), minutes, &common::PAPER000_SENSORS) {
+    match common::write_log(
+        std::path::Path::new(&out),
+        minutes,
+        &common::PAPER000_SENSORS,
+    ) {
         Ok(bytes) => println!("{out}: {minutes} min, {bytes} bytes"),
         Err(e) => {
             eprintln!("{out}: {e}");

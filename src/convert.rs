@@ -1,70 +1,33 @@
-//! One take from capture to outputs: read → pipeline → Euler filter → BVH / glTF → sidecar
-//! (written last, so its appearance means the take is complete).
+//! One take from capture to outputs: read (and hash) → mapping and rig → the pipeline (the
+//! quaternion stages, or paper 002's Euler mode for Listing-2 mappings) → one [`Conversion`]
+//! whatever the mode → each [`Output`] the settings ask for → the sidecar, written last, so its
+//! appearance means the take is complete.
 
 use crate::anim::Animation;
-use crate::bvh::{BvhMotion, write_bvh_in};
 use crate::inspect::SensorSummaries;
 use crate::mapping::{
     CalibrationRecord, LegacyMapping, LegacyTargetRecord, Mapping, MappingError, MappingFile,
     MappingRecord, Mount, SensorRecord, load_mapping,
 };
 use crate::pipeline::calibrate::HeadingSource;
-use crate::pipeline::legacy::LegacyAnimation;
-use crate::pipeline::{self, Converted, PipelineError, PipelineOptions};
+use crate::pipeline::{self, PipelineError, PipelineOptions};
 use crate::read::{
     ReadError, ReadOptions, check_text, is_stream, read_stream, read_take, read_take_from_bytes,
     sniff,
 };
-use crate::report::{BoneSeries, ReportInput, render_report};
 use crate::rig::file::RigLoadError;
 use crate::rig::{LengthUnit, Rig, load_rig};
-use crate::rotation::euler::filter_track;
 use crate::take::{LineReport, Take};
 use crate::world::{World, WorldFrom};
-use crate::write::gltf::{GltfWriteError, to_glb, to_gltf};
-use crate::write::sidecar::{
-    OutputRecord, PipelineRecord, RigRecord, Sidecar, SourceRecord, TrimRecord,
-};
-use crate::write::{remove_take_outputs, write_atomic};
+use crate::write::gltf::GltfWriteError;
+use crate::write::report::{ReportInput, bone_series};
+use crate::write::sidecar::{PipelineRecord, RigRecord, Sidecar, SourceRecord, TrimRecord};
+pub use crate::write::{Output, OutputFormat};
+use crate::write::{OutputError, TakeOutputs, remove_take_outputs, write_atomic};
 use nalgebra::UnitQuaternion;
-use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::io::{self, Read};
 use std::path::{Path, PathBuf};
-
-/// An output file format.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum OutputFormat {
-    Bvh,
-    Glb,
-    /// `.gltf` JSON with a `.bin` buffer beside it.
-    Gltf,
-}
-
-impl OutputFormat {
-    pub fn name(self) -> &'static str {
-        match self {
-            OutputFormat::Bvh => "bvh",
-            OutputFormat::Glb => "glb",
-            OutputFormat::Gltf => "gltf",
-        }
-    }
-}
-
-impl std::str::FromStr for OutputFormat {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "bvh" => Ok(OutputFormat::Bvh),
-            "glb" => Ok(OutputFormat::Glb),
-            "gltf" => Ok(OutputFormat::Gltf),
-            _ => Err(format!(
-                "unknown output format `{s}`; expected bvh, glb or gltf"
-            )),
-        }
-    }
-}
 
 /// Everything a conversion needs besides the input and the output folder.
 #[derive(Debug, Clone, PartialEq)]
@@ -82,6 +45,22 @@ pub struct ConvertSettings {
     pub report: bool,
     /// Where `read.world` came from (`--world` or the config file), when it is set.
     pub world_from: Option<WorldFrom>,
+}
+
+impl ConvertSettings {
+    /// The outputs these settings ask for, in order: each format once, then the report.
+    pub fn outputs(&self) -> Vec<Output> {
+        let mut outputs: Vec<Output> = Vec::new();
+        for f in &self.formats {
+            if !outputs.contains(&Output::Animation(*f)) {
+                outputs.push(Output::Animation(*f));
+            }
+        }
+        if self.report {
+            outputs.push(Output::Report);
+        }
+        outputs
+    }
 }
 
 impl Default for ConvertSettings {
@@ -135,6 +114,49 @@ pub enum ConvertError {
         #[source]
         source: GltfWriteError,
     },
+}
+
+impl From<OutputError> for ConvertError {
+    fn from(e: OutputError) -> Self {
+        match e {
+            OutputError::Write { path, source } => ConvertError::Write { path, source },
+            OutputError::Gltf { path, source } => ConvertError::Gltf { path, source },
+        }
+    }
+}
+
+impl crate::diagnostic::Diagnostic for ConvertError {
+    fn file(&self) -> Option<&Path> {
+        match self {
+            ConvertError::Read(e) => e.file(),
+            // A mapping error's file is the mapping; the report names the take's own file.
+            ConvertError::Mapping(_) => None,
+            ConvertError::Rig(e) => e.file(),
+            ConvertError::Pipeline { input, .. } | ConvertError::NoMapping { input, .. } => {
+                Some(input)
+            }
+            ConvertError::Write { path, .. } | ConvertError::Gltf { path, .. } => Some(path),
+        }
+    }
+
+    fn line(&self) -> Option<u64> {
+        match self {
+            ConvertError::Read(e) => e.line(),
+            _ => None,
+        }
+    }
+
+    fn hint(&self) -> Option<&'static str> {
+        match self {
+            ConvertError::Read(e) => e.hint(),
+            ConvertError::Mapping(e) => e.hint(),
+            ConvertError::Rig(e) => e.hint(),
+            ConvertError::Pipeline { .. } | ConvertError::NoMapping { .. } => None,
+            ConvertError::Write { .. } | ConvertError::Gltf { .. } => {
+                Some("check the output folder: free space and permissions")
+            }
+        }
+    }
 }
 
 /// The name outputs of `input` are written under: the file name without its extension, or the
@@ -200,50 +222,6 @@ fn collect_files(root: &Path, dir: &Path, out: &mut Vec<PathBuf>) -> io::Result<
     Ok(())
 }
 
-/// The mapping to use and the file it came from (for messages and the sidecar).
-fn resolve_mapping(
-    input: &Path,
-    take: &Take,
-    settings: &ConvertSettings,
-    file_mapping: Option<(Mapping, PathBuf)>,
-) -> Result<(Mapping, Option<PathBuf>, Rig), ConvertError> {
-    let rig_name = settings
-        .rig
-        .clone()
-        .or_else(|| file_mapping.as_ref().and_then(|(m, _)| m.rig.clone()))
-        .unwrap_or_else(|| "mixamo".to_string());
-    let rig = load_rig(&rig_name)?;
-    match file_mapping {
-        Some((m, path)) => Ok((m, Some(path), rig)),
-        None => {
-            let ids: Vec<&str> = take.sensors().iter().map(|s| s.id()).collect();
-            let mapping = Mapping::by_name(&rig, &ids).ok_or_else(|| ConvertError::NoMapping {
-                input: input.to_path_buf(),
-                rig: rig_name.clone(),
-                sensors: ids.join(", "),
-            })?;
-            Ok((mapping, None, rig))
-        }
-    }
-}
-
-/// Euler angles in degrees, `[joint][frame]`, each joint in its own channel order, with the
-/// discontinuity filter applied.
-pub fn euler_degrees(animation: &Animation) -> Vec<Vec<[f64; 3]>> {
-    animation
-        .rig()
-        .joints()
-        .iter()
-        .enumerate()
-        .map(|(j, joint)| {
-            filter_track(animation.local(j), joint.order)
-                .into_iter()
-                .map(|a| a.map(f64::to_degrees))
-                .collect()
-        })
-        .collect()
-}
-
 /// What the sidecar and the report keep of a take once its samples are dropped.
 struct TakeFacts {
     sensor_summaries: SensorSummaries,
@@ -267,38 +245,6 @@ impl TakeFacts {
     }
 }
 
-/// Each animated bone's Euler angles before (`unsmoothed`, when kept) and after smoothing.
-fn report_bones(
-    animation: &Animation,
-    unsmoothed: Option<&[Vec<UnitQuaternion<f64>>]>,
-    euler_after: &[Vec<[f64; 3]>],
-) -> Vec<BoneSeries> {
-    let fps = animation.fps();
-    let times: Vec<f64> = (0..animation.frames() as u64)
-        .map(|n| fps.frame_time_of(n))
-        .collect();
-    animation
-        .rig()
-        .joints()
-        .iter()
-        .enumerate()
-        .filter(|(j, _)| animation.is_animated(*j))
-        .map(|(j, joint)| BoneSeries {
-            bone: joint.name.clone(),
-            order: joint.order,
-            times_s: times.clone(),
-            before_deg: match unsmoothed {
-                Some(raw) => filter_track(&raw[j], joint.order)
-                    .into_iter()
-                    .map(|a| a.map(f64::to_degrees))
-                    .collect(),
-                None => euler_after[j].clone(),
-            },
-            after_deg: euler_after[j].clone(),
-        })
-        .collect()
-}
-
 /// What a conversion wrote.
 #[derive(Debug, Clone)]
 pub struct ConvertOutcome {
@@ -307,7 +253,7 @@ pub struct ConvertOutcome {
 }
 
 fn mapping_record(
-    converted: &Converted,
+    converted: &pipeline::Converted,
     rig: &Rig,
     mapping: &Mapping,
     file: Option<&Path>,
@@ -414,97 +360,156 @@ fn convert_unclean(
     settings: &ConvertSettings,
 ) -> Result<ConvertOutcome, ConvertError> {
     let (take, sha256) = read_and_hash(input, &settings.read)?;
-    let file_mapping = match &settings.mapping {
+    let conversion = match &settings.mapping {
         Some(path) => match load_mapping(path)? {
-            MappingFile::Quaternion(m) => Some((m, path.clone())),
-            MappingFile::Legacy(m) => {
-                return convert_legacy(input, out_dir, settings, take, sha256, &m, path);
-            }
+            MappingFile::Quaternion(m) => quaternion_mode(input, &take, settings, m, Some(path))?,
+            MappingFile::Legacy(m) => legacy_mode(input, &take, settings, &m, path)?,
         },
-        None => None,
+        None => {
+            let rig = rig_for(settings, None)?;
+            let ids: Vec<&str> = take.sensors().iter().map(|s| s.id()).collect();
+            let mapping = Mapping::by_name(&rig, &ids).ok_or_else(|| ConvertError::NoMapping {
+                input: input.to_path_buf(),
+                rig: settings.rig.clone().unwrap_or_else(|| "mixamo".into()),
+                sensors: ids.join(", "),
+            })?;
+            quaternion_mode(input, &take, settings, mapping, None)?
+        }
     };
-    let (mapping, mapping_path, rig) = resolve_mapping(input, &take, settings, file_mapping)?;
-    let mapping_name = mapping_path
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("(sensors matched to bones by name)"));
-    let mut pipeline_options = settings.pipeline.clone();
-    pipeline_options.keep_unsmoothed |= settings.report;
-    let (world, world_from) = resolve_world(&take, settings, mapping.world);
-    pipeline_options.world = Some(world);
-    let converted = pipeline::run(&take, &rig, &mapping, &mapping_name, &pipeline_options)
-        .map_err(|source| ConvertError::Pipeline {
-            input: input.to_path_buf(),
-            source,
+    let source = SourceRecord {
+        path: input.to_string_lossy().into_owned(),
+        sha256,
+        format: take.source().format,
+        world: conversion.world.0,
+        world_from: conversion.world.1,
+        start_timestamp: take.source().start_timestamp.clone(),
+    };
+    // What the sidecar and the report keep of the take; its samples are freed here, before the
+    // outputs are built (which halves the peak memory of a long take).
+    let facts = TakeFacts::of(take, &conversion.warnings);
+    write_take(input, out_dir, settings, source, facts, conversion)
+}
+
+/// A converted take, whichever mapping mode made it: the animation, what the writers need of it,
+/// and what the sidecar says of how it was made.
+struct Conversion {
+    animation: Animation,
+    /// BVH channel values ([`TakeOutputs::euler_deg`]).
+    euler_deg: Vec<Vec<[f64; 3]>>,
+    /// Local rotations before smoothing, `[joint][frame]`, for the report.
+    unsmoothed: Option<Vec<Vec<UnitQuaternion<f64>>>>,
+    mapping: MappingRecord,
+    pipeline: PipelineRecord,
+    /// The sensors' world, and where it came from.
+    world: (World, WorldFrom),
+    warnings: Vec<String>,
+}
+
+/// The rig: `--rig`, else the mapping's, else `mixamo`.
+fn rig_for(settings: &ConvertSettings, mapping_rig: Option<&str>) -> Result<Rig, ConvertError> {
+    let name = settings.rig.as_deref().or(mapping_rig).unwrap_or("mixamo");
+    Ok(load_rig(name)?)
+}
+
+/// The quaternion pipeline ([`pipeline::run`]) with a quaternion mapping (`file`: where it came
+/// from; `None` when the sensors drive the bones named like them).
+fn quaternion_mode(
+    input: &Path,
+    take: &Take,
+    settings: &ConvertSettings,
+    mapping: Mapping,
+    file: Option<&Path>,
+) -> Result<Conversion, ConvertError> {
+    let rig = rig_for(settings, mapping.rig.as_deref())?;
+    let mapping_name = file.map_or_else(
+        || PathBuf::from("(sensors matched to bones by name)"),
+        Path::to_path_buf,
+    );
+    let mut options = settings.pipeline.clone();
+    options.keep_unsmoothed |= settings.report;
+    let (world, world_from) = resolve_world(take, settings, mapping.world);
+    options.world = Some(world);
+    let converted =
+        pipeline::run(take, &rig, &mapping, &mapping_name, &options).map_err(|source| {
+            ConvertError::Pipeline {
+                input: input.to_path_buf(),
+                source,
+            }
         })?;
-    // What the sidecar needs of the take; the samples themselves are no longer needed, so a long
-    // take's memory is freed before the outputs are built.
-    let source_format = take.source().format;
-    let start_timestamp = take.source().start_timestamp.clone();
-    let TakeFacts {
-        sensor_summaries,
-        warnings,
-        dropped_lines,
-        repaired_lines,
-    } = TakeFacts::of(take, &converted.warnings);
-    let animation = &converted.animation;
-
-    let stem = take_stem(input);
-    let euler = euler_degrees(animation);
-    let mut outputs = write_outputs(out_dir, &stem, animation, Some(&euler), settings)?;
-    if settings.report {
-        let path = out_dir.join(format!("{stem}.report.html"));
-        let bones = report_bones(animation, converted.unsmoothed.as_deref(), &euler);
-        let html = render_report(&ReportInput {
-            take: &stem,
-            source: &input.to_string_lossy(),
-            fps: animation.fps().to_string(),
-            smoothing: settings.pipeline.smoothing.describe(),
-            bones,
-            sensors: &sensor_summaries,
-            warnings: &warnings,
-            dropped_lines: dropped_lines.len(),
-        });
-        write_atomic(&path, |w| w.write_all(html.as_bytes())).map_err(write_err(&path))?;
-        outputs.push(OutputRecord {
-            format: "report",
-            path: format!("{stem}.report.html"),
-        });
-    }
-
-    let h = converted.calibration.heading;
-    let sidecar = Sidecar {
-        imubake_version: env!("CARGO_PKG_VERSION"),
-        source: SourceRecord {
-            path: input.to_string_lossy().into_owned(),
-            sha256,
-            format: source_format,
-            world: converted.world,
-            world_from,
-            start_timestamp,
-        },
-        fps: animation.fps(),
-        frames: animation.frames(),
-        duration_s: animation.duration_s(),
-        rig: RigRecord {
-            name: rig.name().to_string(),
-            units: settings.units.name(),
-            bones: rig.len(),
-        },
-        mapping: mapping_record(&converted, &rig, &mapping, mapping_path.as_deref()),
+    let heading = &converted.calibration;
+    Ok(Conversion {
+        euler_deg: pipeline::output::euler_degrees(&converted.animation),
+        mapping: mapping_record(&converted, &rig, &mapping, file),
         pipeline: pipeline_record(
             settings,
-            &converted.calibration.heading_source,
-            h.scaled_axis().y.to_degrees(),
+            &heading.heading_source,
+            heading.heading.scaled_axis().y.to_degrees(),
             converted.first_frame,
             "quaternion",
         ),
-        outputs,
-        sensors: sensor_summaries,
-        dropped_lines,
-        repaired_lines,
-        warnings,
-    };
-    write_sidecar(out_dir, &stem, sidecar)
+        world: (converted.world, world_from),
+        unsmoothed: converted.unsmoothed,
+        warnings: converted.warnings,
+        animation: converted.animation,
+    })
+}
+
+/// Paper 002's pipeline for a Listing-2 mapping ([`pipeline::legacy`]): the signed yaw/pitch/roll
+/// channel copy onto `--rig` (default `mixamo`), parents from Table 1 (the `sou12` rig), every
+/// joint written with BVH channels `Zrotation Yrotation Xrotation` (Blender's `XYZ` mode), the
+/// root fixed at rest. Sidecar: `pipeline.mode = "legacy-euler"`, `pipeline.heading = "none"`,
+/// `mapping.legacy` lists each target.
+fn legacy_mode(
+    input: &Path,
+    take: &Take,
+    settings: &ConvertSettings,
+    mapping: &LegacyMapping,
+    mapping_path: &Path,
+) -> Result<Conversion, ConvertError> {
+    let rig = rig_for(settings, None)?;
+    let table1 = load_rig("sou12")?;
+    let legacy = pipeline::legacy::run(
+        take,
+        &rig,
+        &table1,
+        mapping,
+        mapping_path,
+        &settings.pipeline,
+    )
+    .map_err(|source| ConvertError::Pipeline {
+        input: input.to_path_buf(),
+        source,
+    })?;
+    let world = resolve_world(take, settings, None);
+    let out_rig = legacy.animation.rig();
+    Ok(Conversion {
+        mapping: MappingRecord {
+            file: Some(mapping_path.to_string_lossy().into_owned()),
+            rig: out_rig.name().to_string(),
+            world: world.0,
+            calibration: None,
+            sensors: Vec::new(),
+            legacy: Some(
+                legacy
+                    .targets
+                    .iter()
+                    .map(|t| LegacyTargetRecord::new(&t.target, t.parent.clone()))
+                    .collect(),
+            ),
+        },
+        pipeline: pipeline_record(
+            settings,
+            &HeadingSource::None,
+            0.0,
+            legacy.first_frame,
+            "legacy-euler",
+        ),
+        world,
+        unsmoothed: None,
+        warnings: legacy.warnings,
+        euler_deg: legacy.euler_deg,
+        animation: legacy.animation,
+    })
 }
 
 /// The sidecar's `pipeline`: what was done, in which mode.
@@ -531,20 +536,16 @@ fn pipeline_record(
     }
 }
 
-fn write_err(path: &Path) -> impl FnOnce(io::Error) -> ConvertError {
-    let path = path.to_path_buf();
-    move |source| ConvertError::Write { path, source }
-}
-
-/// Writes the requested formats of `animation` as `<out_dir>/<stem>.*`. The BVH gets `euler_deg`
-/// (`[joint][frame]`, degrees, each joint's order) when given, else [`euler_degrees`].
-fn write_outputs(
+/// Writes each output the settings ask for as `<out_dir>/<stem>.*`, then the sidecar, last.
+fn write_take(
+    input: &Path,
     out_dir: &Path,
-    stem: &str,
-    animation: &Animation,
-    euler_deg: Option<&[Vec<[f64; 3]>]>,
     settings: &ConvertSettings,
-) -> Result<Vec<OutputRecord>, ConvertError> {
+    source: SourceRecord,
+    facts: TakeFacts,
+    conversion: Conversion,
+) -> Result<ConvertOutcome, ConvertError> {
+    let stem = take_stem(input);
     std::fs::create_dir_all(out_dir).map_err(|source| ConvertError::Write {
         path: out_dir.to_path_buf(),
         source,
@@ -552,140 +553,48 @@ fn write_outputs(
     // A sidecar left by an earlier conversion would claim a complete take while its outputs are
     // being replaced, and after a failure: it goes before any output is touched.
     let old_sidecar = out_dir.join(format!("{stem}.imubake.json"));
-    if let Err(e) = std::fs::remove_file(&old_sidecar)
-        && e.kind() != io::ErrorKind::NotFound
+    if let Err(source) = std::fs::remove_file(&old_sidecar)
+        && source.kind() != io::ErrorKind::NotFound
     {
-        return Err(write_err(&old_sidecar)(e));
+        return Err(ConvertError::Write {
+            path: old_sidecar,
+            source,
+        });
     }
-    let mut outputs = Vec::new();
-    for format in &settings.formats {
-        match format {
-            OutputFormat::Bvh => {
-                let path = out_dir.join(format!("{stem}.bvh"));
-                let filtered;
-                let euler_deg = match euler_deg {
-                    Some(e) => e,
-                    None => {
-                        filtered = euler_degrees(animation);
-                        &filtered
-                    }
-                };
-                let motion = BvhMotion {
-                    rig: animation.rig(),
-                    fps: animation.fps(),
-                    root_positions: animation.root_positions(),
-                    euler_deg,
-                };
-                write_atomic(&path, |w| write_bvh_in(w, &motion, settings.units))
-                    .map_err(write_err(&path))?;
-                outputs.push(OutputRecord {
-                    format: "bvh",
-                    path: format!("{stem}.bvh"),
-                });
-            }
-            OutputFormat::Glb => {
-                let path = out_dir.join(format!("{stem}.glb"));
-                let bytes = to_glb(animation, stem).map_err(|source| ConvertError::Gltf {
-                    path: path.clone(),
-                    source,
-                })?;
-                write_atomic(&path, |w| w.write_all(&bytes)).map_err(write_err(&path))?;
-                outputs.push(OutputRecord {
-                    format: "glb",
-                    path: format!("{stem}.glb"),
-                });
-            }
-            OutputFormat::Gltf => {
-                let path = out_dir.join(format!("{stem}.gltf"));
-                let bin_name = format!("{stem}.bin");
-                let bin_path = out_dir.join(&bin_name);
-                let (json, bin) =
-                    to_gltf(animation, stem, &bin_name).map_err(|source| ConvertError::Gltf {
-                        path: path.clone(),
-                        source,
-                    })?;
-                // The buffer first, so a .gltf never points at a missing .bin.
-                write_atomic(&bin_path, |w| w.write_all(&bin)).map_err(write_err(&bin_path))?;
-                write_atomic(&path, |w| w.write_all(json.as_bytes())).map_err(write_err(&path))?;
-                outputs.push(OutputRecord {
-                    format: "gltf",
-                    path: format!("{stem}.gltf"),
-                });
-            }
-        }
-    }
-
-    Ok(outputs)
-}
-
-/// Writes the sidecar last: its appearance means the take is complete.
-fn write_sidecar(
-    out_dir: &Path,
-    stem: &str,
-    sidecar: Sidecar,
-) -> Result<ConvertOutcome, ConvertError> {
-    let sidecar_path = out_dir.join(format!("{stem}.imubake.json"));
-    let json = serde_json::to_vec_pretty(&sidecar).expect("the sidecar serialises");
-    write_atomic(&sidecar_path, |w| {
-        w.write_all(&json)?;
-        w.write_all(b"\n")
-    })
-    .map_err(write_err(&sidecar_path))?;
-    Ok(ConvertOutcome {
-        sidecar,
-        sidecar_path,
-    })
-}
-
-/// Paper 002's pipeline for a Listing-2 mapping ([`pipeline::legacy`]): the signed yaw/pitch/roll
-/// channel copy onto `--rig` (default `mixamo`), parents from Table 1 (the `sou12` rig), every
-/// joint written with BVH channels `Zrotation Yrotation Xrotation` (Blender's `XYZ` mode), the
-/// root fixed at rest. Sidecar: `pipeline.mode = "legacy-euler"`, `pipeline.heading = "none"`,
-/// `mapping.legacy` lists each target.
-fn convert_legacy(
-    input: &Path,
-    out_dir: &Path,
-    settings: &ConvertSettings,
-    take: Take,
-    sha256: String,
-    mapping: &LegacyMapping,
-    mapping_path: &Path,
-) -> Result<ConvertOutcome, ConvertError> {
-    let rig = load_rig(settings.rig.as_deref().unwrap_or("mixamo"))?;
-    let table1 = load_rig("sou12")?;
-    let legacy: LegacyAnimation = pipeline::legacy::run(
-        &take,
-        &rig,
-        &table1,
-        mapping,
-        mapping_path,
-        &settings.pipeline,
-    )
-    .map_err(|source| ConvertError::Pipeline {
-        input: input.to_path_buf(),
-        source,
-    })?;
-    // What the sidecar needs of the take; its samples are freed before the outputs are built.
-    let (world, world_from) = resolve_world(&take, settings, None);
-    let source = SourceRecord {
-        path: input.to_string_lossy().into_owned(),
-        sha256,
-        format: take.source().format,
-        world,
-        world_from,
-        start_timestamp: take.source().start_timestamp.clone(),
-    };
     let TakeFacts {
         sensor_summaries,
         warnings,
         dropped_lines,
         repaired_lines,
-    } = TakeFacts::of(take, &legacy.warnings);
-    let animation = &legacy.animation;
-    let stem = take_stem(input);
-    let outputs = write_outputs(out_dir, &stem, animation, Some(&legacy.euler_deg), settings)?;
+    } = facts;
+    let animation = &conversion.animation;
+    let source_text = input.to_string_lossy();
+    let take_outputs = TakeOutputs {
+        stem: &stem,
+        animation,
+        euler_deg: &conversion.euler_deg,
+        units: settings.units,
+        report: settings.report.then(|| ReportInput {
+            take: &stem,
+            source: &source_text,
+            fps: animation.fps().to_string(),
+            smoothing: settings.pipeline.smoothing.describe(),
+            bones: bone_series(
+                animation,
+                conversion.unsmoothed.as_deref(),
+                &conversion.euler_deg,
+            ),
+            sensors: &sensor_summaries,
+            warnings: &warnings,
+            dropped_lines: dropped_lines.len(),
+        }),
+    };
+    let mut outputs = Vec::new();
+    for output in settings.outputs() {
+        outputs.push(output.write(out_dir, &take_outputs)?);
+    }
+    drop(take_outputs);
     let out_rig = animation.rig();
-    let world = source.world;
     let sidecar = Sidecar {
         imubake_version: env!("CARGO_PKG_VERSION"),
         source,
@@ -697,32 +606,26 @@ fn convert_legacy(
             units: settings.units.name(),
             bones: out_rig.len(),
         },
-        mapping: MappingRecord {
-            file: Some(mapping_path.to_string_lossy().into_owned()),
-            rig: out_rig.name().to_string(),
-            world,
-            calibration: None,
-            sensors: Vec::new(),
-            legacy: Some(
-                legacy
-                    .targets
-                    .iter()
-                    .map(|t| LegacyTargetRecord::new(&t.target, t.parent.clone()))
-                    .collect(),
-            ),
-        },
-        pipeline: pipeline_record(
-            settings,
-            &HeadingSource::None,
-            0.0,
-            legacy.first_frame,
-            "legacy-euler",
-        ),
+        mapping: conversion.mapping,
+        pipeline: conversion.pipeline,
         outputs,
         sensors: sensor_summaries,
         dropped_lines,
         repaired_lines,
         warnings,
     };
-    write_sidecar(out_dir, &stem, sidecar)
+    let sidecar_path = out_dir.join(format!("{stem}.imubake.json"));
+    let json = serde_json::to_vec_pretty(&sidecar).expect("the sidecar serialises");
+    write_atomic(&sidecar_path, |w| {
+        w.write_all(&json)?;
+        w.write_all(b"\n")
+    })
+    .map_err(|source| ConvertError::Write {
+        path: sidecar_path.clone(),
+        source,
+    })?;
+    Ok(ConvertOutcome {
+        sidecar,
+        sidecar_path,
+    })
 }

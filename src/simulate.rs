@@ -16,10 +16,10 @@
 
 use crate::bvh::Bvh;
 use crate::mapping::{Mapping, Mount};
-use crate::pipeline::resample::slerp_shortest;
 use crate::rig::{LengthUnit, Rig};
 use crate::rotation::EulerOrder;
 use crate::rotation::euler::from_quaternion;
+use crate::rotation::slerp_shortest;
 use crate::world::World;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::Serialize;

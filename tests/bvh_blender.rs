@@ -10,10 +10,10 @@
 
 mod common;
 
-use imubake::bvh::{self, BvhMotion};
 use imubake::fps::Fps;
 use imubake::rig::{Joint, LengthUnit, Rig};
 use imubake::rotation::EulerOrder;
+use imubake::write::{self, bvh::BvhMotion};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde_json::Value;
 
@@ -114,7 +114,7 @@ fn blender_imports_our_bvh() {
     for (num, den) in rates {
         let path = dir.path().join(format!("take_{num}_{den}.bvh"));
         let file = std::fs::File::create(&path).unwrap();
-        bvh::write_bvh(
+        write::bvh::write_bvh(
             file,
             &BvhMotion {
                 rig: &rig,

@@ -3,10 +3,11 @@
 
 mod common;
 
-use imubake::bvh::{self, BvhMotion};
+use imubake::bvh;
 use imubake::fps::Fps;
 use imubake::rig::{Joint, LengthUnit, Rig};
 use imubake::rotation::EulerOrder;
+use imubake::write::{self, bvh::BvhMotion};
 use nalgebra::Vector3;
 
 fn check_with_bvh_anim(bytes: &[u8], ours: &bvh::Bvh) {
@@ -94,7 +95,7 @@ fn bvh_anim_reads_our_small_rig() {
         })
         .collect();
     let mut out = Vec::new();
-    bvh::write_bvh(
+    write::bvh::write_bvh(
         &mut out,
         &BvhMotion {
             rig: &rig,
@@ -137,7 +138,7 @@ fn bvh_anim_reads_our_rewrite_of_real_files() {
             })
             .collect();
         let mut out = Vec::new();
-        bvh::write_bvh(
+        write::bvh::write_bvh(
             &mut out,
             &BvhMotion {
                 rig: &rig,

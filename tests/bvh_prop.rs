@@ -3,10 +3,11 @@
 
 mod common;
 
-use imubake::bvh::{self, BvhMotion};
+use imubake::bvh;
 use imubake::fps::Fps;
 use imubake::rig::{Joint, LengthUnit, Rig};
 use imubake::rotation::EulerOrder;
+use imubake::write::{self, bvh::BvhMotion};
 use nalgebra::{UnitQuaternion, Vector3};
 use proptest::prelude::*;
 
@@ -239,7 +240,7 @@ fn case(dfs: bool) -> impl Strategy<Value = Case> {
 
 fn write(c: &Case) -> Vec<u8> {
     let mut out = Vec::new();
-    bvh::write_bvh(
+    write::bvh::write_bvh(
         &mut out,
         &BvhMotion {
             rig: &c.rig,

@@ -7,6 +7,7 @@ mod common;
 use imubake::bvh::{self, Bvh, Channel};
 use imubake::rig::LengthUnit;
 use imubake::rotation::EulerOrder;
+use imubake::write::{self, bvh::BvhMotion};
 use nalgebra::{Matrix3, Vector3};
 
 /// The lines of a file as text, line ends removed (LF or CRLF).
@@ -450,9 +451,9 @@ fn deep_nesting() {
     let roots = vec![Vector3::new(0.0, 1.0, 0.0)];
     let angles = vec![vec![[0.0; 3]]; depth];
     let mut out = Vec::new();
-    bvh::write_bvh(
+    write::bvh::write_bvh(
         &mut out,
-        &bvh::BvhMotion {
+        &BvhMotion {
             rig: &rig,
             fps: imubake::fps::Fps::new(10, 1).unwrap(),
             root_positions: &roots,

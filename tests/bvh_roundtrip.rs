@@ -4,10 +4,11 @@
 
 mod common;
 
-use imubake::bvh::{self, Bvh, BvhMotion, Channel};
+use imubake::bvh::{self, Bvh, Channel};
 use imubake::fps::Fps;
 use imubake::rig::{Joint, LengthUnit, Rig};
 use imubake::rotation::EulerOrder;
+use imubake::write::{self, bvh::BvhMotion};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 
 const FILES: [&str; 5] = [
@@ -51,7 +52,7 @@ fn motion_of(bvh: &Bvh) -> (Vec<Vector3<f64>>, Vec<Vec<[f64; 3]>>) {
 
 fn write(motion: &BvhMotion) -> Vec<u8> {
     let mut out = Vec::new();
-    bvh::write_bvh(&mut out, motion).unwrap();
+    write::bvh::write_bvh(&mut out, motion).unwrap();
     out
 }
 
@@ -288,7 +289,7 @@ Frame Time: 0.03336666666666667
 
     // Centimetres: lengths × 100, angles unchanged.
     let mut out = Vec::new();
-    bvh::write_bvh_in(&mut out, &motion, LengthUnit::Centimetres).unwrap();
+    write::bvh::write_bvh_in(&mut out, &motion, LengthUnit::Centimetres).unwrap();
     let cm = bvh::parse(&out).unwrap();
     let m = bvh::parse(text.as_bytes()).unwrap();
     for (a, b) in m.joints().iter().zip(cm.joints()) {
@@ -300,7 +301,7 @@ Frame Time: 0.03336666666666667
     assert_eq!(&cm.frame(1)[..3], &[50.0, 125.0, -12.5]);
     assert_eq!(&cm.frame(1)[3..], &m.frame(1)[3..]);
     assert_eq!(
-        bvh::unit_scale(LengthUnit::Centimetres, LengthUnit::Metres),
+        write::bvh::unit_scale(LengthUnit::Centimetres, LengthUnit::Metres),
         0.01
     );
 }
@@ -339,7 +340,7 @@ fn invalid_input_is_refused() {
     let good: Vec<Vec<[f64; 3]>> = vec![vec![[0.0; 3]; 2]; rig.len()];
     let check = |roots: &[Vector3<f64>], angles: &[Vec<[f64; 3]>], what: &str| {
         let mut out = Vec::new();
-        let err = bvh::write_bvh(
+        let err = write::bvh::write_bvh(
             &mut out,
             &BvhMotion {
                 rig: &rig,
@@ -379,7 +380,7 @@ fn invalid_input_is_refused() {
     )
     .unwrap();
     let mut out = Vec::new();
-    let err = bvh::write_bvh(
+    let err = write::bvh::write_bvh(
         &mut out,
         &BvhMotion {
             rig: &spaced,
@@ -390,7 +391,7 @@ fn invalid_input_is_refused() {
     )
     .unwrap_err();
     assert_eq!(err.kind(), std::io::ErrorKind::InvalidInput);
-    let err = bvh::write_bvh_scaled(
+    let err = write::bvh::write_bvh_scaled(
         &mut out,
         &BvhMotion {
             rig: &rig,

@@ -6,11 +6,11 @@
 mod common;
 
 use imubake::inspect::{SensorSummaries, SensorSummary};
-use imubake::report::{
+use imubake::rotation::EulerOrder;
+use imubake::write::report::{
     AFTER_STROKE, AXIS_COLOURS, BEFORE_STROKE, BoneSeries, PLOT_WIDTH_PX, ReportInput,
     decimate_min_max, render_report,
 };
-use imubake::rotation::EulerOrder;
 use serde_json::{Value, json};
 use std::f64::consts::TAU;
 use std::path::Path;

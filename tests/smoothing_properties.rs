@@ -2,9 +2,9 @@
 //! frame-to-frame rotation step of the output larger than the input's largest step plus 1°.
 //! Euler angle smoothing through (cos, sin) pairs never averages 359° and 1° to 180°.
 
+use imubake::pipeline::smoothing::{smooth_angles_deg, smooth_quaternions};
 use imubake::rotation::angle_between;
 use imubake::smooth::Method;
-use imubake::smooth::tracks::{smooth_angles_deg, smooth_quaternions};
 use nalgebra::{UnitQuaternion, Vector3};
 use proptest::prelude::*;
 

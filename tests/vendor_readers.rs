@@ -643,7 +643,7 @@ fn all_entries(bytes: &[u8]) {
         World::Enu,
         ClockUnit::Microseconds,
     );
-    let mut clock = xsens_dot::WrappingClock::new(xsens_dot::SAMPLE_TIME_FINE_MODULUS);
+    let mut clock = imubake::read::clock::WrappingClock::new(xsens_dot::SAMPLE_TIME_FINE_MODULUS);
     dot.set_file(Some("A_1.csv".into()));
     let _ = xsens_dot::read_file_into(&mut dot, &mut clock, bytes, Path::new("A_1.csv"), 0);
     dot.set_file(Some("B_1.csv".into()));
@@ -655,7 +655,7 @@ fn all_entries(bytes: &[u8]) {
         rate_hz: 100.0,
     };
     let mut mtw = TakeBuilder::new("m", InputFormat::XsensMtw, World::Enu, counter);
-    let mut clock = xsens_dot::WrappingClock::new(xsens_mtw::PACKET_COUNTER_MODULUS);
+    let mut clock = imubake::read::clock::WrappingClock::new(xsens_mtw::PACKET_COUNTER_MODULUS);
     let _ = xsens_mtw::read_file_into(&mut mtw, &mut clock, bytes, Path::new("x_A.txt"), 100.0, 0);
     let _ = xsens_mtw::read_file_into(&mut mtw, &mut clock, bytes, Path::new("x_B.txt"), 100.0, 0);
     let _ = mtw.finish(0.01);

@@ -88,7 +88,7 @@ fn process_take_untimed(take: &BatchTake, job: &TakeJob<'_>) -> TakeResult {
     // A failed conversion and a panic both end in an error report.
     let result = match result {
         Ok(Ok(outcome)) => Ok(outcome),
-        Ok(Err(error)) => Err(ErrorReport::from_convert_error(&take.rel, &error)),
+        Ok(Err(error)) => Err(ErrorReport::from_error(&take.rel, &error)),
         Err(message) => Err(ErrorReport::from_message(&take.rel, &message)),
     };
     match result {

@@ -1,4 +1,6 @@
-//! BVH (Biovision Hierarchy) reading and writing.
+//! BVH (Biovision Hierarchy): the document ([`Bvh`]) and its reader. The writer is
+//! [`crate::write::bvh`]; a BVH hierarchy becomes a rig through [`Bvh::to_rig`] (in
+//! [`crate::rig`], which builds on this module).
 //!
 //! # Reading ([`parse`])
 //!
@@ -32,20 +34,10 @@
 //! Rotation channels are intrinsic and composed in file order: `Zrotation Xrotation Yrotation`
 //! with values z, x, y degrees is Rz(z)·Rx(x)·Ry(y) ([`Bvh::local_rotations`]).
 //!
-//! # Writing ([`write_bvh`])
-//!
-//! The writer takes a [`Rig`], a rational frame rate, root positions and per-joint Euler angles
-//! ([`BvhMotion`]) and writes a file that Blender, `bvh_anim` and this reader read back; see
-//! [`write_bvh_scaled`] for the exact layout, the End Sites it adds and the checks it makes, and
-//! [`write_bvh_in`] for writing another unit (`--units cm`: lengths × 100 from a metre rig).
-
 mod reader;
-mod writer;
 
 pub use reader::{MAX_FRAMES, parse};
-pub use writer::{BvhMotion, unit_scale, write_bvh, write_bvh_in, write_bvh_scaled};
 
-use crate::rig::{Joint, LengthUnit, Rig, RigError};
 use crate::rotation::EulerOrder;
 use nalgebra::{UnitQuaternion, Vector3};
 use std::fmt;
@@ -264,28 +256,6 @@ impl Bvh {
             "BVH frame {frame} out of range: the file has {} frames",
             self.frame_count
         );
-    }
-
-    /// The hierarchy as a [`Rig`] named `name` whose offsets are in `units` (the unit the file's
-    /// numbers are in; nothing is scaled).
-    ///
-    /// Joint order and names are the file's; each joint's Euler order is that of its rotation
-    /// channels ([`BvhJoint::rotation_order`]: a joint without rotation channels gets ZXY);
-    /// End Sites are kept as [`Joint::end_site`]; the root's offset is its OFFSET line. Fails if
-    /// the file repeats a joint name (BVH allows it, a rig does not).
-    pub fn to_rig(&self, name: &str, units: LengthUnit) -> Result<Rig, RigError> {
-        let joints = self
-            .joints
-            .iter()
-            .map(|j| Joint {
-                name: j.name.clone(),
-                parent: j.parent,
-                offset: j.offset,
-                order: j.rotation_order(),
-                end_site: j.end_site,
-            })
-            .collect();
-        Rig::new(name, units, joints)
     }
 
     /// The local rotation of every joint at `frame`: its rotation channels composed in file order

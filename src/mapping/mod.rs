@@ -262,6 +262,16 @@ fn parse_mount(value: &serde_json::Value) -> Result<Mount, String> {
     }
 }
 
+impl crate::diagnostic::Diagnostic for MappingError {
+    fn file(&self) -> Option<&Path> {
+        Some(&self.file)
+    }
+
+    fn hint(&self) -> Option<&'static str> {
+        Some("check the mapping file (README, Mappings)")
+    }
+}
+
 /// Parses a mapping file's text (JSON). `file` names it in errors.
 pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingError> {
     let value: serde_json::Value = serde_json::from_str(text)

@@ -13,7 +13,11 @@
 //! faces), else the direction of travel when the take starts by walking (read off the knees, see
 //! [`heading_from_knees`]), else none (the sensors' own heading is kept: north → +Z).
 
-use crate::mapping::{Mount, ResolvedSensor};
+use super::PipelineError;
+use super::sources::Sources;
+use crate::mapping::{CalibrationWindow, Mapping, Mount, ResolvedSensor};
+use crate::rig::Rig;
+use crate::take::Track;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 /// Where the heading came from (sidecar `pipeline.heading`).
@@ -60,6 +64,169 @@ pub struct Calibration {
     /// `q_bone_sensor` per mapped sensor, in mapping order.
     pub mounts: Vec<UnitQuaternion<f64>>,
     pub warnings: Vec<String>,
+}
+
+/// The calibration window: the mapping's, or — when a mount is to be calibrated and the mapping
+/// gives none — the rig's rest pose over the first second, with a warning. `None` when every
+/// mount is known and the mapping names no window.
+pub fn window(
+    mapping: &Mapping,
+    sensors: &[ResolvedSensor],
+    warnings: &mut Vec<String>,
+) -> Option<CalibrationWindow> {
+    let needs_window = sensors.iter().any(|s| s.mount == Mount::Calibrate);
+    match (&mapping.calibration, needs_window) {
+        (Some(w), _) => Some(w.clone()),
+        (None, true) => {
+            let w = CalibrationWindow::default();
+            warnings.push(format!(
+                "the mapping has `calibrate` mounts but no `calibration`; assuming the subject holds the rig's rest pose for the first {} s",
+                w.duration_s
+            ));
+            Some(w)
+        }
+        (None, false) => None,
+    }
+}
+
+/// Stage 2, pose calibration: over the window, each sensor's mean orientation (a sensor that
+/// turns by more than [`MOVED_DURING_CALIBRATION_DEG`] in it is warned about), the heading from
+/// travel over the seconds after it, then [`solve`]. Without a window, mounts are the known ones
+/// and the heading is kept. `take_end_s` is the take's last sample time; `mapping_file` names the
+/// mapping in errors.
+pub fn calibrate(
+    rig: &Rig,
+    sources: &Sources,
+    window: Option<&CalibrationWindow>,
+    take_end_s: f64,
+    mapping_file: &str,
+    warnings: &mut Vec<String>,
+) -> Result<Calibration, PipelineError> {
+    let Sources { sensors, tracks } = sources;
+    let Some(w) = window else {
+        return Ok(Calibration {
+            heading: UnitQuaternion::identity(),
+            heading_source: HeadingSource::None,
+            mounts: sensors
+                .iter()
+                .map(|s| match s.mount {
+                    Mount::Fixed(q) => q,
+                    Mount::Calibrate => UnitQuaternion::identity(),
+                })
+                .collect(),
+            warnings: Vec::new(),
+        });
+    };
+    if w.start_s > take_end_s {
+        return Err(PipelineError::CalibrationOutside {
+            file: mapping_file.to_string(),
+            start_s: w.start_s,
+            duration_s: w.duration_s,
+            end_s: take_end_s,
+        });
+    }
+    let pose = rig
+        .pose(&w.pose.label())
+        .ok_or_else(|| PipelineError::UnknownPose {
+            file: mapping_file.to_string(),
+            rig: rig.name().to_string(),
+            pose: w.pose.label(),
+            known: rig.pose_names().join(", "),
+        })?;
+    let pose_world_all = rig.world_rotations(&pose.local);
+    let pose_world: Vec<_> = sensors.iter().map(|s| pose_world_all[s.bone]).collect();
+    let held: Vec<_> = tracks.iter().map(|t| held_over(t, w)).collect();
+    for ((s, track), mean) in sensors.iter().zip(tracks).zip(&held) {
+        let moved = track
+            .iter()
+            .filter(|(t, _)| *t >= w.start_s && *t <= w.start_s + w.duration_s)
+            .map(|(_, q)| crate::rotation::angle_between(q, mean))
+            .fold(0.0, f64::max)
+            .to_degrees();
+        if moved > MOVED_DURING_CALIBRATION_DEG {
+            warnings.push(format!(
+                "sensor `{}` moved by up to {moved:.1}° during the calibration window ({} s to {} s); its mount may be off: check the mapping's `calibration`",
+                s.sensor,
+                w.start_s,
+                w.start_s + w.duration_s
+            ));
+        }
+    }
+    let travel = heading_from_knees(&knee_samples(rig, sensors, tracks, &held, w));
+    let calibration = solve(sensors, &held, &pose_world, travel);
+    warnings.extend(calibration.warnings.iter().cloned());
+    Ok(calibration)
+}
+
+/// The mean orientation of a track over [start, start + duration]; the value interpolated at the
+/// window's middle when no sample falls inside.
+fn held_over(
+    track: &Track<UnitQuaternion<f64>>,
+    window: &CalibrationWindow,
+) -> UnitQuaternion<f64> {
+    let end = window.start_s + window.duration_s;
+    let inside: Vec<UnitQuaternion<f64>> = track
+        .iter()
+        .filter(|(t, _)| *t >= window.start_s && *t <= end)
+        .map(|(_, q)| *q)
+        .collect();
+    if inside.is_empty() {
+        return track.sample_at(window.start_s + window.duration_s / 2.0);
+    }
+    mean_rotation(&inside)
+}
+
+/// A sensor turning further than this from its mean during the calibration window is reported.
+pub const MOVED_DURING_CALIBRATION_DEG: f64 = 5.0;
+
+/// How long after the calibration window the walk is read for the heading from travel.
+pub const TRAVEL_WINDOW_S: f64 = 4.0;
+
+/// A joint whose own offset and whose child (or end site) both point down at rest: a knee-like
+/// joint (the thigh → shank link of a leg), for the heading from travel.
+fn is_shank(rig: &Rig, joint: usize) -> bool {
+    let down = |v: &nalgebra::Vector3<f64>| v.norm() > 0.0 && -v.y > 0.8 * v.norm();
+    let j = &rig.joints()[joint];
+    let below = rig
+        .children(joint)
+        .map(|c| rig.joints()[c].offset)
+        .chain(j.end_site);
+    j.parent.is_some() && down(&j.offset) && below.into_iter().any(|v| down(&v))
+}
+
+/// For every mapped thigh–shank pair, both sensors' rotations since calibration (rig world) at
+/// the shank's samples in the seconds after the window.
+fn knee_samples(
+    rig: &Rig,
+    sensors: &[ResolvedSensor],
+    tracks: &[Track<UnitQuaternion<f64>>],
+    held: &[UnitQuaternion<f64>],
+    window: &CalibrationWindow,
+) -> Vec<Vec<(UnitQuaternion<f64>, UnitQuaternion<f64>)>> {
+    let start = window.start_s + window.duration_s;
+    let end = start + TRAVEL_WINDOW_S;
+    let mut legs = Vec::new();
+    for (s, shank) in sensors.iter().enumerate() {
+        let Some(parent) = rig.joints()[shank.bone].parent else {
+            continue;
+        };
+        let Some(t) = sensors.iter().position(|o| o.bone == parent) else {
+            continue;
+        };
+        if !is_shank(rig, shank.bone) {
+            continue;
+        }
+        let leg = tracks[s]
+            .iter()
+            .filter(|(time, _)| *time > start && *time <= end)
+            .map(|(time, q)| {
+                let thigh = tracks[t].sample_at(time);
+                (thigh * held[t].inverse(), q * held[s].inverse())
+            })
+            .collect();
+        legs.push(leg);
+    }
+    legs
 }
 
 /// Sign-aligned mean of unit quaternions (accurate for the small spread of a held pose).

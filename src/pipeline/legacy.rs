@@ -64,6 +64,9 @@
 //! Z-up axis conversion ((x, y, z) → (x, −z, y)), and posed bones are C·W·Cᵀ times their rest,
 //! W the world rotation down the chain.
 
+use super::resample::{FrameGrid, check_frame_rate, long_gaps};
+use super::smoothing::smooth_angles_deg;
+use super::sources::{no_sensors, unmapped_sensors};
 use super::{PipelineError, PipelineOptions};
 use crate::anim::Animation;
 use crate::fps::Fps;
@@ -71,7 +74,6 @@ use crate::mapping::{LegacyChannel, LegacyMapping, LegacyTarget, MappingError};
 use crate::rig::Rig;
 use crate::rotation::EulerOrder;
 use crate::rotation::euler;
-use crate::smooth::tracks::smooth_angles_deg;
 use crate::take::{OrientationTrack, Take, Track};
 use nalgebra::UnitQuaternion;
 use std::collections::{BTreeMap, BTreeSet};
@@ -326,9 +328,9 @@ pub fn run(
         .iter()
         .flat_map(|(n, (_, p))| std::iter::once(n.as_str()).chain(p.as_deref()))
         .collect();
-    warnings.extend(super::unmapped_sensors(take, |id| used.contains(id)));
+    warnings.extend(unmapped_sensors(take, |id| used.contains(id)));
     if channels.is_empty() {
-        return Err(super::no_sensors(
+        return Err(no_sensors(
             take,
             mapping.targets.iter().map(|t| t.node.as_str()),
         ));
@@ -339,11 +341,12 @@ pub fn run(
         .values()
         .map(|(t, _)| t.last_time_s())
         .fold(0.0, f64::max);
-    let (first, frames) = super::frame_range(options.fps, t_last, options.trim)?;
+    let grid = FrameGrid::new(options.fps, t_last, options.trim)?;
+    let FrameGrid { first, frames, .. } = grid;
     let times: Vec<&[f64]> = relative.values().map(|(t, _)| t.times_s()).collect();
-    super::check_frame_rate(options, &times, frames, rig.len(), &mut warnings)?;
+    check_frame_rate(&grid, options.force, &times, rig.len(), &mut warnings)?;
     let names: Vec<&str> = relative.keys().map(String::as_str).collect();
-    warnings.extend(super::long_gaps(&names, &times, options.fps, first, frames));
+    warnings.extend(long_gaps(&names, &times, &grid));
 
     let mut not_smoothed: Vec<String> = Vec::new();
     let mut euler_deg = vec![vec![[0.0; 3]; frames]; rig.len()];
@@ -377,7 +380,8 @@ pub fn run(
             not_smoothed.len()
         ));
     }
-    let roots = super::root::root_positions(&rig, options.root, frames);
+    // Paper 002's mode drives bones by Euler channels, with no world tracks of sensed bones.
+    let roots = super::root::root_positions(&rig, options.root, &local, &vec![None; rig.len()]);
     let animation = Animation::new(rig, options.fps, local, animated, roots)?;
     Ok(LegacyAnimation {
         animation,

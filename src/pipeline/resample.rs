@@ -1,89 +1,163 @@
 //! Resampling rotation tracks onto the take's frame grid (conventions.md, "Time and frames"):
-//! slerp between the two nearest samples, held at the first/last sample outside the track.
+//! slerp between the two nearest samples, held at the first/last sample outside the track
+//! ([`Track::resample_at`]).
 
+use super::{PipelineError, Trim};
 use crate::fps::Fps;
 use crate::take::Track;
-use nalgebra::{Quaternion, UnitQuaternion};
+use nalgebra::UnitQuaternion;
 
-/// Spherical linear interpolation along the shorter arc; `u` in [0, 1]. Unlike nalgebra's
-/// `slerp` it never panics (rotations 180° apart take a well-defined path).
-pub fn slerp_shortest(
-    a: &UnitQuaternion<f64>,
-    b: &UnitQuaternion<f64>,
-    u: f64,
-) -> UnitQuaternion<f64> {
-    let qa = a.into_inner();
-    let mut qb = b.into_inner();
-    let mut dot = qa.dot(&qb);
-    if dot < 0.0 {
-        qb = -qb;
-        dot = -dot;
+/// `track` at the frames of `grid`.
+pub fn resample(track: &Track<UnitQuaternion<f64>>, grid: &FrameGrid) -> Vec<UnitQuaternion<f64>> {
+    track.resample_at(grid.times_s())
+}
+
+/// The frames an animation covers: frames `first .. first + frames` of the take's grid
+/// (conventions.md: frame n at n / fps, from 0 to floor(t_last · fps)); `first` > 0 after
+/// `--trim`. Its frame 0 is the grid's frame `first`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameGrid {
+    pub fps: Fps,
+    pub first: usize,
+    pub frames: usize,
+}
+
+impl FrameGrid {
+    /// Frames 0 ..= floor(t_last · fps), cut by `trim` (both ends inclusive).
+    pub fn new(fps: Fps, t_last: f64, trim: Option<Trim>) -> Result<FrameGrid, PipelineError> {
+        let (first, frames) = frame_range(fps, t_last, trim)?;
+        Ok(FrameGrid { fps, first, frames })
     }
-    let q: Quaternion<f64> = if dot > 0.9995 {
-        // Nearly equal: normalised linear interpolation is exact to ~1e-7 rad and stable.
-        qa * (1.0 - u) + qb * u
-    } else {
-        let theta = dot.min(1.0).acos();
-        let s = theta.sin();
-        qa * (((1.0 - u) * theta).sin() / s) + qb * ((u * theta).sin() / s)
+
+    /// The take-clock times of the frames, in order.
+    pub fn times_s(&self) -> impl ExactSizeIterator<Item = f64> + '_ {
+        (self.first..self.first + self.frames).map(|n| self.fps.frame_time_of(n as u64))
+    }
+}
+
+fn frame_range(fps: Fps, t_last: f64, trim: Option<Trim>) -> Result<(usize, usize), PipelineError> {
+    let total = fps.frame_count(t_last) as usize;
+    let Some(trim) = trim else {
+        return Ok((0, total));
     };
-    UnitQuaternion::from_quaternion(q)
-}
-
-/// The track's value at time `t`: slerp between the bracketing samples, held outside.
-pub fn sample_at(track: &Track<UnitQuaternion<f64>>, t: f64) -> UnitQuaternion<f64> {
-    let times = track.times_s();
-    let values = track.values();
-    match times.partition_point(|&x| x <= t) {
-        0 => values[0],
-        i if i == times.len() => values[i - 1],
-        i => slerp_shortest(
-            &values[i - 1],
-            &values[i],
-            (t - times[i - 1]) / (times[i] - times[i - 1]),
-        ),
+    let first = fps.first_frame_at_or_after(trim.start_s) as usize;
+    let last = (fps
+        .last_frame_at_or_before(trim.end_s.min(1e12))
+        .unwrap_or(0) as usize)
+        .min(total - 1);
+    if first > last || first >= total {
+        return Err(PipelineError::EmptyTrim {
+            trim,
+            end_take_s: fps.frame_time_of(total as u64 - 1),
+        });
     }
+    Ok((first, last - first + 1))
 }
 
-/// Samples `track` at frames `first .. first + frames` of `fps`.
-pub fn resample(
-    track: &Track<UnitQuaternion<f64>>,
-    fps: Fps,
-    first: usize,
-    frames: usize,
-) -> Vec<UnitQuaternion<f64>> {
-    resample_at(
-        track,
-        (first..first + frames).map(|n| fps.frame_time_of(n as u64)),
-    )
+/// Frames × joints above this (about 1 GB of BVH) are refused unless `force`.
+pub const MAX_KEYFRAMES: usize = 50_000_000;
+
+/// A gap in a sensor's samples longer than this is a warning naming the frames interpolated
+/// across it.
+pub const LONG_GAP_S: f64 = 1.0;
+
+/// The mean rate of a track's sample times, Hz (`None` for a single sample).
+fn mean_rate_hz(times: &[f64]) -> Option<f64> {
+    let n = times.len();
+    (n > 1 && times[n - 1] > times[0]).then(|| (n - 1) as f64 / (times[n - 1] - times[0]))
 }
 
-/// Samples `track` at increasing times (slerp between the bracketing samples, held outside).
-pub fn resample_at(
-    track: &Track<UnitQuaternion<f64>>,
-    times_s: impl IntoIterator<Item = f64>,
-) -> Vec<UnitQuaternion<f64>> {
-    let times = track.times_s();
-    let values = track.values();
-    let times_s = times_s.into_iter();
-    let mut out = Vec::with_capacity(times_s.size_hint().0);
-    // The times increase, so the bracketing sample only moves forward.
-    let mut i = 0;
-    for t in times_s {
-        while i < times.len() && times[i] <= t {
-            i += 1;
+/// Warns when the frame rate is more than twice the fastest mapped sensor's (the frames between
+/// samples are interpolation, not data); refuses more than [`MAX_KEYFRAMES`] keyframes unless
+/// `force`.
+pub fn check_frame_rate(
+    grid: &FrameGrid,
+    force: bool,
+    times: &[&[f64]],
+    joints: usize,
+    warnings: &mut Vec<String>,
+) -> Result<(), PipelineError> {
+    let FrameGrid {
+        fps: rate, frames, ..
+    } = *grid;
+    let fastest = times
+        .iter()
+        .filter_map(|t| mean_rate_hz(t))
+        .fold(0.0, f64::max);
+    if fastest > 0.0 && rate.as_f64() > 2.0 * fastest {
+        warnings.push(format!(
+            "--fps {rate} is more than twice the fastest mapped sensor's rate ({fastest:.1} Hz): most \
+             frames are interpolated between samples"
+        ));
+    }
+    let cells = frames.saturating_mul(joints);
+    if cells > MAX_KEYFRAMES && !force {
+        return Err(PipelineError::TooManyFrames {
+            fps: rate,
+            frames,
+            joints,
+            cells,
+            // About 22 bytes per keyframe of text in the BVH.
+            mb: cells / 1_000_000 * 22,
+            max: MAX_KEYFRAMES,
+            sensor_hz: fastest,
+        });
+    }
+    Ok(())
+}
+
+/// A warning for each stretch longer than [`LONG_GAP_S`] in which a mapped sensor has no sample,
+/// naming the frames interpolated across it (frame numbers of the output, after `--trim`); gaps
+/// that all sensors share are one warning.
+pub fn long_gaps(sensors: &[&str], times: &[&[f64]], grid: &FrameGrid) -> Vec<String> {
+    let FrameGrid { fps, first, frames } = *grid;
+    // (start, end) → sensors, in order of first appearance.
+    let mut gaps: Vec<((f64, f64), Vec<&str>)> = Vec::new();
+    for (id, t) in sensors.iter().zip(times) {
+        for w in t.windows(2).filter(|w| w[1] - w[0] > LONG_GAP_S) {
+            let key = (w[0], w[1]);
+            // The same stretch in another sensor (within a sample's worth) counts as one gap.
+            match gaps
+                .iter_mut()
+                .find(|(k, _)| (k.0 - key.0).abs() < 0.1 && (k.1 - key.1).abs() < 0.1)
+            {
+                Some((_, ids)) => ids.push(id),
+                None => gaps.push((key, vec![id])),
+            }
         }
-        let q = if i == 0 {
-            values[0]
-        } else if i == times.len() {
-            values[times.len() - 1]
-        } else {
-            let (t0, t1) = (times[i - 1], times[i]);
-            slerp_shortest(&values[i - 1], &values[i], (t - t0) / (t1 - t0))
-        };
-        out.push(q);
     }
-    out
+    let last_frame = first + frames - 1;
+    gaps.into_iter()
+        .filter_map(|((start, end), ids)| {
+            // Frames strictly inside the gap, on the output's numbering.
+            let a = (fps.first_frame_at_or_after(start) as usize).max(first);
+            let b = (fps.last_frame_at_or_before(end)? as usize).min(last_frame);
+            let inside = if a > b {
+                "no frame falls inside it".to_string()
+            } else {
+                format!(
+                    "frames {}–{} are interpolated across it",
+                    a - first,
+                    b - first
+                )
+            };
+            let who = if ids.len() == sensors.len() && sensors.len() > 1 {
+                "all sensors".to_string()
+            } else if ids.len() <= 4 {
+                format!(
+                    "sensor{} {}",
+                    if ids.len() == 1 { "" } else { "s" },
+                    ids.join(", ")
+                )
+            } else {
+                format!("{} sensors ({}, …)", ids.len(), ids[..3].join(", "))
+            };
+            Some(format!(
+                "a {:.1} s gap in {who} from {start:.3} s to {end:.3} s: {inside}",
+                end - start
+            ))
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -101,7 +175,12 @@ mod tests {
         let times: Vec<f64> = (0..100).map(|n| fps.frame_time_of(n)).collect();
         let values: Vec<_> = (0..100).map(|n| about_y(n as f64 * 7.3)).collect();
         let track = Track::new(times, values.clone()).unwrap();
-        let out = resample(&track, fps, 0, 100);
+        let grid = FrameGrid {
+            fps,
+            first: 0,
+            frames: 100,
+        };
+        let out = resample(&track, &grid);
         for (a, b) in out.iter().zip(&values) {
             assert!(a.angle_to(b) < 1e-12);
         }
@@ -110,17 +189,22 @@ mod tests {
     #[test]
     fn slerp_midpoint_holds_and_shortest_arc_by_hand() {
         let track = Track::new(vec![0.1, 0.3], vec![about_y(10.0), about_y(50.0)]).unwrap();
-        let out = resample(&track, "10".parse().unwrap(), 0, 5);
+        let grid = FrameGrid {
+            fps: "10".parse().unwrap(),
+            first: 0,
+            frames: 5,
+        };
+        let out = resample(&track, &grid);
         // Frames at 0.0 (held), 0.1, 0.2 (midway: 30°), 0.3, 0.4 (held).
         let deg: Vec<f64> = out.iter().map(|q| q.angle().to_degrees()).collect();
         for (a, b) in deg.iter().zip([10.0, 10.0, 30.0, 50.0, 50.0]) {
             assert!((a - b).abs() < 1e-9, "{deg:?}");
         }
         // 170° and -170° are 20° apart through 180°.
-        let m = slerp_shortest(&about_y(170.0), &about_y(-170.0), 0.5);
+        let m = crate::rotation::slerp_shortest(&about_y(170.0), &about_y(-170.0), 0.5);
         assert!(m.angle_to(&about_y(180.0)) < 1e-9);
         // Exactly opposite rotations do not panic.
-        let q = slerp_shortest(&about_y(0.0), &about_y(180.0), 0.5);
+        let q = crate::rotation::slerp_shortest(&about_y(0.0), &about_y(180.0), 0.5);
         assert!((q.angle().to_degrees() - 90.0).abs() < 1e-9);
     }
 }

@@ -2,7 +2,7 @@
 //! the rest pose); foot-rooted modes come later.
 
 use crate::rig::Rig;
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -21,8 +21,17 @@ impl RootMode {
     }
 }
 
-/// Root positions for `frames` frames (rig units).
-pub fn root_positions(rig: &Rig, mode: RootMode, frames: usize) -> Vec<Vector3<f64>> {
+/// Stage 7, root: the root position at every frame (rig units), given every joint's local
+/// rotations (`local[joint][frame]`) and the world rotations of the sensed bones
+/// (`world[joint]`, `None` for joints without a sensor) — what foot-rooted modes will need.
+pub fn root_positions(
+    rig: &Rig,
+    mode: RootMode,
+    local: &[Vec<UnitQuaternion<f64>>],
+    world: &[Option<Vec<UnitQuaternion<f64>>>],
+) -> Vec<Vector3<f64>> {
+    let frames = local.first().map_or(0, Vec::len);
+    let _ = world;
     match mode {
         RootMode::Fixed => vec![rig.joints()[0].offset; frames],
     }

@@ -12,7 +12,7 @@
 //! (default `enu`). Blank lines are ignored.
 
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
-use super::{InputFormat, ReadError, ReadOptions, check_text, sniff};
+use super::{InputFormat, ReadError, ReadOptions, check_text, sniff, warn_if_denormalised};
 use crate::take::{ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg};
 use crate::world::World;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -483,11 +483,7 @@ fn read_sized(
             take.reserve_orientation(per_sensor as usize);
         }
     }
-    if worst_norm_error > 0.01 {
-        take.warn(format!(
-            "quaternions deviate from unit length by up to {worst_norm_error:.3}; normalised"
-        ));
-    }
+    warn_if_denormalised(&mut take, worst_norm_error, None);
     take.finish(options.skip_seconds)
         .map_err(|e| ReadError::take(path, e))
 }

@@ -1,6 +1,7 @@
 //! Readers: one module per capture format, each turning a file or session folder into a
 //! [`Take`]. The format is detected from content; [`ReadOptions::format`] overrides.
 
+pub mod clock;
 pub mod imubake_csv;
 pub mod lines;
 pub mod opensense_sto;
@@ -9,88 +10,12 @@ pub mod xio_session;
 pub mod xsens_dot;
 pub mod xsens_mtw;
 
-use crate::take::{BuildError, Take};
+pub use crate::take::InputFormat;
+use crate::take::{BuildError, Take, TakeBuilder};
 use crate::world::World;
-use serde::Serialize;
-use std::fmt;
 use std::fs;
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::str::FromStr;
-
-/// The capture formats imubake reads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum InputFormat {
-    /// Paper 002's SOU log: `timestamp_ms,SOU_ID,yaw1,pitch1,roll1,yaw2,pitch2,roll2`.
-    Sou,
-    /// imubake's own CSV (README, "imubake CSV").
-    ImubakeCsv,
-    /// OpenSense orientation `.sto` (quaternions per `<body>_imu` column).
-    OpensenseSto,
-    /// Movella/Xsens DOT CSV export: a folder with one file per sensor (or one such file).
-    XsensDot,
-    /// Xsens MTw `.txt` export (MT Manager, as used by OpenSense): one file, or a folder of them.
-    XsensMtw,
-    /// x-io x-IMU3 session folder, one sub-folder per device.
-    XioSession,
-}
-
-impl InputFormat {
-    pub const ALL: [InputFormat; 6] = [
-        InputFormat::Sou,
-        InputFormat::ImubakeCsv,
-        InputFormat::OpensenseSto,
-        InputFormat::XsensDot,
-        InputFormat::XsensMtw,
-        InputFormat::XioSession,
-    ];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            InputFormat::Sou => "sou",
-            InputFormat::ImubakeCsv => "imubake-csv",
-            InputFormat::OpensenseSto => "opensense-sto",
-            InputFormat::XsensDot => "xsens-dot",
-            InputFormat::XsensMtw => "xsens-mtw",
-            InputFormat::XioSession => "xio-session",
-        }
-    }
-
-    /// What a person would call it.
-    pub fn description(self) -> &'static str {
-        match self {
-            InputFormat::Sou => "paper-002 SOU log",
-            InputFormat::ImubakeCsv => "imubake CSV",
-            InputFormat::OpensenseSto => "OpenSense orientation .sto",
-            InputFormat::XsensDot => "Movella/Xsens DOT CSV export",
-            InputFormat::XsensMtw => "Xsens MTw .txt export",
-            InputFormat::XioSession => "x-io x-IMU3 session",
-        }
-    }
-}
-
-impl fmt::Display for InputFormat {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for InputFormat {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        InputFormat::ALL
-            .into_iter()
-            .find(|f| f.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<_> = InputFormat::ALL.iter().map(|f| f.name()).collect();
-                format!(
-                    "unknown input format `{s}`; expected one of {}",
-                    names.join(", ")
-                )
-            })
-    }
-}
 
 /// How to read a take.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -134,6 +59,41 @@ pub enum ReadError {
         #[source]
         source: BuildError,
     },
+}
+
+impl crate::diagnostic::Diagnostic for ReadError {
+    fn file(&self) -> Option<&Path> {
+        match self {
+            ReadError::Io { path, .. }
+            | ReadError::EmptyFile { path }
+            | ReadError::Binary { path, .. }
+            | ReadError::Line { path, .. }
+            | ReadError::Format { path, .. }
+            | ReadError::Take { path, .. } => Some(path),
+        }
+    }
+
+    fn line(&self) -> Option<u64> {
+        match self {
+            ReadError::Line { line, .. } => Some(*line),
+            _ => None,
+        }
+    }
+
+    fn hint(&self) -> Option<&'static str> {
+        match self {
+            ReadError::Line { .. } => {
+                Some("fix or delete that line, or drop the lines before it with --skip-lines")
+            }
+            ReadError::Io { .. } => Some("check the path and its permissions"),
+            ReadError::EmptyFile { .. } | ReadError::Binary { .. } | ReadError::Format { .. } => {
+                Some(
+                    "is this a capture log? Name its format with --input-format, or move it out of the inputs",
+                )
+            }
+            ReadError::Take { .. } => None,
+        }
+    }
 }
 
 impl ReadError {
@@ -287,6 +247,75 @@ pub(crate) fn column_group(
     Some(found.into_iter().flatten().collect())
 }
 
+/// A unit quaternion from `w, x, y, z` and the norm it had; `None` for a zero or non-finite one.
+pub(crate) fn unit_quaternion(
+    q: nalgebra::Quaternion<f64>,
+) -> Option<(nalgebra::UnitQuaternion<f64>, f64)> {
+    let norm = q.norm();
+    if !norm.is_finite() || norm < 1e-9 {
+        return None;
+    }
+    Some((nalgebra::UnitQuaternion::new_unchecked(q / norm), norm))
+}
+
+/// Quaternions are normalised on read; one warning when they were more than 1 % off unit length
+/// (`file`: the file of a multi-file take, named in the warning).
+pub(crate) fn warn_if_denormalised(
+    take: &mut TakeBuilder,
+    worst_norm_error: f64,
+    file: Option<&str>,
+) {
+    if worst_norm_error > 0.01 {
+        let what = "quaternions deviate from unit length by up to";
+        take.warn(match file {
+            Some(f) => format!("{f}: {what} {worst_norm_error:.3}; normalised"),
+            None => format!("{what} {worst_norm_error:.3}; normalised"),
+        });
+    }
+}
+
+/// The checks of a header (column) row the Xsens readers share; every error names the file, the
+/// line, the row (`what`: "header", "column row") and what was expected.
+pub(crate) struct HeaderCheck<'a> {
+    pub path: &'a Path,
+    pub line: u64,
+    pub what: &'a str,
+    pub expected: &'a str,
+}
+
+impl HeaderCheck<'_> {
+    pub(crate) fn error(&self, problem: String) -> ReadError {
+        ReadError::line(self.path, self.line, format!("{} {problem}", self.what))
+    }
+
+    /// At most `max` columns are looked at.
+    pub(crate) fn column_count(&self, columns: usize, max: usize) -> Result<(), ReadError> {
+        if columns > max {
+            return Err(self.error(format!(
+                "has {columns} columns; at most {max} are supported"
+            )));
+        }
+        Ok(())
+    }
+
+    /// A column the format cannot do without.
+    pub(crate) fn required(&self, found: Option<usize>, name: &str) -> Result<usize, ReadError> {
+        found.ok_or_else(|| self.error(format!("has no {name} column; expected {}", self.expected)))
+    }
+
+    /// No column group may be partly present ([`column_group`]'s `missing`).
+    pub(crate) fn complete(&self, missing: &[String]) -> Result<(), ReadError> {
+        if missing.is_empty() {
+            return Ok(());
+        }
+        Err(self.error(format!(
+            "is missing column(s) {}; expected {}",
+            missing.join(", "),
+            self.expected
+        )))
+    }
+}
+
 /// A session folder's accepted files (path and name), and notes on the files passed over.
 pub(crate) type TakeFiles = (Vec<(PathBuf, String)>, Vec<String>);
 
@@ -342,6 +371,71 @@ pub(crate) fn one_file_per_sensor(
         }
     }
     Ok(())
+}
+
+/// A folder holding one file per sensor of one recording (Movella DOT, Xsens MTw): the files the
+/// format accepts (the others noted), at most one per sensor.
+pub(crate) struct PerSensorFolder {
+    files: Vec<(PathBuf, String)>,
+    notes: Vec<String>,
+}
+
+impl PerSensorFolder {
+    /// The files of `dir` that `looks_like` accepts ([`take_files`]), one per sensor by
+    /// `sensor_id` ([`one_file_per_sensor`]).
+    pub(crate) fn open(
+        dir: &Path,
+        looks_like: fn(&[u8]) -> bool,
+        what: &str,
+        expected: &str,
+        sensor_id: fn(&Path) -> String,
+    ) -> Result<Self, ReadError> {
+        let (files, notes) = take_files(dir, looks_like, what, expected)?;
+        one_file_per_sensor(dir, &files, sensor_id)?;
+        Ok(PerSensorFolder { files, notes })
+    }
+
+    /// The take's counter clock, anchored at the earliest of the files' first counter values
+    /// (`first_value` of each file and its name), so every file lands at or after it.
+    pub(crate) fn anchored_clock(
+        &self,
+        modulus: u64,
+        mut first_value: impl FnMut(fs::File, &Path, &str) -> Result<Option<u64>, ReadError>,
+    ) -> Result<clock::WrappingClock, ReadError> {
+        let mut firsts = Vec::new();
+        for (file, name) in &self.files {
+            let f = fs::File::open(file).map_err(|e| ReadError::io(file, e))?;
+            if let Some(first) = first_value(f, file, name)? {
+                firsts.push(first);
+            }
+        }
+        Ok(clock::WrappingClock::anchored_at_earliest(modulus, &firsts))
+    }
+
+    /// Reads every file into `take` with `read_file`, each under its own name in reports, after
+    /// noting the files passed over.
+    pub(crate) fn read_into(
+        &self,
+        take: &mut TakeBuilder,
+        clock: &mut clock::WrappingClock,
+        mut read_file: impl FnMut(
+            &mut TakeBuilder,
+            &mut clock::WrappingClock,
+            fs::File,
+            &Path,
+        ) -> Result<(), ReadError>,
+    ) -> Result<(), ReadError> {
+        for note in &self.notes {
+            take.warn(note.clone());
+        }
+        for (file, name) in &self.files {
+            take.set_file(Some(name.clone()));
+            let f = fs::File::open(file).map_err(|e| ReadError::io(file, e))?;
+            read_file(take, clock, f, file)?;
+        }
+        take.set_file(None);
+        Ok(())
+    }
 }
 
 /// Reads a single-file take through a reader's byte-level entry, after the text checks.

@@ -25,7 +25,9 @@
 //! `--skip-lines N` drops data rows whose line number is at most N; header lines are always read.
 
 use super::lines::{LineReader, number_problem, parse_f64};
-use super::{InputFormat, ReadError, ReadOptions, read_single_file};
+use super::{
+    InputFormat, ReadError, ReadOptions, read_single_file, unit_quaternion, warn_if_denormalised,
+};
 use crate::take::{ClockUnit, SensorIdx, Take, TakeBuilder};
 use crate::world::World;
 use nalgebra::{Quaternion, UnitQuaternion};
@@ -53,15 +55,6 @@ pub fn looks_like(head: &[u8]) -> bool {
 
 pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
     read_single_file(path, options, read_from)
-}
-
-/// Unit quaternion from `w, x, y, z`; `None` for a zero quaternion. Also returns the norm.
-fn unit_quaternion(q: Quaternion<f64>) -> Option<(UnitQuaternion<f64>, f64)> {
-    let norm = q.norm();
-    if !norm.is_finite() || norm < 1e-9 {
-        return None;
-    }
-    Some((UnitQuaternion::new_unchecked(q / norm), norm))
 }
 
 /// Parses one `w,x,y,z` cell.
@@ -251,11 +244,7 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
             take.drop_line(line_no, format!("{}; {scope}", problems.join("; ")), line);
         }
     }
-    if worst_norm_error > 0.01 {
-        take.warn(format!(
-            "quaternions deviate from unit length by up to {worst_norm_error:.3}; normalised"
-        ));
-    }
+    warn_if_denormalised(&mut take, worst_norm_error, None);
     take.finish(options.skip_seconds)
         .map_err(|e| ReadError::take(path, e))
 }

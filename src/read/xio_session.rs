@@ -29,10 +29,12 @@
 //! have different rates, so line numbers do not mean the same time); use `--skip-seconds`.
 
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
-use super::{InputFormat, ReadError, ReadOptions, check_text, sniff};
+use super::{
+    InputFormat, ReadError, ReadOptions, check_text, sniff, unit_quaternion, warn_if_denormalised,
+};
 use crate::take::{BuildError, ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder};
 use crate::world::World;
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{Quaternion, Vector3};
 use std::collections::HashMap;
 use std::fs::{self, File};
 use std::io::Read;
@@ -266,15 +268,6 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
         .map_err(|e| ReadError::take(path, e))
 }
 
-/// Unit quaternion from `w, x, y, z`; `None` for a zero quaternion. Also returns the norm.
-fn unit_quaternion(q: Quaternion<f64>) -> Option<(UnitQuaternion<f64>, f64)> {
-    let norm = q.norm();
-    if !norm.is_finite() || norm < 1e-9 {
-        return None;
-    }
-    Some((UnitQuaternion::new_unchecked(q / norm), norm))
-}
-
 /// Parses one x-IMU3 file of kind `kind` into `take` as samples of `sensor` (the caller names the
 /// file for reports with [`TakeBuilder::set_file`]); `path` names it in errors.
 pub fn read_file_into(
@@ -374,12 +367,8 @@ pub fn read_file_into(
             format!("no header; expected `{}` and data rows", expected.join(",")),
         ));
     }
-    if worst_norm_error > 0.01 {
-        take.warn(format!(
-            "{}: quaternions deviate from unit length by up to {worst_norm_error:.3}; normalised",
-            take.current_file().unwrap_or("Quaternion.csv")
-        ));
-    }
+    let file = take.current_file().unwrap_or("Quaternion.csv").to_string();
+    warn_if_denormalised(take, worst_norm_error, Some(&file));
     Ok(())
 }
 

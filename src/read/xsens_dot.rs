@@ -37,15 +37,16 @@
 //! like the metadata lines. Any other data row that cannot be used is dropped and reported.
 //! `--skip-lines N` drops data rows whose line number is at most N in each file.
 
+use super::clock::{WrappingClock, parse_counter};
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
 use super::{
-    InputFormat, ReadError, ReadOptions, column_group, one_file_per_sensor, read_single_file,
-    take_files,
+    HeaderCheck, InputFormat, PerSensorFolder, ReadError, ReadOptions, column_group,
+    read_single_file, unit_quaternion, warn_if_denormalised,
 };
 use crate::take::{ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg};
 use crate::world::World;
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
-use std::fs::{self, File};
+use nalgebra::{Quaternion, Vector3};
+use std::fs;
 use std::io::Read;
 use std::path::Path;
 
@@ -61,100 +62,6 @@ const MAX_METADATA_LINES: u64 = 1000;
 const EXPECTED_HEADER: &str = "a header row with SampleTimeFine and Quat_W,Quat_X,Quat_Y,Quat_Z or \
      Euler_X,Euler_Y,Euler_Z (or Acc_X..Z with Gyr_X..Z), e.g. \
      `PacketCounter,SampleTimeFine,Quat_W,Quat_X,Quat_Y,Quat_Z,FreeAcc_X,FreeAcc_Y,FreeAcc_Z,Status`";
-
-/// Unwraps a device counter that wraps at `modulus` and puts the files of one take on one clock.
-///
-/// Each file's first value is placed within half a wrap of the anchor (the first value seen, or
-/// the one given to [`WrappingClock::anchored`]); each later value of the file within half a wrap
-/// of the previous row's. Shared by the Xsens readers (DOT `SampleTimeFine`, MTw `PacketCounter`).
-#[derive(Debug, Clone)]
-pub struct WrappingClock {
-    modulus: u64,
-    anchor: Option<i64>,
-    last: Option<(u64, i64)>,
-}
-
-impl WrappingClock {
-    /// A clock anchored at the first value it sees.
-    pub fn new(modulus: u64) -> Self {
-        WrappingClock {
-            modulus: modulus.max(2),
-            anchor: None,
-            last: None,
-        }
-    }
-
-    /// A clock anchored at the earliest of the files' first values: the one every other value
-    /// follows within half a wrap. All unwrapped values are then at or after it (when the files
-    /// start within half a wrap of each other).
-    pub fn anchored_at_earliest(modulus: u64, firsts: &[u64]) -> Self {
-        let mut clock = WrappingClock::new(modulus);
-        if let Some(&first) = firsts.first() {
-            let m = clock.modulus;
-            let earliest = firsts
-                .iter()
-                .copied()
-                .min_by_key(|&f| circular_delta(f % m, first % m, m))
-                .unwrap_or(first);
-            clock.anchor = Some((earliest % m) as i64);
-        }
-        clock
-    }
-
-    /// Starts a new file: its first value is placed relative to the anchor.
-    pub fn start_file(&mut self) {
-        self.last = None;
-    }
-
-    /// The unwrapped value of `raw` (which must be below the modulus).
-    pub fn unwrap(&mut self, raw: u64) -> i64 {
-        let m = self.modulus;
-        let raw = raw % m;
-        let value = match (self.last, self.anchor) {
-            (Some((last_raw, last_value)), _) => last_value + circular_delta(raw, last_raw, m),
-            (None, Some(anchor)) => {
-                anchor + circular_delta(raw, anchor.rem_euclid(m as i64) as u64, m)
-            }
-            (None, None) => {
-                self.anchor = Some(raw as i64);
-                raw as i64
-            }
-        };
-        self.last = Some((raw, value));
-        value
-    }
-}
-
-/// `a - b` modulo `m`, in [-m/2, m/2).
-fn circular_delta(a: u64, b: u64, m: u64) -> i64 {
-    let m = m as i64;
-    let d = (a as i64 - b as i64).rem_euclid(m);
-    if d >= m / 2 { d - m } else { d }
-}
-
-/// Parses a whole non-negative number (surrounding spaces allowed).
-pub(crate) fn parse_counter(field: &[u8]) -> Result<u64, &'static str> {
-    let t = field.trim_ascii();
-    if t.is_empty() {
-        return Err("is empty");
-    }
-    if !t.iter().all(u8::is_ascii_digit) {
-        return Err("is not a whole number");
-    }
-    std::str::from_utf8(t)
-        .ok()
-        .and_then(|s| s.parse::<u64>().ok())
-        .ok_or("is too large")
-}
-
-/// Unit quaternion from `w, x, y, z`; `None` for a zero quaternion. Also returns the norm.
-fn unit_quaternion(q: Quaternion<f64>) -> Option<(UnitQuaternion<f64>, f64)> {
-    let norm = q.norm();
-    if !norm.is_finite() || norm < 1e-9 {
-        return None;
-    }
-    Some((UnitQuaternion::new_unchecked(q / norm), norm))
-}
 
 /// Sensor id of a DOT file: the file name before the first `_` (else the stem).
 pub fn sensor_id(path: &Path) -> String {
@@ -194,16 +101,13 @@ fn fields_of(line: &[u8]) -> Vec<String> {
 impl Layout {
     fn from_header(line: &[u8], path: &Path, line_no: u64) -> Result<Layout, ReadError> {
         let names = fields_of(line);
-        if names.len() > MAX_COLUMNS {
-            return Err(ReadError::line(
-                path,
-                line_no,
-                format!(
-                    "header has {} columns; at most {MAX_COLUMNS} are supported",
-                    names.len()
-                ),
-            ));
-        }
+        let check = HeaderCheck {
+            path,
+            line: line_no,
+            what: "header",
+            expected: EXPECTED_HEADER,
+        };
+        check.column_count(names.len(), MAX_COLUMNS)?;
         let find = |name: &str| names.iter().position(|n| n == name);
         let group =
             |wanted: &[&str], missing: &mut Vec<String>| column_group(find, wanted, missing);
@@ -216,27 +120,9 @@ impl Layout {
         let acc = group(&["acc_x", "acc_y", "acc_z"], &mut missing).and_then(three);
         let gyr = group(&["gyr_x", "gyr_y", "gyr_z"], &mut missing).and_then(three);
         let mag = group(&["mag_x", "mag_y", "mag_z"], &mut missing).and_then(three);
-        let Some(time) = time else {
-            return Err(ReadError::line(
-                path,
-                line_no,
-                format!("header has no SampleTimeFine column; expected {EXPECTED_HEADER}"),
-            ));
-        };
-        if !missing.is_empty() {
-            return Err(ReadError::line(
-                path,
-                line_no,
-                format!(
-                    "header is missing column(s) {}; expected {EXPECTED_HEADER}",
-                    missing
-                        .iter()
-                        .map(|m| xsens_case(m))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            ));
-        }
+        let time = check.required(time, "SampleTimeFine")?;
+        let missing: Vec<String> = missing.iter().map(|m| xsens_case(m)).collect();
+        check.complete(&missing)?;
         let inertial = acc.is_some() && gyr.is_some();
         if quat.is_none() && euler.is_none() && !inertial {
             return Err(ReadError::line(
@@ -315,33 +201,21 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
     if !meta.is_dir() {
         return read_single_file(path, options, read_from);
     }
-    let world = options.world.unwrap_or(World::Enu);
-    let mut take = TakeBuilder::new(path, InputFormat::XsensDot, world, ClockUnit::Microseconds);
-    let (files, notes) = take_files(
+    let folder = PerSensorFolder::open(
         path,
         looks_like,
         "Movella DOT CSV",
         &format!("one CSV per sensor with {EXPECTED_HEADER}"),
+        sensor_id,
     )?;
-    for note in notes {
-        take.warn(note);
-    }
-    one_file_per_sensor(path, &files, sensor_id)?;
-    // Anchor the clock at the earliest-starting file, so every file lands at or after it.
-    let mut firsts = Vec::new();
-    for (file, _) in &files {
-        let f = File::open(file).map_err(|e| ReadError::io(file, e))?;
-        if let Some(first) = first_sample_time(f, file)? {
-            firsts.push(first);
-        }
-    }
-    let mut clock = WrappingClock::anchored_at_earliest(SAMPLE_TIME_FINE_MODULUS, &firsts);
-    for (file, name) in &files {
-        take.set_file(Some(name.clone()));
-        let f = File::open(file).map_err(|e| ReadError::io(file, e))?;
-        read_file_into(&mut take, &mut clock, f, file, options.skip_lines)?;
-    }
-    take.set_file(None);
+    let mut clock = folder.anchored_clock(SAMPLE_TIME_FINE_MODULUS, |f, file, _| {
+        first_sample_time(f, file)
+    })?;
+    let world = options.world.unwrap_or(World::Enu);
+    let mut take = TakeBuilder::new(path, InputFormat::XsensDot, world, ClockUnit::Microseconds);
+    folder.read_into(&mut take, &mut clock, |take, clock, f, file| {
+        read_file_into(take, clock, f, file, options.skip_lines)
+    })?;
     take.finish(options.skip_seconds)
         .map_err(|e| ReadError::take(path, e))
 }
@@ -441,14 +315,12 @@ pub fn read_file_into(
             Err(reason) => take.drop_line(line_no, reason, raw),
         }
     }
-    if worst_norm_error > 0.01 {
-        take.warn(format!(
-            "{}: quaternions deviate from unit length by up to {worst_norm_error:.3}; normalised",
-            path.file_name()
-                .map(|n| n.to_string_lossy())
-                .unwrap_or_default()
-        ));
-    }
+    let file = path.file_name().map(|n| n.to_string_lossy().into_owned());
+    warn_if_denormalised(
+        take,
+        worst_norm_error,
+        Some(file.as_deref().unwrap_or_default()),
+    );
     Ok(())
 }
 
@@ -584,30 +456,6 @@ mod tests {
         t.iter()
             .map(|(time, q)| (time, [q.w, q.i, q.j, q.k]))
             .collect()
-    }
-
-    #[test]
-    fn circular_delta_and_unwrap() {
-        assert_eq!(circular_delta(5, 3, 16), 2);
-        assert_eq!(circular_delta(1, 15, 16), 2);
-        assert_eq!(circular_delta(15, 1, 16), -2);
-        let mut c = WrappingClock::new(16);
-        let got: Vec<i64> = [12, 14, 1, 0, 3, 15, 6]
-            .iter()
-            .map(|&r| c.unwrap(r))
-            .collect();
-        assert_eq!(got, vec![12, 14, 17, 16, 19, 15, 22]);
-        // a second file starting after the wrap lands after the first one's start
-        c.start_file();
-        assert_eq!(c.unwrap(2), 18);
-        // anchored at the earliest of the files' starts
-        let mut c = WrappingClock::anchored_at_earliest(16, &[2, 14, 1]);
-        assert_eq!(c.unwrap(2), 18);
-        c.start_file();
-        assert_eq!(c.unwrap(14), 14);
-        assert_eq!(parse_counter(b" 0042 "), Ok(42));
-        assert!(parse_counter(b"-1").is_err());
-        assert!(parse_counter(b"99999999999999999999999").is_err());
     }
 
     #[test]

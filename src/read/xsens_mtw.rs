@@ -48,18 +48,18 @@
 //! a used column (empty, NaN, a zero quaternion, a matrix that is not a rotation) are dropped and
 //! reported. `--skip-lines N` drops data rows whose line number is at most N in each file.
 
+use super::clock::{WrappingClock, parse_counter};
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
-use super::xsens_dot::{WrappingClock, parse_counter};
 use super::{
-    InputFormat, ReadError, ReadOptions, column_group, one_file_per_sensor, read_single_file,
-    take_files,
+    HeaderCheck, InputFormat, PerSensorFolder, ReadError, ReadOptions, column_group,
+    read_single_file, warn_if_denormalised,
 };
 use crate::take::{
     BuildError, ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg,
 };
 use crate::world::World;
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
-use std::fs::{self, File};
+use std::fs;
 use std::io::Read;
 use std::path::Path;
 
@@ -194,16 +194,13 @@ impl Layout {
     fn from_header(line: &[u8], path: &Path, line_no: u64) -> Result<Layout, ReadError> {
         let sep = separator(line);
         let names = names_of(line, sep);
-        if names.len() > MAX_COLUMNS {
-            return Err(ReadError::line(
-                path,
-                line_no,
-                format!(
-                    "column row has {} columns; at most {MAX_COLUMNS} are supported",
-                    names.len()
-                ),
-            ));
-        }
+        let check = HeaderCheck {
+            path,
+            line: line_no,
+            what: "column row",
+            expected: EXPECTED_HEADER,
+        };
+        check.column_count(names.len(), MAX_COLUMNS)?;
         let find = |name: &str| {
             let lower = name.to_ascii_lowercase();
             names.iter().position(|n| *n == lower)
@@ -217,23 +214,8 @@ impl Layout {
         let gyr = group(&["Gyr_X", "Gyr_Y", "Gyr_Z"]);
         let mag = group(&["Mag_X", "Mag_Y", "Mag_Z"]);
         let three = |v: Vec<usize>| <[usize; 3]>::try_from(v).ok();
-        let Some(counter) = find("PacketCounter") else {
-            return Err(ReadError::line(
-                path,
-                line_no,
-                format!("column row has no PacketCounter column; expected {EXPECTED_HEADER}"),
-            ));
-        };
-        if !missing.is_empty() {
-            return Err(ReadError::line(
-                path,
-                line_no,
-                format!(
-                    "column row is missing column(s) {}; expected {EXPECTED_HEADER}",
-                    missing.join(", ")
-                ),
-            ));
-        }
+        let counter = check.required(find("PacketCounter"), "PacketCounter")?;
+        check.complete(&missing)?;
         let orientation = if let Some(q) = quat.and_then(|v| <[usize; 4]>::try_from(v).ok()) {
             Some(Orientation::Quaternion(q))
         } else if let Some(m) = mat {
@@ -316,23 +298,21 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
     if !meta.is_dir() {
         return read_single_file(path, options, read_from);
     }
-    let (files, notes) = take_files(
+    let folder = PerSensorFolder::open(
         path,
         looks_like,
         "Xsens MTw",
         &format!("files with {EXPECTED_HEADER}"),
+        sensor_id,
     )?;
-    one_file_per_sensor(path, &files, sensor_id)?;
     // First pass: the update rate (one for the take) and each file's first counter value.
-    let mut rate: Option<(f64, &str)> = None;
-    let mut firsts = Vec::new();
-    for (file, name) in &files {
-        let f = File::open(file).map_err(|e| ReadError::io(file, e))?;
+    let mut rate: Option<(f64, String)> = None;
+    let mut clock = folder.anchored_clock(PACKET_COUNTER_MODULUS, |f, file, name| {
         let mut lines = LineReader::new(f);
         let header = read_header(&mut lines, file)?;
-        match rate {
-            None => rate = Some((header.rate_hz, name)),
-            Some((r, first)) if !same_rate(r, header.rate_hz) => {
+        match &rate {
+            None => rate = Some((header.rate_hz, name.to_string())),
+            Some((r, first)) if !same_rate(*r, header.rate_hz) => {
                 return Err(ReadError::format(
                     file,
                     format!(
@@ -344,10 +324,8 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
             }
             Some(_) => {}
         }
-        if let Some(first) = first_counter(&mut lines, &header.layout, file)? {
-            firsts.push(first);
-        }
-    }
+        first_counter(&mut lines, &header.layout, file)
+    })?;
     let rate_hz = rate.map(|r| r.0).unwrap_or(1.0);
     let world = options.world.unwrap_or(World::Enu);
     let clock_unit = ClockUnit::Counter {
@@ -355,16 +333,9 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
         rate_hz,
     };
     let mut take = TakeBuilder::new(path, InputFormat::XsensMtw, world, clock_unit);
-    for note in notes {
-        take.warn(note);
-    }
-    let mut clock = WrappingClock::anchored_at_earliest(PACKET_COUNTER_MODULUS, &firsts);
-    for (file, name) in &files {
-        take.set_file(Some(name.clone()));
-        let f = File::open(file).map_err(|e| ReadError::io(file, e))?;
-        read_file_into(&mut take, &mut clock, f, file, rate_hz, options.skip_lines)?;
-    }
-    take.set_file(None);
+    folder.read_into(&mut take, &mut clock, |take, clock, f, file| {
+        read_file_into(take, clock, f, file, rate_hz, options.skip_lines)
+    })?;
     take.finish(options.skip_seconds)
         .map_err(|e| ReadError::take(path, e))
 }
@@ -516,14 +487,12 @@ fn read_rows<R: Read>(
             Err(problem) => take.drop_line(line_no, problem, line),
         }
     }
-    if worst_norm_error > 0.01 {
-        take.warn(format!(
-            "{}: quaternions deviate from unit length by up to {worst_norm_error:.3}; normalised",
-            path.file_name()
-                .map(|n| n.to_string_lossy())
-                .unwrap_or_default()
-        ));
-    }
+    let file = path.file_name().map(|n| n.to_string_lossy().into_owned());
+    warn_if_denormalised(
+        take,
+        worst_norm_error,
+        Some(file.as_deref().unwrap_or_default()),
+    );
     Ok(())
 }
 

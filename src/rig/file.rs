@@ -157,6 +157,21 @@ impl RigFile {
     }
 }
 
+impl crate::diagnostic::Diagnostic for RigLoadError {
+    fn file(&self) -> Option<&Path> {
+        match self {
+            RigLoadError::Io { path, .. }
+            | RigLoadError::Parse { path, .. }
+            | RigLoadError::Invalid { path, .. } => Some(path),
+            RigLoadError::Unknown(_) => None,
+        }
+    }
+
+    fn hint(&self) -> Option<&'static str> {
+        Some("check --rig (README, Rigs)")
+    }
+}
+
 /// Parses rig text (YAML, of which JSON is a subset).
 pub fn parse_rig(text: &str, path: &Path) -> Result<Rig, RigLoadError> {
     let file: RigFile = serde_yaml::from_str(text).map_err(|e| RigLoadError::Parse {

@@ -7,6 +7,8 @@
 
 pub mod file;
 
+mod bvh;
+
 pub use file::{RigFile, load_rig};
 
 use crate::rotation::EulerOrder;

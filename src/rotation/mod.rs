@@ -4,7 +4,7 @@
 pub mod euler;
 pub mod quat;
 
-pub use quat::{angle_between, make_hemisphere_continuous};
+pub use quat::{angle_between, make_hemisphere_continuous, slerp_shortest};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;

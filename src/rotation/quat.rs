@@ -42,6 +42,31 @@ pub fn make_hemisphere_continuous(track: &mut [UnitQuaternion<f64>]) {
     }
 }
 
+/// Spherical linear interpolation along the shorter arc; `u` in [0, 1]. Unlike nalgebra's
+/// `slerp` it never panics (rotations 180° apart take a well-defined path).
+pub fn slerp_shortest(
+    a: &UnitQuaternion<f64>,
+    b: &UnitQuaternion<f64>,
+    u: f64,
+) -> UnitQuaternion<f64> {
+    let qa = a.into_inner();
+    let mut qb = b.into_inner();
+    let mut dot = qa.dot(&qb);
+    if dot < 0.0 {
+        qb = -qb;
+        dot = -dot;
+    }
+    let q: Quaternion<f64> = if dot > 0.9995 {
+        // Nearly equal: normalised linear interpolation is exact to ~1e-7 rad and stable.
+        qa * (1.0 - u) + qb * u
+    } else {
+        let theta = dot.min(1.0).acos();
+        let s = theta.sin();
+        qa * (((1.0 - u) * theta).sin() / s) + qb * ((u * theta).sin() / s)
+    };
+    UnitQuaternion::from_quaternion(q)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,14 +1,12 @@
-//! The smoothing stage: filters that never break a rotation (README, "Smoothing").
-//!
-//! `method` parses `--smooth METHOD[:key=value,...]`; `tracks` applies a method to quaternion
-//! and Euler tracks; `butterworth`, `gaussian` and `fft` are the filters on uniform series,
-//! matching scipy and numpy.
+//! Smoothing filters and their settings (README, "Smoothing"): `butterworth`, `gaussian` and
+//! `fft` filter uniform series, matching scipy and numpy; `method` parses
+//! `--smooth METHOD[:key=value,...]`. The pipeline's smoothing stage
+//! ([`crate::pipeline::smoothing`]) applies them to rotation tracks.
 
 pub mod butterworth;
 pub mod fft;
 pub mod gaussian;
 mod method;
-pub mod tracks;
 
 pub use method::{DEFAULT, Method};
 

@@ -14,9 +14,9 @@
 //! So one damaged timestamp costs one sample, not the take.
 
 use super::{
-    ImuSample, LineReport, OrientationTrack, Sensor, SourceInfo, Take, Track, YawPitchRollDeg,
+    ImuSample, InputFormat, LineReport, OrientationTrack, Sensor, SourceInfo, Take, Track,
+    YawPitchRollDeg,
 };
-use crate::read::InputFormat;
 use crate::world::World;
 use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::HashMap;

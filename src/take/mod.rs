@@ -2,14 +2,15 @@
 //! repaired on the way in (conventions.md, "Time and frames", "Takes and names").
 
 mod builder;
+mod format;
 mod samples;
 mod track;
 
 pub use builder::{BuildError, ClockUnit, SensorIdx, TakeBuilder};
+pub use format::InputFormat;
 pub use samples::{ImuSample, YawPitchRollDeg};
 pub use track::{Track, TrackError};
 
-use crate::read::InputFormat;
 use crate::world::World;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Serialize;

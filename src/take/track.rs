@@ -1,5 +1,7 @@
 //! A time series whose invariants are enforced by its constructor.
 
+use crate::rotation::slerp_shortest;
+use nalgebra::UnitQuaternion;
 use std::fmt;
 
 /// Samples at strictly increasing, finite times (seconds on the take's clock).
@@ -123,6 +125,50 @@ impl<T> Track<T> {
             times_s: self.times_s.clone(),
             values: self.values.iter().map(f).collect(),
         }
+    }
+}
+
+/// Sampling a rotation track (as bevy's curve types carry their own sampling): slerp between the
+/// bracketing samples, held at the first and last sample outside the track.
+impl Track<UnitQuaternion<f64>> {
+    /// The track's value at time `t`: slerp between the bracketing samples, held outside.
+    pub fn sample_at(&self, t: f64) -> UnitQuaternion<f64> {
+        let times = self.times_s();
+        let values = self.values();
+        match times.partition_point(|&x| x <= t) {
+            0 => values[0],
+            i if i == times.len() => values[i - 1],
+            i => slerp_shortest(
+                &values[i - 1],
+                &values[i],
+                (t - times[i - 1]) / (times[i] - times[i - 1]),
+            ),
+        }
+    }
+
+    /// The track at increasing times (slerp between the bracketing samples, held outside).
+    pub fn resample_at(&self, times_s: impl IntoIterator<Item = f64>) -> Vec<UnitQuaternion<f64>> {
+        let times = self.times_s();
+        let values = self.values();
+        let times_s = times_s.into_iter();
+        let mut out = Vec::with_capacity(times_s.size_hint().0);
+        // The times increase, so the bracketing sample only moves forward.
+        let mut i = 0;
+        for t in times_s {
+            while i < times.len() && times[i] <= t {
+                i += 1;
+            }
+            let q = if i == 0 {
+                values[0]
+            } else if i == times.len() {
+                values[times.len() - 1]
+            } else {
+                let (t0, t1) = (times[i - 1], times[i]);
+                slerp_shortest(&values[i - 1], &values[i], (t - t0) / (t1 - t0))
+            };
+            out.push(q);
+        }
+        out
     }
 }
 

@@ -6,9 +6,7 @@
 //!  "hint": "…"}
 //! ```
 
-use crate::convert::ConvertError;
-use crate::read::ReadError;
-use crate::rig::file::RigLoadError;
+use crate::diagnostic::Diagnostic;
 use crate::write::write_atomic;
 use serde::{Deserialize, Serialize};
 use std::io;
@@ -29,57 +27,14 @@ pub struct ErrorReport {
 }
 
 impl ErrorReport {
-    /// A report of a failed conversion.
-    pub fn from_convert_error(source: &str, error: &ConvertError) -> ErrorReport {
-        let (file, line, default_hint): (Option<&Path>, Option<u64>, Option<&str>) = match error {
-            ConvertError::Read(e) => match e {
-                ReadError::Line { path, line, .. } => (
-                    Some(path),
-                    Some(*line),
-                    Some("fix or delete that line, or drop the lines before it with --skip-lines"),
-                ),
-                ReadError::Io { path, .. } => {
-                    (Some(path), None, Some("check the path and its permissions"))
-                }
-                ReadError::EmptyFile { path }
-                | ReadError::Binary { path, .. }
-                | ReadError::Format { path, .. } => (
-                    Some(path),
-                    None,
-                    Some(
-                        "is this a capture log? Name its format with --input-format, or move it out of the inputs",
-                    ),
-                ),
-                ReadError::Take { path, .. } => (Some(path), None, None),
-            },
-            ConvertError::Mapping(_) => (
-                None,
-                None,
-                Some("check the mapping file (README, Mappings)"),
-            ),
-            ConvertError::Rig(e) => {
-                let path = match e {
-                    RigLoadError::Io { path, .. }
-                    | RigLoadError::Parse { path, .. }
-                    | RigLoadError::Invalid { path, .. } => Some(path.as_path()),
-                    RigLoadError::Unknown(_) => None,
-                };
-                (path, None, Some("check --rig (README, Rigs)"))
-            }
-            ConvertError::Pipeline { input, .. } | ConvertError::NoMapping { input, .. } => {
-                (Some(input), None, None)
-            }
-            ConvertError::Write { path, .. } | ConvertError::Gltf { path, .. } => (
-                Some(path),
-                None,
-                Some("check the output folder: free space and permissions"),
-            ),
-        };
+    /// A report of an error: its message (a `Hint: …` in it split off), and the file, line and
+    /// hint it tells ([`Diagnostic`]).
+    pub fn from_error(source: &str, error: &dyn Diagnostic) -> ErrorReport {
         let mut report = ErrorReport::from_message(source, &error.to_string());
-        report.file = file.map(|f| f.to_string_lossy().into_owned());
-        report.line = line;
+        report.file = error.file().map(|f| f.to_string_lossy().into_owned());
+        report.line = error.line();
         if report.hint.is_none() {
-            report.hint = default_hint.map(str::to_string);
+            report.hint = error.hint().map(str::to_string);
         }
         report
     }
@@ -133,15 +88,16 @@ pub fn remove_error_report(out_dir: &Path, stem: &str) -> io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::read::ReadError;
 
     #[test]
     fn line_errors_keep_file_and_line_and_hints_split_off() {
-        let e = ConvertError::Read(ReadError::Line {
+        let e = ReadError::Line {
             path: "in/a.log".into(),
             line: 7,
             message: "expected 8 fields. Hint: check the separator".into(),
-        });
-        let r = ErrorReport::from_convert_error("a.log", &e);
+        };
+        let r = ErrorReport::from_error("a.log", &e);
         assert_eq!(r.file.as_deref(), Some("in/a.log"));
         assert_eq!(r.line, Some(7));
         assert_eq!(r.reason, "in/a.log: line 7: expected 8 fields");
@@ -158,11 +114,11 @@ mod tests {
 
     #[test]
     fn binary_files_name_the_file_without_a_line() {
-        let e = ConvertError::Read(ReadError::Binary {
+        let e = ReadError::Binary {
             path: "x.log".into(),
             offset: 0,
-        });
-        let r = ErrorReport::from_convert_error("x.log", &e);
+        };
+        let r = ErrorReport::from_error("x.log", &e);
         assert!(r.reason.contains("binary"), "{}", r.reason);
         assert_eq!(r.line, None);
         assert!(r.hint.is_some());

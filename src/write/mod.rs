@@ -1,10 +1,17 @@
-//! Writers: one module per output format, and the atomic file writing they share
-//! (conventions.md, "Takes and names": hidden temporary file in the same folder, renamed into
-//! place).
+//! Writers: one module per output format, the [`Output`] kinds a conversion chooses from, and
+//! the atomic file writing they share (conventions.md, "Takes and names": hidden temporary file
+//! in the same folder, renamed into place).
 
+pub mod bvh;
 pub mod error_report;
 pub mod gltf;
+pub mod report;
 pub mod sidecar;
+
+use crate::anim::Animation;
+use crate::rig::LengthUnit;
+use serde::{Deserialize, Serialize};
+use sidecar::OutputRecord;
 
 use std::fs;
 use std::io::{self, Write};
@@ -65,6 +72,142 @@ pub fn unless_abandoned<T>(f: impl FnOnce() -> io::Result<T>) -> io::Result<T> {
     let result = f();
     drop(temps);
     result
+}
+
+/// An animation file format (`--format`, config `formats`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputFormat {
+    Bvh,
+    Glb,
+    /// `.gltf` JSON with a `.bin` buffer beside it.
+    Gltf,
+}
+
+impl OutputFormat {
+    pub fn name(self) -> &'static str {
+        match self {
+            OutputFormat::Bvh => "bvh",
+            OutputFormat::Glb => "glb",
+            OutputFormat::Gltf => "gltf",
+        }
+    }
+}
+
+impl std::str::FromStr for OutputFormat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "bvh" => Ok(OutputFormat::Bvh),
+            "glb" => Ok(OutputFormat::Glb),
+            "gltf" => Ok(OutputFormat::Gltf),
+            _ => Err(format!(
+                "unknown output format `{s}`; expected bvh, glb or gltf"
+            )),
+        }
+    }
+}
+
+/// One output of a take (the sidecar, written last by its writer, is not one of them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    Animation(OutputFormat),
+    /// `<stem>.report.html` ([`report`]).
+    Report,
+}
+
+/// Everything the writers are given of a converted take.
+pub struct TakeOutputs<'a> {
+    pub stem: &'a str,
+    pub animation: &'a Animation,
+    /// BVH channel values: `[joint][frame]` degrees, each joint's order, continuous
+    /// ([`crate::pipeline::output`]).
+    pub euler_deg: &'a [Vec<[f64; 3]>],
+    /// Length unit of the BVH (glTF is always metres).
+    pub units: LengthUnit,
+    /// The report's content, when a report is wanted.
+    pub report: Option<report::ReportInput<'a>>,
+}
+
+/// Why an output could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    #[error("{}: cannot write: {source}", .path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+    #[error("{}: {source}", .path.display())]
+    Gltf {
+        path: PathBuf,
+        #[source]
+        source: gltf::GltfWriteError,
+    },
+}
+
+fn write_error(path: &Path) -> impl FnOnce(io::Error) -> OutputError {
+    let path = path.to_path_buf();
+    move |source| OutputError::Write { path, source }
+}
+
+impl Output {
+    /// Writes this output of the take into `dir` (atomically), and says what it wrote.
+    pub fn write(self, dir: &Path, take: &TakeOutputs) -> Result<OutputRecord, OutputError> {
+        let stem = take.stem;
+        let record = |format: &'static str, ext: &str| OutputRecord {
+            format,
+            path: format!("{stem}.{ext}"),
+        };
+        let gltf_error = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| OutputError::Gltf { path, source }
+        };
+        match self {
+            Output::Animation(OutputFormat::Bvh) => {
+                let path = dir.join(format!("{stem}.bvh"));
+                let anim = take.animation;
+                let motion = bvh::BvhMotion {
+                    rig: anim.rig(),
+                    fps: anim.fps(),
+                    root_positions: anim.root_positions(),
+                    euler_deg: take.euler_deg,
+                };
+                write_atomic(&path, |w| bvh::write_bvh_in(w, &motion, take.units))
+                    .map_err(write_error(&path))?;
+                Ok(record("bvh", "bvh"))
+            }
+            Output::Animation(OutputFormat::Glb) => {
+                let path = dir.join(format!("{stem}.glb"));
+                let bytes = gltf::to_glb(take.animation, stem).map_err(gltf_error(&path))?;
+                write_atomic(&path, |w| w.write_all(&bytes)).map_err(write_error(&path))?;
+                Ok(record("glb", "glb"))
+            }
+            Output::Animation(OutputFormat::Gltf) => {
+                let path = dir.join(format!("{stem}.gltf"));
+                let bin_name = format!("{stem}.bin");
+                let bin_path = dir.join(&bin_name);
+                let (json, bin) =
+                    gltf::to_gltf(take.animation, stem, &bin_name).map_err(gltf_error(&path))?;
+                // The buffer first, so a .gltf never points at a missing .bin.
+                write_atomic(&bin_path, |w| w.write_all(&bin)).map_err(write_error(&bin_path))?;
+                write_atomic(&path, |w| w.write_all(json.as_bytes()))
+                    .map_err(write_error(&path))?;
+                Ok(record("gltf", "gltf"))
+            }
+            Output::Report => {
+                let path = dir.join(format!("{stem}.report.html"));
+                let html = take
+                    .report
+                    .as_ref()
+                    .map(report::render_report)
+                    .unwrap_or_default();
+                write_atomic(&path, |w| w.write_all(html.as_bytes()))
+                    .map_err(write_error(&path))?;
+                Ok(record("report", "report.html"))
+            }
+        }
+    }
 }
 
 /// The extensions a take's outputs may have, the sidecar first (removed first: without it a take

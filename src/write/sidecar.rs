@@ -29,7 +29,7 @@ pub struct Sidecar {
 pub struct SourceRecord {
     pub path: String,
     pub sha256: String,
-    pub format: crate::read::InputFormat,
+    pub format: crate::take::InputFormat,
     /// The world the sensors were read in (the mapping's `world` when it overrides the format's).
     pub world: crate::world::World,
     /// Where the world came from: `flag`, `config`, `mapping` or `format`.

@@ -1,4 +1,7 @@
-//! The BVH writer.
+//! The BVH writer: a [`Rig`], a rational frame rate, root positions and per-joint Euler angles
+//! ([`BvhMotion`]) → a file that Blender, `bvh_anim` and [`crate::bvh::parse`] read back; see
+//! [`write_bvh_scaled`] for the exact layout, the End Sites it adds and the checks it makes, and
+//! [`write_bvh_in`] for writing another unit (`--units cm`: lengths × 100 from a metre rig).
 
 use crate::fps::Fps;
 use crate::rig::{LengthUnit, Rig};

@@ -37,8 +37,11 @@
 //! no more than two points per column are drawn as they are. A 60-minute, 22-bone take at 60 fps
 //! gives a report of about 1.7 MB.
 
+use crate::anim::Animation;
 use crate::inspect::{GAP_THRESHOLD_S, SensorSummaries};
 use crate::rotation::EulerOrder;
+use crate::rotation::euler::filter_track;
+use nalgebra::UnitQuaternion;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::fmt::Write as _;
@@ -98,6 +101,39 @@ pub struct ReportInput<'a> {
     pub sensors: &'a SensorSummaries,
     pub warnings: &'a [String],
     pub dropped_lines: usize,
+}
+
+/// Each animated bone's Euler angles (degrees, `[joint][frame]` in each joint's order) before
+/// smoothing (`unsmoothed` local rotations, when kept; else the same as after) and after.
+pub fn bone_series(
+    animation: &Animation,
+    unsmoothed: Option<&[Vec<UnitQuaternion<f64>>]>,
+    euler_after: &[Vec<[f64; 3]>],
+) -> Vec<BoneSeries> {
+    let fps = animation.fps();
+    let times: Vec<f64> = (0..animation.frames() as u64)
+        .map(|n| fps.frame_time_of(n))
+        .collect();
+    animation
+        .rig()
+        .joints()
+        .iter()
+        .enumerate()
+        .filter(|(j, _)| animation.is_animated(*j))
+        .map(|(j, joint)| BoneSeries {
+            bone: joint.name.clone(),
+            order: joint.order,
+            times_s: times.clone(),
+            before_deg: match unsmoothed {
+                Some(raw) => filter_track(&raw[j], joint.order)
+                    .into_iter()
+                    .map(|a| a.map(f64::to_degrees))
+                    .collect(),
+                None => euler_after[j].clone(),
+            },
+            after_deg: euler_after[j].clone(),
+        })
+        .collect()
 }
 
 /// The complete, self-contained HTML5 document (see the module documentation).

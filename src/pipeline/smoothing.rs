@@ -1,4 +1,5 @@
-//! Smoothing rotation tracks without breaking them: quaternions are made sign-continuous,
+//! The smoothing stage: rotation tracks smoothed without breaking them, with the filters of
+//! [`crate::smooth`]: quaternions are made sign-continuous,
 //! filtered per component and renormalised; Euler angles are filtered as (cos, sin) pairs and
 //! turned back with atan2 (paper 002, 6.5), so 359° and 0° never average to 180°.
 //!
@@ -7,12 +8,11 @@
 //! rate, where averaging has the most samples to work with — and then resampled onto the frame
 //! grid by the pipeline.
 
-use super::Method;
-use super::butterworth::{design_lowpass_sos, sosfilt_with_state, sosfilt_zi, sosfiltfilt};
-use super::fft::{FftOptions, fft_filter};
-use super::gaussian::gaussian_filter1d;
-use crate::pipeline::resample::resample_at;
 use crate::rotation::make_hemisphere_continuous;
+use crate::smooth::Method;
+use crate::smooth::butterworth::{design_lowpass_sos, sosfilt_with_state, sosfilt_zi, sosfiltfilt};
+use crate::smooth::fft::{FftOptions, fft_filter};
+use crate::smooth::gaussian::gaussian_filter1d;
 use crate::take::Track;
 use nalgebra::{Quaternion, UnitQuaternion};
 
@@ -187,8 +187,29 @@ pub fn uniform(track: &Track<UnitQuaternion<f64>>) -> Option<(f64, Track<UnitQua
     let (first, last) = (track.first_time_s(), track.last_time_s());
     let step = (last - first) / (n - 1) as f64;
     let times: Vec<f64> = (0..n).map(|k| first + step * k as f64).collect();
-    let values = resample_at(track, times.iter().copied());
+    let values = track.resample_at(times.iter().copied());
     Track::new(times, values).ok().map(|t| (1.0 / step, t))
+}
+
+/// The warnings for bones left unsmoothed (bone, reason): one for a reason many bones share (a
+/// low sensor rate, a short take), else one per bone.
+pub fn not_smoothed_warnings(not_smoothed: &[(String, String)]) -> Vec<String> {
+    let Some((_, first_reason)) = not_smoothed.first() else {
+        return Vec::new();
+    };
+    if not_smoothed.len() > 3 {
+        let bones: Vec<&str> = not_smoothed.iter().map(|(b, _)| b.as_str()).collect();
+        vec![format!(
+            "{} bones are not smoothed ({}), e.g. because {first_reason}",
+            bones.len(),
+            bones.join(", ")
+        )]
+    } else {
+        not_smoothed
+            .iter()
+            .map(|(bone, why)| format!("`{bone}` is not smoothed: {why}"))
+            .collect()
+    }
 }
 
 /// Smooths one sensor's track at its own rate; returns the uniform smoothed track, or the input
