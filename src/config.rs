@@ -1,5 +1,9 @@
-//! The YAML settings file shared by `convert --config` and `watch` (README, "Configuration").
-//! Flags override it; paths in it are relative to the file's folder.
+//! Settings, parsed once, the ripgrep way: a [`Config`] is a layer of settings, every field
+//! optional and already of its own type (a YAML file deserialises straight into one, and so do
+//! the command-line flags); layers are stacked with [`Config::over`] — flags over the config
+//! file — and turned into [`ConvertSettings`] by [`Config::to_settings`]. The YAML file is the one
+//! `convert --config` and `watch` read (README, "Configuration"); paths in it are relative to its
+//! folder.
 //!
 //! ```yaml
 //! mapping: mappings/paper002_sou12_mixamo.json
@@ -22,35 +26,85 @@ use crate::convert::{ConvertSettings, OutputFormat};
 use crate::fps::Fps;
 use crate::pipeline::Trim;
 use crate::pipeline::root::RootMode;
-use crate::read::InputFormat;
 use crate::rig::LengthUnit;
 use crate::smooth::Smoothing;
-use crate::world::World;
-use serde::Deserialize;
+use crate::take::InputFormat;
+use crate::world::{World, WorldFrom};
+use serde::{Deserialize, Deserializer};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// One layer of settings: a config file, or the flags given. `None` (and `false`) leave a
+/// setting to the layer below.
 #[derive(Debug, Clone, Default, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Config {
     pub mapping: Option<PathBuf>,
     pub rig: Option<String>,
     pub fps: Option<Fps>,
+    #[serde(default, deserialize_with = "formats")]
     pub formats: Option<Vec<OutputFormat>>,
     pub units: Option<LengthUnit>,
-    pub trim: Option<String>,
+    #[serde(default, deserialize_with = "trim")]
+    pub trim: Option<Trim>,
     pub root: Option<RootMode>,
-    pub input_format: Option<String>,
+    #[serde(default, deserialize_with = "input_format")]
+    pub input_format: Option<InputFormat>,
     pub skip_lines: Option<u64>,
+    #[serde(default, deserialize_with = "skip_seconds")]
     pub skip_seconds: Option<f64>,
     pub world: Option<World>,
-    pub smoothing: Option<SmoothingEntry>,
+    #[serde(default, deserialize_with = "smoothing")]
+    pub smoothing: Option<Smoothing>,
+    /// Also write the report (a flag: `true` in any layer asks for it).
+    #[serde(default)]
+    pub report: bool,
+    /// Allow absurd frame counts (a flag).
+    #[serde(default)]
+    pub force: bool,
 }
 
-/// `smoothing:` in the config: a method string, or a method with per-bone overrides.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
+/// A key's value parsed with `FromStr`, its error naming the key.
+fn parsed<'de, D: Deserializer<'de>, T: std::str::FromStr<Err = String>>(
+    d: D,
+    key: &str,
+) -> Result<Option<T>, D::Error> {
+    let text = Option::<String>::deserialize(d)?;
+    text.map(|t| t.parse().map_err(|e| format!("`{key}`: {e}")))
+        .transpose()
+        .map_err(serde::de::Error::custom)
+}
+
+fn trim<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Trim>, D::Error> {
+    parsed(d, "trim")
+}
+
+fn input_format<'de, D: Deserializer<'de>>(d: D) -> Result<Option<InputFormat>, D::Error> {
+    parsed(d, "input_format")
+}
+
+fn skip_seconds<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+    match Option::<f64>::deserialize(d)? {
+        Some(s) if !(s.is_finite() && s >= 0.0) => Err(serde::de::Error::custom(
+            "`skip_seconds`: expected seconds ≥ 0",
+        )),
+        s => Ok(s),
+    }
+}
+
+fn formats<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Vec<OutputFormat>>, D::Error> {
+    match Option::<Vec<OutputFormat>>::deserialize(d)? {
+        Some(f) if f.is_empty() => Err(serde::de::Error::custom(
+            "`formats`: name at least one of bvh, glb, gltf",
+        )),
+        f => Ok(f),
+    }
+}
+
+/// `smoothing:` in a config file: a method string, or a method with per-bone overrides.
+#[derive(Deserialize)]
 #[serde(untagged)]
-pub enum SmoothingEntry {
+enum SmoothingEntry {
     Method(String),
     WithBones {
         method: String,
@@ -59,9 +113,12 @@ pub enum SmoothingEntry {
     },
 }
 
-impl SmoothingEntry {
-    pub fn to_smoothing(&self) -> Result<Smoothing, String> {
-        match self {
+fn smoothing<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Smoothing>, D::Error> {
+    let Some(entry) = Option::<SmoothingEntry>::deserialize(d)? else {
+        return Ok(None);
+    };
+    let parse = || -> Result<Smoothing, String> {
+        match entry {
             SmoothingEntry::Method(m) => Ok(Smoothing {
                 method: m.parse()?,
                 bones: BTreeMap::new(),
@@ -69,10 +126,8 @@ impl SmoothingEntry {
             SmoothingEntry::WithBones { method, bones } => {
                 let mut parsed = BTreeMap::new();
                 for (bone, m) in bones {
-                    parsed.insert(
-                        bone.clone(),
-                        m.parse().map_err(|e| format!("bone `{bone}`: {e}"))?,
-                    );
+                    let method = m.parse().map_err(|e| format!("bone `{bone}`: {e}"))?;
+                    parsed.insert(bone, method);
                 }
                 Ok(Smoothing {
                     method: method.parse()?,
@@ -80,7 +135,10 @@ impl SmoothingEntry {
                 })
             }
         }
-    }
+    };
+    parse()
+        .map(Some)
+        .map_err(|e| serde::de::Error::custom(format!("`smoothing`: {e}")))
 }
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -113,46 +171,42 @@ impl Config {
                 config.rig = Some(base.join(p).to_string_lossy().into_owned());
             }
         }
-        config.validate().map_err(err)?;
         Ok(config)
     }
 
-    /// Parses and checks a config's text (paths in it stay as written).
+    /// Parses a config's text into its types (paths in it stay as written); an error names the
+    /// key.
     pub fn parse(text: &str) -> Result<Config, String> {
-        let config: Config = if text.trim().is_empty() {
-            Config::default()
-        } else {
-            serde_yaml::from_str(text).map_err(|e| format!("{e}; see README, \"Configuration\""))?
-        };
-        config.validate()?;
-        Ok(config)
+        if text.trim().is_empty() {
+            return Ok(Config::default());
+        }
+        serde_yaml::from_str(text).map_err(|e| format!("{e}; see README, \"Configuration\""))
     }
 
-    fn validate(&self) -> Result<(), String> {
-        if let Some(t) = &self.trim {
-            t.parse::<Trim>().map_err(|e| format!("`trim`: {e}"))?;
+    /// This layer over `below`: each setting this one gives wins; the flags `report` and `force`
+    /// are on when either layer turns them on.
+    pub fn over(self, below: Config) -> Config {
+        Config {
+            mapping: self.mapping.or(below.mapping),
+            rig: self.rig.or(below.rig),
+            fps: self.fps.or(below.fps),
+            formats: self.formats.or(below.formats),
+            units: self.units.or(below.units),
+            trim: self.trim.or(below.trim),
+            root: self.root.or(below.root),
+            input_format: self.input_format.or(below.input_format),
+            skip_lines: self.skip_lines.or(below.skip_lines),
+            skip_seconds: self.skip_seconds.or(below.skip_seconds),
+            world: self.world.or(below.world),
+            smoothing: self.smoothing.or(below.smoothing),
+            report: self.report || below.report,
+            force: self.force || below.force,
         }
-        if let Some(f) = &self.input_format {
-            f.parse::<InputFormat>()
-                .map_err(|e| format!("`input_format`: {e}"))?;
-        }
-        if self
-            .skip_seconds
-            .is_some_and(|s| !(s.is_finite() && s >= 0.0))
-        {
-            return Err("`skip_seconds`: expected seconds ≥ 0".into());
-        }
-        if let Some(s) = &self.smoothing {
-            s.to_smoothing().map_err(|e| format!("`smoothing`: {e}"))?;
-        }
-        if self.formats.as_ref().is_some_and(Vec::is_empty) {
-            return Err("`formats`: name at least one of bvh, glb, gltf".into());
-        }
-        Ok(())
     }
 
-    /// Settings from this file over the defaults.
-    pub fn to_settings(&self) -> ConvertSettings {
+    /// Settings from this layer over the defaults. `world_from` says which layer gave `world`
+    /// (recorded in the sidecar), when one did.
+    pub fn to_settings(&self, world_from: WorldFrom) -> ConvertSettings {
         let mut s = ConvertSettings {
             mapping: self.mapping.clone(),
             rig: self.rig.clone(),
@@ -162,25 +216,48 @@ impl Config {
             s.pipeline.fps = fps;
         }
         if let Some(f) = &self.formats {
-            s.formats = f.clone();
+            // Each format once (`--format bvh,glb,bvh`), in the order first given.
+            s.formats.clear();
+            for format in f {
+                if !s.formats.contains(format) {
+                    s.formats.push(*format);
+                }
+            }
         }
         if let Some(u) = self.units {
             s.units = u;
         }
-        s.pipeline.trim = self.trim.as_ref().and_then(|t| t.parse().ok());
+        s.pipeline.trim = self.trim;
         if let Some(r) = self.root {
             s.pipeline.root = r;
         }
-        s.read.format = self.input_format.as_ref().and_then(|f| f.parse().ok());
+        if let Some(smoothing) = &self.smoothing {
+            s.pipeline.smoothing = smoothing.clone();
+        }
+        s.pipeline.force = self.force;
+        s.read.format = self.input_format;
         s.read.skip_lines = self.skip_lines.unwrap_or(0);
         s.read.skip_seconds = self.skip_seconds.unwrap_or(0.0);
         s.read.world = self.world;
-        s.world_from = self.world.map(|_| crate::world::WorldFrom::Config);
-        if let Some(smoothing) = self.smoothing.as_ref().and_then(|e| e.to_smoothing().ok()) {
-            s.pipeline.smoothing = smoothing;
-        }
+        s.world_from = self.world.map(|_| world_from);
+        s.report = self.report;
         s
     }
+}
+
+/// The settings of `flags` (a layer made from the command line) over the config file at
+/// `config`, if any: the one place the two meet.
+pub fn settings(flags: Config, config: Option<&Path>) -> Result<ConvertSettings, ConfigError> {
+    let file = match config {
+        Some(path) => Config::load(path)?,
+        None => Config::default(),
+    };
+    let world_from = if flags.world.is_some() {
+        WorldFrom::Flag
+    } else {
+        WorldFrom::Config
+    };
+    Ok(flags.over(file).to_settings(world_from))
 }
 
 #[cfg(test)]
@@ -198,7 +275,7 @@ mod tests {
         .unwrap();
         let c = Config::load(&path).unwrap();
         assert_eq!(c.mapping, Some(dir.path().join("m.json")));
-        let s = c.to_settings();
+        let s = c.to_settings(WorldFrom::Config);
         assert_eq!((s.pipeline.fps.num(), s.pipeline.fps.den()), (30000, 1001));
         assert_eq!(s.formats, vec![OutputFormat::Bvh, OutputFormat::Gltf]);
         assert_eq!(s.units, LengthUnit::Centimetres);
@@ -218,7 +295,9 @@ mod tests {
             "smoothing: {method: \"gaussian:sigma=0.05\", bones: {LeftHand: none}}\n",
         )
         .unwrap();
-        let s = Config::load(&path).unwrap().to_settings();
+        let s = Config::load(&path)
+            .unwrap()
+            .to_settings(WorldFrom::Config);
         assert_eq!(
             s.pipeline.smoothing.for_bone("Hips"),
             &crate::smooth::Method::Gaussian { sigma_s: 0.05 }
@@ -241,5 +320,31 @@ mod tests {
                 .to_string()
                 .contains("`trim`")
         );
+    }
+
+    #[test]
+    fn flags_are_one_layer_over_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.yaml");
+        std::fs::write(&path, "fps: 24\nunits: cm\nworld: ned\nsmoothing: none\n").unwrap();
+        let flags = Config {
+            fps: Some("60".parse().unwrap()),
+            world: Some(World::Enu),
+            report: true,
+            ..Config::default()
+        };
+        let s = settings(flags, Some(&path)).unwrap();
+        assert_eq!(s.pipeline.fps, "60".parse().unwrap(), "the flag wins");
+        assert_eq!(s.units, LengthUnit::Centimetres, "the file fills in");
+        assert!(s.pipeline.smoothing.is_none());
+        assert_eq!(
+            (s.read.world, s.world_from),
+            (Some(World::Enu), Some(WorldFrom::Flag))
+        );
+        assert!(s.report);
+        let s = settings(Config::default(), Some(&path)).unwrap();
+        assert_eq!(s.world_from, Some(WorldFrom::Config));
+        let s = settings(Config::default(), None).unwrap();
+        assert_eq!(s, ConvertSettings::default());
     }
 }

@@ -2,8 +2,8 @@
 
 use super::ReadArgs;
 use anyhow::Context;
-use clap::Args;
 use imubake::config::Config;
+use clap::Args;
 use imubake::convert::{ConvertSettings, OutputFormat, convert, take_stem};
 use imubake::fps::Fps;
 use imubake::pipeline::Trim;
@@ -78,61 +78,38 @@ fn parse_units(s: &str) -> Result<LengthUnit, String> {
 }
 
 impl SettingsArgs {
-    /// The settings: the config file's, overridden by the flags given.
     /// The `--config` given, if any.
     pub fn config(&self) -> Option<&Path> {
         self.config.as_deref()
     }
 
+    /// The settings: the config file's, with these flags over it.
     pub fn settings(&self) -> anyhow::Result<ConvertSettings> {
         self.settings_with(self.config())
     }
 
     /// The settings from `config` (a YAML file, or none) with these flags over it.
     pub fn settings_with(&self, config: Option<&Path>) -> anyhow::Result<ConvertSettings> {
-        let mut settings = match config {
-            Some(path) => Config::load(path)?.to_settings(),
-            None => ConvertSettings::default(),
-        };
-        self.read.apply(&mut settings.read);
-        if self.read.sets_world() {
-            settings.world_from = Some(imubake::world::WorldFrom::Flag);
-        }
-        settings.pipeline.force |= self.force;
-        if self.mapping.is_some() {
-            settings.mapping = self.mapping.clone();
-        }
-        if self.rig.is_some() {
-            settings.rig = self.rig.clone();
-        }
-        if let Some(fps) = self.fps {
-            settings.pipeline.fps = fps;
-        }
-        if let Some(f) = &self.format {
-            settings.formats = f.clone();
-        }
-        // Each format once (`--format bvh,glb,bvh`), in the order first given.
-        let mut seen = Vec::new();
-        settings.formats.retain(|f| {
-            let new = !seen.contains(f);
-            seen.push(*f);
-            new
-        });
-        if let Some(u) = self.units {
-            settings.units = u;
-        }
-        if self.trim.is_some() {
-            settings.pipeline.trim = self.trim;
-        }
-        if let Some(m) = &self.smooth {
-            // A flag's method replaces the config's, overrides included.
-            settings.pipeline.smoothing = imubake::smooth::Smoothing {
-                method: m.clone(),
+        Ok(imubake::config::settings(self.layer(), config)?)
+    }
+
+    /// These flags as one settings layer.
+    fn layer(&self) -> Config {
+        Config {
+            mapping: self.mapping.clone(),
+            rig: self.rig.clone(),
+            fps: self.fps,
+            formats: self.format.clone(),
+            units: self.units,
+            trim: self.trim,
+            smoothing: self.smooth.clone().map(|method| imubake::smooth::Smoothing {
+                method,
                 bones: Default::default(),
-            };
+            }),
+            report: self.report,
+            force: self.force,
+            ..self.read.layer()
         }
-        settings.report |= self.report;
-        Ok(settings)
     }
 }
 

@@ -9,7 +9,8 @@ mod watch;
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 use imubake::read::{InputFormat, ReadOptions};
-use imubake::world::World;
+use imubake::config::Config;
+use imubake::world::{World, WorldFrom};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -57,30 +58,19 @@ pub struct ReadArgs {
 }
 
 impl ReadArgs {
+    /// The read options these flags give alone (`inspect`).
     pub fn options(&self) -> ReadOptions {
-        let mut options = ReadOptions::default();
-        self.apply(&mut options);
-        options
+        self.layer().to_settings(WorldFrom::Flag).read
     }
 
-    /// Whether `--world` was given.
-    pub fn sets_world(&self) -> bool {
-        self.world.is_some()
-    }
-
-    /// Overrides `options` (e.g. from a config file) with the flags given.
-    pub fn apply(&self, options: &mut ReadOptions) {
-        if self.input_format.is_some() {
-            options.format = self.input_format;
-        }
-        if let Some(n) = self.skip_lines {
-            options.skip_lines = n;
-        }
-        if let Some(s) = self.skip_seconds {
-            options.skip_seconds = s;
-        }
-        if self.world.is_some() {
-            options.world = self.world;
+    /// These flags as a settings layer.
+    pub fn layer(&self) -> Config {
+        Config {
+            input_format: self.input_format,
+            skip_lines: self.skip_lines,
+            skip_seconds: self.skip_seconds,
+            world: self.world,
+            ..Config::default()
         }
     }
 }
