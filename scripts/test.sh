@@ -40,12 +40,22 @@ if [ ! -f "$CACHE/node/node_modules/gltf-validator/package.json" ] \
   npm install --silent --no-audit --no-fund --prefix "$CACHE/node" "gltf-validator@$VALIDATOR_VERSION" >/dev/null
 fi
 
+# mdBook, to build the reference in docs/ (a broken book fails the run).
+MDBOOK_VERSION="0.5.4"
+if ! "$CACHE/mdbook/bin/mdbook" --version 2>/dev/null | grep -q "v$MDBOOK_VERSION"; then
+  step "installing mdbook $MDBOOK_VERSION into $CACHE/mdbook (a few minutes the first time)"
+  cargo install --quiet --locked --version "$MDBOOK_VERSION" --root "$CACHE/mdbook" mdbook
+fi
+
 export IMUBAKE_PYTHON="$CACHE/venv/bin/python"
 export IMUBAKE_PYTHON_BLENDER42="$CACHE/venv-blender42/bin/python"
 
 step "building the Blender extension (dist/imubake-<version>.zip)"
 "$IMUBAKE_PYTHON" scripts/build_blender_addon.py dist
 export IMUBAKE_NODE_MODULES="$CACHE/node/node_modules"
+
+step "mdbook build docs (the reference, into target/book)"
+"$CACHE/mdbook/bin/mdbook" build docs
 
 step "cargo fmt --check"
 cargo fmt --all -- --check

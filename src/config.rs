@@ -295,9 +295,7 @@ mod tests {
             "smoothing: {method: \"gaussian:sigma=0.05\", bones: {LeftHand: none}}\n",
         )
         .unwrap();
-        let s = Config::load(&path)
-            .unwrap()
-            .to_settings(WorldFrom::Config);
+        let s = Config::load(&path).unwrap().to_settings(WorldFrom::Config);
         assert_eq!(
             s.pipeline.smoothing.for_bone("Hips"),
             &crate::smooth::Method::Gaussian { sigma_s: 0.05 }

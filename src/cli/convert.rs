@@ -2,8 +2,8 @@
 
 use super::ReadArgs;
 use anyhow::Context;
-use imubake::config::Config;
 use clap::Args;
+use imubake::config::Config;
 use imubake::convert::{ConvertSettings, OutputFormat, convert, take_stem};
 use imubake::fps::Fps;
 use imubake::pipeline::Trim;
@@ -102,10 +102,13 @@ impl SettingsArgs {
             formats: self.format.clone(),
             units: self.units,
             trim: self.trim,
-            smoothing: self.smooth.clone().map(|method| imubake::smooth::Smoothing {
-                method,
-                bones: Default::default(),
-            }),
+            smoothing: self
+                .smooth
+                .clone()
+                .map(|method| imubake::smooth::Smoothing {
+                    method,
+                    bones: Default::default(),
+                }),
             report: self.report,
             force: self.force,
             ..self.read.layer()

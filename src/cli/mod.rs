@@ -8,8 +8,8 @@ mod watch;
 
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
-use imubake::read::{InputFormat, ReadOptions};
 use imubake::config::Config;
+use imubake::read::{InputFormat, ReadOptions};
 use imubake::world::{World, WorldFrom};
 use std::process::ExitCode;
 use std::sync::Arc;

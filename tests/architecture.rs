@@ -1,0 +1,87 @@
+//! The layers of ARCHITECTURE.md hold: a module imports (`use crate::…`, `crate::…` paths in
+//! code, outside tests and comments) only modules of lower layers — never a higher one, nor
+//! another of its own layer, so there can be no import loop. Submodules belong to their
+//! top-level module's layer.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Top-level modules by layer, lowest first (ARCHITECTURE.md, "Layers").
+const LAYERS: [&[&str]; 11] = [
+    &["fps", "world", "rotation", "diagnostic"],
+    &["take"],
+    &["read", "bvh", "smooth", "inspect"],
+    &["rig"],
+    &["mapping", "anim"],
+    &["pipeline"],
+    &["write"],
+    &["convert", "simulate"],
+    &["config", "ledger"],
+    &["batch"],
+    &["watch"],
+];
+
+fn layer_of(module: &str) -> Option<usize> {
+    LAYERS.iter().position(|l| l.contains(&module))
+}
+
+/// The code of a source file: test modules cut off, comments dropped.
+fn code(text: &str) -> String {
+    let text = text.split("#[cfg(test)]").next().unwrap_or("");
+    text.lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+#[test]
+fn lower_layers_never_import_higher_ones() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let path_re = regex::Regex::new(r"crate::([a-z_]+)").unwrap();
+    let mut modules = BTreeMap::new();
+    let mut violations = Vec::new();
+    let mut stack = vec![src.clone()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+                continue;
+            }
+            let rel = path
+                .strip_prefix(&src)
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            let top = rel.split(['/', '.']).next().unwrap().to_string();
+            if ["lib", "main", "cli"].contains(&top.as_str()) {
+                continue;
+            }
+            let own = layer_of(&top).unwrap_or_else(|| {
+                panic!("src/{rel}: module `{top}` is in no layer of ARCHITECTURE.md")
+            });
+            modules.insert(top.clone(), own);
+            let text = std::fs::read_to_string(&path).unwrap();
+            for cap in path_re.captures_iter(&code(&text)) {
+                let used = &cap[1];
+                let Some(theirs) = layer_of(used) else {
+                    panic!("src/{rel}: uses `crate::{used}`, which is in no layer");
+                };
+                // Only strictly lower layers (or the module itself): no loops, even in a layer.
+                if used != top && theirs >= own {
+                    violations.push(format!(
+                        "src/{rel} (layer {own}) uses crate::{used} (layer {theirs})"
+                    ));
+                }
+            }
+        }
+    }
+    // Every layer's modules exist (the table names no module that is gone).
+    for module in LAYERS.iter().flat_map(|l| l.iter()) {
+        assert!(
+            modules.contains_key(*module),
+            "no module `{module}` in src/"
+        );
+    }
+    assert!(violations.is_empty(), "{violations:#?}");
+}
