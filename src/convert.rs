@@ -19,7 +19,6 @@ use crate::rig::file::RigLoadError;
 use crate::rig::{LengthUnit, Rig, load_rig};
 use crate::take::{LineReport, Take};
 use crate::world::{World, WorldFrom};
-use crate::write::gltf::GltfWriteError;
 use crate::write::report::{ReportInput, bone_series};
 use crate::write::sidecar::{PipelineRecord, RigRecord, Sidecar, SourceRecord, TrimRecord};
 pub use crate::write::{Output, OutputFormat};
@@ -102,27 +101,9 @@ pub enum ConvertError {
         rig: String,
         sensors: String,
     },
-    #[error("{}: cannot write: {source}", .path.display())]
-    Write {
-        path: PathBuf,
-        #[source]
-        source: io::Error,
-    },
-    #[error("{}: {source}", .path.display())]
-    Gltf {
-        path: PathBuf,
-        #[source]
-        source: GltfWriteError,
-    },
-}
-
-impl From<OutputError> for ConvertError {
-    fn from(e: OutputError) -> Self {
-        match e {
-            OutputError::Write { path, source } => ConvertError::Write { path, source },
-            OutputError::Gltf { path, source } => ConvertError::Gltf { path, source },
-        }
-    }
+    /// Writing an output (or the sidecar) failed: the take's outputs are removed.
+    #[error(transparent)]
+    Output(#[from] OutputError),
 }
 
 impl crate::diagnostic::Diagnostic for ConvertError {
@@ -135,7 +116,8 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             ConvertError::Pipeline { input, .. } | ConvertError::NoMapping { input, .. } => {
                 Some(input)
             }
-            ConvertError::Write { path, .. } | ConvertError::Gltf { path, .. } => Some(path),
+            ConvertError::Output(OutputError::Write { path, .. })
+            | ConvertError::Output(OutputError::Gltf { path, .. }) => Some(path),
         }
     }
 
@@ -152,9 +134,7 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             ConvertError::Mapping(e) => e.hint(),
             ConvertError::Rig(e) => e.hint(),
             ConvertError::Pipeline { .. } | ConvertError::NoMapping { .. } => None,
-            ConvertError::Write { .. } | ConvertError::Gltf { .. } => {
-                Some("check the output folder: free space and permissions")
-            }
+            ConvertError::Output(_) => Some("check the output folder: free space and permissions"),
         }
     }
 }
@@ -348,7 +328,7 @@ pub fn convert(
     settings: &ConvertSettings,
 ) -> Result<ConvertOutcome, ConvertError> {
     convert_unclean(input, out_dir, settings).inspect_err(|e| {
-        if matches!(e, ConvertError::Write { .. } | ConvertError::Gltf { .. }) {
+        if matches!(e, ConvertError::Output(_)) {
             remove_take_outputs(out_dir, &take_stem(input));
         }
     })
@@ -546,7 +526,7 @@ fn write_take(
     conversion: Conversion,
 ) -> Result<ConvertOutcome, ConvertError> {
     let stem = take_stem(input);
-    std::fs::create_dir_all(out_dir).map_err(|source| ConvertError::Write {
+    std::fs::create_dir_all(out_dir).map_err(|source| OutputError::Write {
         path: out_dir.to_path_buf(),
         source,
     })?;
@@ -556,10 +536,11 @@ fn write_take(
     if let Err(source) = std::fs::remove_file(&old_sidecar)
         && source.kind() != io::ErrorKind::NotFound
     {
-        return Err(ConvertError::Write {
+        return Err(OutputError::Write {
             path: old_sidecar,
             source,
-        });
+        }
+        .into());
     }
     let TakeFacts {
         sensor_summaries,
@@ -620,7 +601,7 @@ fn write_take(
         w.write_all(&json)?;
         w.write_all(b"\n")
     })
-    .map_err(|source| ConvertError::Write {
+    .map_err(|source| OutputError::Write {
         path: sidecar_path.clone(),
         source,
     })?;

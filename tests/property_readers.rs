@@ -163,14 +163,13 @@ mod one_line_edits {
         if !t.is_finite() {
             return Vec::new();
         }
+        // Readers trim ASCII whitespace around a field (not a vertical tab).
+        let id = fields[1].trim_ascii();
         if sou_format {
             let us = (t * 1e3).round() as i64;
-            vec![
-                (format!("{}_0", fields[1]), us),
-                (format!("{}_1", fields[1]), us),
-            ]
+            vec![(format!("{id}_0"), us), (format!("{id}_1"), us)]
         } else {
-            vec![(fields[1].to_string(), (t * 1e6).round() as i64)]
+            vec![(id.to_string(), (t * 1e6).round() as i64)]
         }
     }
 
@@ -277,7 +276,7 @@ mod one_line_edits {
             let edited = samples(&edited);
             // What the line may cost or add: its own samples, and what the edited text names.
             let mut allowed: Vec<(String, i64)> = keys_of_line(lines[at], sou_format);
-            for piece in edited_line.split(['\n', '\r']) {
+            for piece in edited_line.split('\n') {
                 allowed.extend(keys_of_line(piece, sou_format));
             }
             for (key, value) in &original {

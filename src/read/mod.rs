@@ -283,7 +283,17 @@ pub(crate) struct HeaderCheck<'a> {
     pub expected: &'a str,
 }
 
-impl HeaderCheck<'_> {
+impl<'a> HeaderCheck<'a> {
+    /// The checks of the row at `line` of `path`, called `what` in messages.
+    pub(crate) fn new(path: &'a Path, line: u64, what: &'a str, expected: &'a str) -> Self {
+        HeaderCheck {
+            path,
+            line,
+            what,
+            expected,
+        }
+    }
+
     pub(crate) fn error(&self, problem: String) -> ReadError {
         ReadError::line(self.path, self.line, format!("{} {problem}", self.what))
     }

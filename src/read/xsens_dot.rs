@@ -101,12 +101,7 @@ fn fields_of(line: &[u8]) -> Vec<String> {
 impl Layout {
     fn from_header(line: &[u8], path: &Path, line_no: u64) -> Result<Layout, ReadError> {
         let names = fields_of(line);
-        let check = HeaderCheck {
-            path,
-            line: line_no,
-            what: "header",
-            expected: EXPECTED_HEADER,
-        };
+        let check = HeaderCheck::new(path, line_no, "header", EXPECTED_HEADER);
         check.column_count(names.len(), MAX_COLUMNS)?;
         let find = |name: &str| names.iter().position(|n| n == name);
         let group =

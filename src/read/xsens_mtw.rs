@@ -194,12 +194,7 @@ impl Layout {
     fn from_header(line: &[u8], path: &Path, line_no: u64) -> Result<Layout, ReadError> {
         let sep = separator(line);
         let names = names_of(line, sep);
-        let check = HeaderCheck {
-            path,
-            line: line_no,
-            what: "column row",
-            expected: EXPECTED_HEADER,
-        };
+        let check = HeaderCheck::new(path, line_no, "column row", EXPECTED_HEADER);
         check.column_count(names.len(), MAX_COLUMNS)?;
         let find = |name: &str| {
             let lower = name.to_ascii_lowercase();
