@@ -22,6 +22,69 @@ pub struct Animation {
     root_positions: Vec<Vector3<f64>>,
 }
 
+/// One frame of an animation: what a stream emits. Every joint's local rotation (rig world
+/// axes; the root's is its world rotation) and the root position (rig units), at frame `frame`
+/// (time `time_s` = frame / fps).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pose {
+    pub frame: u64,
+    pub time_s: f64,
+    pub local: Vec<UnitQuaternion<f64>>,
+    pub root: Vector3<f64>,
+}
+
+/// An [`Animation`] built by collecting [`Pose`]s (frame after frame).
+pub struct AnimationBuilder {
+    rig: Rig,
+    fps: Fps,
+    local: Vec<Vec<UnitQuaternion<f64>>>,
+    roots: Vec<Vector3<f64>>,
+}
+
+impl AnimationBuilder {
+    pub fn new(rig: Rig, fps: Fps) -> AnimationBuilder {
+        let joints = rig.len();
+        AnimationBuilder {
+            rig,
+            fps,
+            local: vec![Vec::new(); joints],
+            roots: Vec::new(),
+        }
+    }
+
+    /// Adds the next frame (`pose.local` has one rotation per joint).
+    pub fn push(&mut self, pose: &Pose) {
+        for (track, q) in self.local.iter_mut().zip(&pose.local) {
+            track.push(*q);
+        }
+        self.roots.push(pose.root);
+    }
+
+    /// Frames collected so far.
+    pub fn frames(&self) -> usize {
+        self.roots.len()
+    }
+
+    /// The animation of frames `first ..` (a `--trim` of the collected frames), with `animated`
+    /// saying which joints carry motion.
+    pub fn finish(
+        mut self,
+        first: usize,
+        frames: usize,
+        animated: Vec<bool>,
+    ) -> Result<Animation, AnimationError> {
+        fn keep<T>(v: &mut Vec<T>, first: usize, frames: usize) {
+            v.truncate(first + frames);
+            v.drain(..first.min(v.len()));
+        }
+        for track in &mut self.local {
+            keep(track, first, frames);
+        }
+        keep(&mut self.roots, first, frames);
+        Animation::new(self.rig, self.fps, self.local, animated, self.roots)
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum AnimationError {
     #[error("an animation needs at least one frame")]

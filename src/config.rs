@@ -17,6 +17,8 @@
 //! skip_lines: 0
 //! skip_seconds: 0
 //! world: ned             # override the format's world
+//! causal: false          # run the take as a live stream would (causal smoothing, no look-ahead)
+//! sensor_rate_hz: 100    # the sensors' rate, for causal smoothing (else from their first samples)
 //! smoothing: butterworth:order=4,cutoff=14   # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
 //! # or with per-bone overrides:
 //! # smoothing: {method: "butterworth:cutoff=4", bones: {LeftHand: none, Head: "gaussian:sigma=0.05"}}
@@ -62,6 +64,12 @@ pub struct Config {
     /// Allow absurd frame counts (a flag).
     #[serde(default)]
     pub force: bool,
+    /// Causal mode: the take runs through the stream's cores (a flag).
+    #[serde(default)]
+    pub causal: bool,
+    /// The sensors' sample rate, Hz, for causal smoothing's grid.
+    #[serde(default, deserialize_with = "sensor_rate")]
+    pub sensor_rate_hz: Option<f64>,
 }
 
 /// A key's value parsed with `FromStr`, its error naming the key.
@@ -89,6 +97,15 @@ fn skip_seconds<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error
             "`skip_seconds`: expected seconds ≥ 0",
         )),
         s => Ok(s),
+    }
+}
+
+fn sensor_rate<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+    match Option::<f64>::deserialize(d)? {
+        Some(r) if !(r.is_finite() && r > 0.0) => Err(serde::de::Error::custom(
+            "`sensor_rate_hz`: expected a rate above 0 Hz",
+        )),
+        r => Ok(r),
     }
 }
 
@@ -201,6 +218,8 @@ impl Config {
             smoothing: self.smoothing.or(below.smoothing),
             report: self.report || below.report,
             force: self.force || below.force,
+            causal: self.causal || below.causal,
+            sensor_rate_hz: self.sensor_rate_hz.or(below.sensor_rate_hz),
         }
     }
 
@@ -235,6 +254,8 @@ impl Config {
             s.pipeline.smoothing = smoothing.clone();
         }
         s.pipeline.force = self.force;
+        s.pipeline.causal = self.causal;
+        s.pipeline.sensor_rate_hz = self.sensor_rate_hz;
         s.read.format = self.input_format;
         s.read.skip_lines = self.skip_lines.unwrap_or(0);
         s.read.skip_seconds = self.skip_seconds.unwrap_or(0.0);

@@ -513,6 +513,7 @@ fn pipeline_record(
             first_frame,
         }),
         mode,
+        causal: settings.pipeline.causal,
     }
 }
 

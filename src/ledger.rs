@@ -151,8 +151,9 @@ const RACY_NS: u64 = 2_000_000_000;
 /// or bump).
 ///
 /// Schema 0 was a hash of the settings' `Debug` text and the crate version (any release
-/// reconverted everything); 1 is [`FingerprintInput`].
-pub const FINGERPRINT_SCHEMA: u32 = 1;
+/// reconverted everything); 1 is [`FingerprintInput`]; 2: causal Butterworth smoothing runs on
+/// the stream's core (its grid's rate from each sensor's first samples).
+pub const FINGERPRINT_SCHEMA: u32 = 2;
 
 /// What decides a conversion's outputs besides the capture, in a stable serialisation: field
 /// names and values, not Rust's `Debug` text; the mapping and rig files by content, not by path.
@@ -173,6 +174,10 @@ struct FingerprintInput<'a> {
     formats: Vec<&'static str>,
     units: &'static str,
     report: bool,
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    causal: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    sensor_rate_hz: Option<f64>,
 }
 
 fn file_sha256(path: &Path) -> String {
@@ -208,6 +213,8 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         formats: settings.formats.iter().map(|f| f.name()).collect(),
         units: settings.units.name(),
         report: settings.report,
+        causal: p.causal,
+        sensor_rate_hz: p.sensor_rate_hz,
     };
     let json = serde_json::to_vec(&input).expect("the fingerprint input serialises");
     format!("{FINGERPRINT_SCHEMA}:{}", hex(&Sha256::digest(&json)))

@@ -65,8 +65,23 @@ pub struct SettingsArgs {
     /// --fps).
     #[arg(long)]
     force: bool,
+    /// Causal mode: run the take as a live stream would (smoothing causal, no heading from the
+    /// direction of travel), through the same incremental stages.
+    #[arg(long)]
+    causal: bool,
+    /// The sensors' sample rate, Hz: causal smoothing's grid uses it instead of the rate of each
+    /// sensor's first samples.
+    #[arg(long, value_name = "HZ", value_parser = parse_rate)]
+    sensor_rate: Option<f64>,
     #[command(flatten)]
     read: ReadArgs,
+}
+
+fn parse_rate(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(r) if r.is_finite() && r > 0.0 => Ok(r),
+        _ => Err(format!("`{s}`: expected a rate above 0 Hz")),
+    }
 }
 
 fn parse_units(s: &str) -> Result<LengthUnit, String> {
@@ -111,6 +126,8 @@ impl SettingsArgs {
                 }),
             report: self.report,
             force: self.force,
+            causal: self.causal,
+            sensor_rate_hz: self.sensor_rate,
             ..self.read.layer()
         }
     }

@@ -104,19 +104,38 @@ pub fn calibrate(
 ) -> Result<Calibration, PipelineError> {
     let Sources { sensors, tracks } = sources;
     let Some(w) = window else {
-        return Ok(Calibration {
-            heading: UnitQuaternion::identity(),
-            heading_source: HeadingSource::None,
-            mounts: sensors
-                .iter()
-                .map(|s| match s.mount {
-                    Mount::Fixed(q) => q,
-                    Mount::Calibrate => UnitQuaternion::identity(),
-                })
-                .collect(),
-            warnings: Vec::new(),
-        });
+        return Ok(without_window(sensors));
     };
+    check_window(w, take_end_s, mapping_file)?;
+    let pose_world = pose_world(rig, sensors, w, mapping_file)?;
+    let held = held_poses(sensors, tracks, w, warnings);
+    let travel = heading_from_knees(&knee_samples(rig, sensors, tracks, &held, w));
+    let calibration = solve(sensors, &held, &pose_world, travel);
+    warnings.extend(calibration.warnings.iter().cloned());
+    Ok(calibration)
+}
+
+/// Without a window: the known mounts (identity for the others), the sensors' own heading.
+fn without_window(sensors: &[ResolvedSensor]) -> Calibration {
+    Calibration {
+        heading: UnitQuaternion::identity(),
+        heading_source: HeadingSource::None,
+        mounts: sensors
+            .iter()
+            .map(|s| match s.mount {
+                Mount::Fixed(q) => q,
+                Mount::Calibrate => UnitQuaternion::identity(),
+            })
+            .collect(),
+        warnings: Vec::new(),
+    }
+}
+
+fn check_window(
+    w: &CalibrationWindow,
+    take_end_s: f64,
+    mapping_file: &str,
+) -> Result<(), PipelineError> {
     if w.start_s > take_end_s {
         return Err(PipelineError::CalibrationOutside {
             file: mapping_file.to_string(),
@@ -125,6 +144,16 @@ pub fn calibrate(
             end_s: take_end_s,
         });
     }
+    Ok(())
+}
+
+/// Each sensor's bone's world orientation in the calibration pose.
+fn pose_world(
+    rig: &Rig,
+    sensors: &[ResolvedSensor],
+    w: &CalibrationWindow,
+    mapping_file: &str,
+) -> Result<Vec<UnitQuaternion<f64>>, PipelineError> {
     let pose = rig
         .pose(&w.pose.label())
         .ok_or_else(|| PipelineError::UnknownPose {
@@ -134,7 +163,17 @@ pub fn calibrate(
             known: rig.pose_names().join(", "),
         })?;
     let pose_world_all = rig.world_rotations(&pose.local);
-    let pose_world: Vec<_> = sensors.iter().map(|s| pose_world_all[s.bone]).collect();
+    Ok(sensors.iter().map(|s| pose_world_all[s.bone]).collect())
+}
+
+/// Each sensor's mean orientation over the window ([`held_over`]), warning about the sensors that
+/// turn by more than [`MOVED_DURING_CALIBRATION_DEG`] in it.
+fn held_poses(
+    sensors: &[ResolvedSensor],
+    tracks: &[Track<UnitQuaternion<f64>>],
+    w: &CalibrationWindow,
+    warnings: &mut Vec<String>,
+) -> Vec<UnitQuaternion<f64>> {
     let held: Vec<_> = tracks.iter().map(|t| held_over(t, w)).collect();
     for ((s, track), mean) in sensors.iter().zip(tracks).zip(&held) {
         let moved = track
@@ -152,10 +191,146 @@ pub fn calibrate(
             ));
         }
     }
-    let travel = heading_from_knees(&knee_samples(rig, sensors, tracks, &held, w));
-    let calibration = solve(sensors, &held, &pose_world, travel);
-    warnings.extend(calibration.warnings.iter().cloned());
-    Ok(calibration)
+    held
+}
+
+/// The incremental core of stage 2, for streams: each sensor's samples (rig world) are kept until
+/// the calibration window has passed for every sensor — a sample after its end, or the sensor
+/// declared stale — then the stage solves as [`calibrate`] does, from the same samples (the last
+/// one before the window, those in it, the first after it), but without the heading from travel,
+/// which would need the seconds after the window (a stream uses a declared forward axis or a
+/// known mount). Before that, [`CalibrationCore::left_s`] says how long the pose is to be held.
+pub struct CalibrationCore {
+    window: Option<CalibrationWindow>,
+    sensors: Vec<ResolvedSensor>,
+    pose_world: Vec<UnitQuaternion<f64>>,
+    samples: Vec<Vec<(f64, UnitQuaternion<f64>)>>,
+    passed: Vec<bool>,
+    latest_s: f64,
+    result: Option<Calibration>,
+}
+
+impl CalibrationCore {
+    pub fn new(
+        rig: &Rig,
+        sensors: Vec<ResolvedSensor>,
+        window: Option<CalibrationWindow>,
+        mapping_file: &str,
+    ) -> Result<CalibrationCore, PipelineError> {
+        let pose_world = match &window {
+            Some(w) => pose_world(rig, &sensors, w, mapping_file)?,
+            None => Vec::new(),
+        };
+        let n = sensors.len();
+        let result = window.is_none().then(|| without_window(&sensors));
+        Ok(CalibrationCore {
+            window,
+            sensors,
+            pose_world,
+            samples: vec![Vec::new(); n],
+            passed: vec![false; n],
+            latest_s: f64::NEG_INFINITY,
+            result,
+        })
+    }
+
+    /// The calibration, once solved.
+    pub fn result(&self) -> Option<&Calibration> {
+        self.result.as_ref()
+    }
+
+    /// The calibration window, if there is one.
+    pub fn window(&self) -> Option<&CalibrationWindow> {
+        self.window.as_ref()
+    }
+
+    /// Seconds of stream time until the window ends (0 once it has).
+    pub fn left_s(&self) -> f64 {
+        match &self.window {
+            Some(w) => (w.start_s + w.duration_s - self.latest_s.max(0.0)).max(0.0),
+            None => 0.0,
+        }
+    }
+
+    /// A sample of sensor `i` (in mapping order), rig world; times increase per sensor.
+    pub fn push(&mut self, i: usize, t: f64, q: UnitQuaternion<f64>) {
+        self.latest_s = self.latest_s.max(t);
+        let Some(w) = &self.window else {
+            return;
+        };
+        if self.result.is_some() || self.passed[i] {
+            return;
+        }
+        let samples = &mut self.samples[i];
+        if t < w.start_s {
+            // Only the last sample before the window matters (to interpolate in an empty one).
+            samples.clear();
+        }
+        samples.push((t, q));
+        if t > w.start_s + w.duration_s {
+            self.passed[i] = true;
+        }
+    }
+
+    /// Solves once every sensor has passed the window or is `stale`; `Some` once solved.
+    pub fn try_solve(
+        &mut self,
+        stale: impl Fn(usize) -> bool,
+        warnings: &mut Vec<String>,
+    ) -> Option<&Calibration> {
+        if self.result.is_none() && (0..self.sensors.len()).all(|i| self.passed[i] || stale(i)) {
+            self.solve_now(warnings);
+        }
+        self.result.as_ref()
+    }
+
+    /// Solves with what there is (at the end of a take): an error when the window starts after
+    /// every sample.
+    pub fn finish(
+        &mut self,
+        mapping_file: &str,
+        warnings: &mut Vec<String>,
+    ) -> Result<&Calibration, PipelineError> {
+        if self.result.is_none() {
+            if let Some(w) = &self.window {
+                check_window(w, self.latest_s, mapping_file)?;
+            }
+            self.solve_now(warnings);
+        }
+        Ok(self.result.as_ref().expect("solved"))
+    }
+
+    fn solve_now(&mut self, warnings: &mut Vec<String>) {
+        let Some(w) = self.window.clone() else {
+            return;
+        };
+        let tracks: Vec<Track<UnitQuaternion<f64>>> = self
+            .samples
+            .iter()
+            .map(|s| {
+                let (times, values): (Vec<f64>, Vec<UnitQuaternion<f64>>) = if s.is_empty() {
+                    // A sensor silent through the window: it cannot be calibrated.
+                    (vec![w.start_s], vec![UnitQuaternion::identity()])
+                } else {
+                    s.iter().copied().unzip()
+                };
+                Track::new(times, values).expect("a sensor's samples increase")
+            })
+            .collect();
+        for (s, samples) in self.sensors.iter().zip(&self.samples) {
+            if samples.is_empty() {
+                warnings.push(format!(
+                    "sensor `{}` sent nothing during the calibration window; its mount is unknown",
+                    s.sensor
+                ));
+            }
+        }
+        let held = held_poses(&self.sensors, &tracks, &w, warnings);
+        let calibration = solve(&self.sensors, &held, &self.pose_world, None);
+        warnings.extend(calibration.warnings.iter().cloned());
+        self.samples = Vec::new();
+        self.result = Some(calibration);
+    }
 }
 
 /// The mean orientation of a track over [start, start + duration]; the value interpolated at the

@@ -20,8 +20,9 @@ pub mod resample;
 pub mod root;
 pub mod smoothing;
 pub mod sources;
+pub mod stream;
 
-use crate::anim::{Animation, AnimationError};
+use crate::anim::{Animation, AnimationBuilder, AnimationError, Pose};
 use crate::fps::Fps;
 use crate::mapping::{CalibrationWindow, Mapping, MappingError, ResolvedSensor};
 use crate::rig::Rig;
@@ -94,6 +95,12 @@ pub struct PipelineOptions {
     /// The sensors' world when the user set it (`--world`, the config file): over the mapping's
     /// and the take's.
     pub world: Option<World>,
+    /// Causal mode: the take runs through the stream's incremental cores ([`stream`]), as a live
+    /// capture would: smoothing causal, no heading from the direction of travel.
+    pub causal: bool,
+    /// The sensors' sample rate, when known: causal smoothing's grid uses it instead of the rate
+    /// of each sensor's first samples.
+    pub sensor_rate_hz: Option<f64>,
 }
 
 impl Default for PipelineOptions {
@@ -106,6 +113,8 @@ impl Default for PipelineOptions {
             keep_unsmoothed: false,
             force: false,
             world: None,
+            causal: false,
+            sensor_rate_hz: None,
         }
     }
 }
@@ -167,6 +176,8 @@ pub enum PipelineError {
         max: usize,
         sensor_hz: f64,
     },
+    #[error("`{bone}`: {reason}")]
+    NotCausal { bone: String, reason: String },
     #[error(transparent)]
     Animation(#[from] AnimationError),
 }
@@ -216,6 +227,9 @@ pub fn run(
     mapping_file: &Path,
     options: &PipelineOptions,
 ) -> Result<Converted, PipelineError> {
+    if options.causal {
+        return run_causal(take, rig, mapping, mapping_file, options);
+    }
     let file = mapping_file.display().to_string();
     let mut warnings = Vec::new();
     let world = options
@@ -259,7 +273,11 @@ pub fn run(
             .keep_unsmoothed
             .then(|| resample::resample(&track, &grid));
         let bone = &rig.joints()[s.bone].name;
-        let (track, unsmoothed) = smooth_track(track, options.smoothing.for_bone(bone));
+        let (track, unsmoothed) = smooth_track(
+            track,
+            options.smoothing.for_bone(bone),
+            options.sensor_rate_hz,
+        );
         let on_grid = resample::resample(&track, &grid);
         (
             s.bone,
@@ -297,4 +315,118 @@ pub fn run(
         unsmoothed,
         warnings,
     })
+}
+
+/// Causal mode: the whole take through the stream's incremental cores ([`stream::PoseStream`]),
+/// its samples in time order as a live capture would deliver them, the poses collected into the
+/// animation (then cut by `--trim`).
+fn run_causal(
+    take: &Take,
+    rig: &Rig,
+    mapping: &Mapping,
+    mapping_file: &Path,
+    options: &PipelineOptions,
+) -> Result<Converted, PipelineError> {
+    let file = mapping_file.display().to_string();
+    let mut warnings = Vec::new();
+    let world = options
+        .world
+        .or(mapping.world)
+        .unwrap_or(take.source().world);
+    let resolved = mapping.resolve(rig, mapping_file)?;
+    let sources = sources::orientations(take, rig, mapping, resolved, world, &mut warnings)?;
+    let window = calibrate::window(mapping, &sources.sensors, &mut warnings);
+    let t_last = sources
+        .tracks
+        .iter()
+        .map(|t| t.last_time_s())
+        .fold(0.0, f64::max);
+    let grid = FrameGrid::new(options.fps, t_last, options.trim)?;
+    let times: Vec<&[f64]> = sources.tracks.iter().map(|t| t.times_s()).collect();
+    resample::check_frame_rate(&grid, options.force, &times, rig.len(), &mut warnings)?;
+    let names: Vec<&str> = sources.sensors.iter().map(|s| s.sensor.as_str()).collect();
+    warnings.extend(resample::long_gaps(&names, &times, &grid));
+
+    let mut stream = stream::PoseStream::new(
+        rig,
+        sources.sensors.clone(),
+        window.clone(),
+        world,
+        options,
+        &file,
+    )?;
+    let mut animation = AnimationBuilder::new(rig.clone(), options.fps);
+    let mut on_pose = |pose: &Pose| animation.push(pose);
+    // The sensors' samples merged in time order (ties in mapping order).
+    let mut heads: std::collections::BinaryHeap<MergeHead> = sources
+        .tracks
+        .iter()
+        .enumerate()
+        .map(|(sensor, track)| MergeHead {
+            t: track.first_time_s(),
+            sensor,
+            index: 0,
+        })
+        .collect();
+    while let Some(head) = heads.pop() {
+        let track = &sources.tracks[head.sensor];
+        stream.push_rig(
+            head.sensor,
+            head.t,
+            track.values()[head.index],
+            &mut on_pose,
+        );
+        if head.index + 1 < track.len() {
+            heads.push(MergeHead {
+                t: track.times_s()[head.index + 1],
+                sensor: head.sensor,
+                index: head.index + 1,
+            });
+        }
+    }
+    stream.finish(&mut on_pose)?;
+    warnings.extend(stream.warnings().iter().cloned());
+    let mut animated = vec![false; rig.len()];
+    for s in &sources.sensors {
+        animated[s.bone] = true;
+    }
+    let calibration = stream.calibration().cloned().expect("solved at the end");
+    let animation = animation.finish(grid.first, grid.frames, animated)?;
+    Ok(Converted {
+        animation,
+        sensors: sources.sensors,
+        calibration,
+        window,
+        world,
+        first_frame: grid.first,
+        unsmoothed: None,
+        warnings,
+    })
+}
+
+/// The next sample of one sensor, in a merge by time (the earliest on top of the heap).
+struct MergeHead {
+    t: f64,
+    sensor: usize,
+    index: usize,
+}
+
+impl PartialEq for MergeHead {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == std::cmp::Ordering::Equal
+    }
+}
+impl Eq for MergeHead {}
+impl PartialOrd for MergeHead {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for MergeHead {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        other
+            .t
+            .total_cmp(&self.t)
+            .then(other.sensor.cmp(&self.sensor))
+    }
 }

@@ -14,24 +14,47 @@ pub fn to_local(
     let n = rig.len();
     let mut local = vec![vec![UnitQuaternion::identity(); frames]; n];
     let mut frame_world = vec![UnitQuaternion::identity(); n];
+    let mut frame_local = vec![UnitQuaternion::identity(); n];
     for f in 0..frames {
-        for (j, joint) in rig.joints().iter().enumerate() {
-            let parent_world = joint.parent.map(|p| frame_world[p]);
-            frame_world[j] = match (&world[j], parent_world) {
-                (Some(track), Some(pw)) => {
-                    local[j][f] = pw.inverse() * track[f];
-                    track[f]
-                }
-                (Some(track), None) => {
-                    local[j][f] = track[f];
-                    track[f]
-                }
-                (None, Some(pw)) => pw,
-                (None, None) => UnitQuaternion::identity(),
-            };
+        frame_to_local(
+            rig,
+            |j| world[j].as_ref().map(|track| track[f]),
+            &mut frame_world,
+            &mut frame_local,
+        );
+        for (j, q) in frame_local.iter().enumerate() {
+            local[j][f] = *q;
         }
     }
     local
+}
+
+/// The incremental core: one frame's local rotations (`local`, one per joint) from the world
+/// rotations of the joints a sensor drives (`world(j)`); `frame_world` is scratch (one per joint).
+/// A joint without a sensor keeps its rest (identity) rotation.
+pub fn frame_to_local(
+    rig: &Rig,
+    world: impl Fn(usize) -> Option<UnitQuaternion<f64>>,
+    frame_world: &mut [UnitQuaternion<f64>],
+    local: &mut [UnitQuaternion<f64>],
+) {
+    for (j, joint) in rig.joints().iter().enumerate() {
+        let parent_world = joint.parent.map(|p| frame_world[p]);
+        frame_world[j] = match (world(j), parent_world) {
+            (Some(w), Some(pw)) => {
+                local[j] = pw.inverse() * w;
+                w
+            }
+            (Some(w), None) => {
+                local[j] = w;
+                w
+            }
+            (None, pw) => {
+                local[j] = UnitQuaternion::identity();
+                pw.unwrap_or_else(UnitQuaternion::identity)
+            }
+        };
+    }
 }
 
 #[cfg(test)]

@@ -4,8 +4,10 @@
 
 use super::{PipelineError, Trim};
 use crate::fps::Fps;
+use crate::rotation::slerp_shortest;
 use crate::take::Track;
 use nalgebra::UnitQuaternion;
+use std::collections::VecDeque;
 
 /// `track` at the frames of `grid`.
 pub fn resample(track: &Track<UnitQuaternion<f64>>, grid: &FrameGrid) -> Vec<UnitQuaternion<f64>> {
@@ -158,6 +160,120 @@ pub fn long_gaps(sensors: &[&str], times: &[&[f64]], grid: &FrameGrid) -> Vec<St
             ))
         })
         .collect()
+}
+
+/// The incremental core of resampling: each sensor's (smoothed) samples in, frames out. Frame
+/// n (at n / fps) comes out once every sensor has a sample at or after its time, or has been
+/// declared stale (no sample for [`FrameResampler::stale_after_s`] of stream time: it is then
+/// held at its last sample, and picked up again when it returns); a sensor with no sample yet is
+/// absent (`None`) once stale. The value is as [`Track::resample_at`]'s: slerp between the
+/// bracketing samples, held before the first and after the last; a frame exactly on a sample
+/// takes the sample.
+pub struct FrameResampler {
+    fps: Fps,
+    /// The next frame to emit.
+    next: u64,
+    /// Per sensor, its samples from the one bracketing the next frame on.
+    queues: Vec<VecDeque<(f64, UnitQuaternion<f64>)>>,
+    /// Per sensor, the time of its latest input sample (before smoothing), for staleness.
+    last_input_s: Vec<Option<f64>>,
+    /// The latest time any sensor has reached.
+    stream_s: f64,
+    /// Sensors whose samples have ended (at the end of a take).
+    ended: Vec<bool>,
+    pub stale_after_s: f64,
+}
+
+/// How long a sensor may be silent before frames go on without it.
+pub const DEFAULT_STALE_AFTER_S: f64 = 0.5;
+
+impl FrameResampler {
+    pub fn new(fps: Fps, sensors: usize) -> FrameResampler {
+        FrameResampler {
+            fps,
+            next: 0,
+            queues: (0..sensors).map(|_| VecDeque::new()).collect(),
+            last_input_s: vec![None; sensors],
+            stream_s: f64::NEG_INFINITY,
+            ended: vec![false; sensors],
+            stale_after_s: DEFAULT_STALE_AFTER_S,
+        }
+    }
+
+    /// The next frame to come out.
+    pub fn next_frame(&self) -> u64 {
+        self.next
+    }
+
+    /// Notes that `sensor` delivered an input sample at `t` (stream time moves on).
+    pub fn saw_input(&mut self, sensor: usize, t: f64) {
+        self.last_input_s[sensor] = Some(t);
+        self.stream_s = self.stream_s.max(t);
+    }
+
+    /// A (smoothed) sample of `sensor`; times increase per sensor.
+    pub fn push(&mut self, sensor: usize, t: f64, q: UnitQuaternion<f64>) {
+        self.queues[sensor].push_back((t, q));
+    }
+
+    /// The sensor's samples have ended: frames after its last sample hold it.
+    pub fn end(&mut self, sensor: usize) {
+        self.ended[sensor] = true;
+    }
+
+    /// Whether `sensor` has been silent longer than [`FrameResampler::stale_after_s`] of stream
+    /// time (or has sent nothing after that long).
+    pub fn is_stale(&self, sensor: usize) -> bool {
+        match self.last_input_s[sensor] {
+            Some(t) => self.stream_s - t > self.stale_after_s,
+            None => self.stream_s > self.stale_after_s,
+        }
+    }
+
+    /// Whether every sensor is ready for frame time `t`.
+    fn ready(&self, t: f64) -> bool {
+        (0..self.queues.len()).all(|s| {
+            self.ended[s]
+                || self.is_stale(s)
+                || self.queues[s].back().is_some_and(|&(last, _)| last >= t)
+        })
+    }
+
+    /// Emits the frames that are ready, up to `last_frame` (inclusive) when given: for each,
+    /// every sensor's value (`None`: no sample yet) goes to `frame(n, values)`.
+    pub fn emit(
+        &mut self,
+        last_frame: Option<u64>,
+        values: &mut [Option<UnitQuaternion<f64>>],
+        mut frame: impl FnMut(u64, &[Option<UnitQuaternion<f64>>]),
+    ) {
+        loop {
+            if last_frame.is_some_and(|l| self.next > l) {
+                return;
+            }
+            let t = self.fps.frame_time_of(self.next);
+            if !self.ready(t) {
+                return;
+            }
+            for (s, queue) in self.queues.iter_mut().enumerate() {
+                // Drop samples no later frame needs: keep the last one at or before `t`.
+                while queue.len() >= 2 && queue[1].0 <= t {
+                    queue.pop_front();
+                }
+                // At or before the first sample, and after the last: held. A frame exactly on a
+                // sample takes it as it is, whether or not the next sample has come yet.
+                values[s] = match (queue.front(), queue.get(1)) {
+                    (None, _) => None,
+                    (Some(&(t0, q0)), Some(&(t1, q1))) if t > t0 => {
+                        Some(slerp_shortest(&q0, &q1, (t - t0) / (t1 - t0)))
+                    }
+                    (Some(&(_, q0)), _) => Some(q0),
+                };
+            }
+            frame(self.next, values);
+            self.next += 1;
+        }
+    }
 }
 
 #[cfg(test)]

@@ -8,9 +8,11 @@
 //! rate, where averaging has the most samples to work with — and then resampled onto the frame
 //! grid by the pipeline.
 
-use crate::rotation::make_hemisphere_continuous;
+use crate::rotation::{make_hemisphere_continuous, slerp_shortest};
 use crate::smooth::Method;
-use crate::smooth::butterworth::{design_lowpass_sos, sosfilt_with_state, sosfilt_zi, sosfiltfilt};
+use crate::smooth::butterworth::{
+    design_lowpass_sos, sosfilt_step, sosfilt_with_state, sosfilt_zi, sosfiltfilt,
+};
 use crate::smooth::fft::{FftOptions, fft_filter};
 use crate::smooth::gaussian::gaussian_filter1d;
 use crate::take::Track;
@@ -217,9 +219,13 @@ pub fn not_smoothed_warnings(not_smoothed: &[(String, String)]) -> Vec<String> {
 pub fn smooth_track(
     track: Track<UnitQuaternion<f64>>,
     method: &Method,
+    sensor_rate_hz: Option<f64>,
 ) -> (Track<UnitQuaternion<f64>>, Option<Unsmoothed>) {
     if *method == Method::None {
         return (track, None);
+    }
+    if method.is_causal() {
+        return smooth_track_causally(&track, method, sensor_rate_hz);
     }
     let Some((rate, grid)) = uniform(&track) else {
         return (
@@ -232,4 +238,285 @@ pub fn smooth_track(
     let unsmoothed = smooth_quaternions_in_place(&mut values, rate, method).err();
     let track = Track::new(times, values).expect("the uniform grid's times are valid");
     (track, unsmoothed)
+}
+/// A causal method runs on its incremental core ([`CausalSmoother`]), as on a stream.
+fn smooth_track_causally(
+    track: &Track<UnitQuaternion<f64>>,
+    method: &Method,
+    sensor_rate_hz: Option<f64>,
+) -> (Track<UnitQuaternion<f64>>, Option<Unsmoothed>) {
+    let mut smoother = CausalSmoother::new(method, sensor_rate_hz).expect("a causal method");
+    let mut out = Vec::with_capacity(track.len());
+    for (t, q) in track.iter() {
+        smoother.push(t, *q, &mut out);
+    }
+    smoother.finish(&mut out);
+    let why = smoother.not_smoothed().cloned().or_else(|| {
+        (smoother.unsmoothed() > 0).then(|| {
+            Unsmoothed(format!(
+                "{} samples would have turned further than the sensor did",
+                smoother.unsmoothed()
+            ))
+        })
+    });
+    let (times, values) = out.into_iter().unzip();
+    let smoothed = Track::new(times, values).expect("the grid's times increase");
+    (smoothed, why)
+}
+
+/// How many samples of a sensor give its grid's rate in causal smoothing (when no rate is
+/// declared).
+pub const RATE_SAMPLES: usize = 32;
+
+/// The incremental core of smoothing, for one sensor: samples in, smoothed samples out, using only
+/// the past. The sensor's samples are slerped onto a uniform grid whose rate comes from its first
+/// [`RATE_SAMPLES`] samples (or the declared rate), then each grid sample goes through a causal
+/// Butterworth filter per quaternion component (started in the steady state of the first sample,
+/// sign-continuous, renormalised). The guard decides per sample, as the whole-take guard does
+/// over the track: a filtered sample that would turn from the previous output by more than 1°
+/// beyond the largest turn of the input over the last [`GUARD_SAMPLES`] grid samples (a lagging
+/// filter may turn more than the input at the very moment the input slows) is replaced by the
+/// input, and the filter restarts there (counted in [`CausalSmoother::unsmoothed`]). `none`
+/// passes samples through unchanged.
+pub struct CausalSmoother {
+    method: Method,
+    declared_rate_hz: Option<f64>,
+    /// The first samples, until the grid's rate is known.
+    first: Vec<(f64, UnitQuaternion<f64>)>,
+    grid: Option<Grid>,
+    /// The previous input sample, for slerping onto the grid.
+    previous: Option<(f64, UnitQuaternion<f64>)>,
+    /// Grid samples left unsmoothed by the guard.
+    unsmoothed: usize,
+    /// Why the sensor is not smoothed at all, if it is not.
+    not_smoothed: Option<Unsmoothed>,
+}
+
+/// How many recent grid samples' turns the per-sample guard compares a filtered turn with.
+pub const GUARD_SAMPLES: usize = 64;
+
+/// The uniform grid and the filter running on it.
+struct Grid {
+    t0: f64,
+    step: f64,
+    /// The next grid sample to produce.
+    next: u64,
+    /// `None`: the low-pass has nothing to remove at this rate (passes grid samples unchanged).
+    sos: Option<Vec<crate::smooth::butterworth::Sos>>,
+    zi: Vec<[f64; 2]>,
+    /// Per quaternion component (nalgebra's x, y, z, w), the filter state.
+    state: [Vec<[f64; 2]>; 4],
+    /// The previous grid sample in (sign-continuous) and out.
+    last_in: Option<UnitQuaternion<f64>>,
+    last_out: Option<UnitQuaternion<f64>>,
+    /// The input's turns (radians) over the last [`GUARD_SAMPLES`] grid samples, a ring.
+    recent_steps: [f64; GUARD_SAMPLES],
+    steps_seen: usize,
+}
+
+impl CausalSmoother {
+    /// A smoother for `method` (which must be causal: [`Method::to_causal`]); `rate_hz` the
+    /// sensor's declared rate, if known.
+    pub fn new(method: &Method, rate_hz: Option<f64>) -> Result<CausalSmoother, String> {
+        let method = method.to_causal()?;
+        Ok(CausalSmoother {
+            method,
+            declared_rate_hz: rate_hz.filter(|r| r.is_finite() && *r > 0.0),
+            first: Vec::new(),
+            grid: None,
+            previous: None,
+            unsmoothed: 0,
+            not_smoothed: None,
+        })
+    }
+
+    /// Grid samples the guard left unsmoothed so far.
+    pub fn unsmoothed(&self) -> usize {
+        self.unsmoothed
+    }
+
+    /// Why the sensor was not smoothed at all (a single sample, a filter that cannot be made).
+    pub fn not_smoothed(&self) -> Option<&Unsmoothed> {
+        self.not_smoothed.as_ref()
+    }
+
+    /// Takes a sample (times increasing); appends the smoothed samples it completes to `out`.
+    pub fn push(
+        &mut self,
+        t: f64,
+        q: UnitQuaternion<f64>,
+        out: &mut Vec<(f64, UnitQuaternion<f64>)>,
+    ) {
+        if self.method == Method::None {
+            out.push((t, q));
+            return;
+        }
+        if self.grid.is_none() {
+            self.first.push((t, q));
+            let rate = self
+                .declared_rate_hz
+                .or_else(|| (self.first.len() >= RATE_SAMPLES).then(|| mean_rate(&self.first)));
+            if let Some(rate) = rate {
+                self.start_grid(rate, out);
+            }
+            return;
+        }
+        self.advance(t, q, out);
+    }
+
+    /// The end of the sensor's samples: what is still held comes out.
+    pub fn finish(&mut self, out: &mut Vec<(f64, UnitQuaternion<f64>)>) {
+        if self.grid.is_some() || self.first.is_empty() {
+            return;
+        }
+        if self.first.len() < 2 {
+            self.not_smoothed = Some(Unsmoothed("a single sample cannot be smoothed".into()));
+            out.append(&mut self.first);
+            return;
+        }
+        let rate = mean_rate(&self.first);
+        self.start_grid(rate, out);
+    }
+
+    fn start_grid(&mut self, rate_hz: f64, out: &mut Vec<(f64, UnitQuaternion<f64>)>) {
+        let Method::Butterworth {
+            order, cutoff_hz, ..
+        } = self.method
+        else {
+            unreachable!("only Butterworth smooths causally")
+        };
+        let t0 = self.first[0].0;
+        let sos = if cutoff_hz >= rate_hz / 2.0 {
+            // A low-pass at or above half the rate has nothing to remove: the identity.
+            None
+        } else {
+            match design_lowpass_sos(order, cutoff_hz, rate_hz) {
+                Ok(sos) => Some(sos),
+                Err(e) => {
+                    self.not_smoothed = Some(Unsmoothed(format!(
+                        "{} at {rate_hz:.1} Hz: {e}",
+                        self.method
+                    )));
+                    None
+                }
+            }
+        };
+        let zi = match &sos {
+            Some(sos) => sosfilt_zi(sos).unwrap_or_default(),
+            None => Vec::new(),
+        };
+        self.grid = Some(Grid {
+            t0,
+            step: 1.0 / rate_hz,
+            next: 0,
+            sos,
+            state: std::array::from_fn(|_| zi.clone()),
+            zi,
+            last_in: None,
+            last_out: None,
+            recent_steps: [0.0; GUARD_SAMPLES],
+            steps_seen: 0,
+        });
+        let first = std::mem::take(&mut self.first);
+        for (t, q) in first {
+            self.advance(t, q, out);
+        }
+    }
+
+    /// Produces the grid samples up to `t` (slerped between the previous sample and this one).
+    fn advance(
+        &mut self,
+        t: f64,
+        q: UnitQuaternion<f64>,
+        out: &mut Vec<(f64, UnitQuaternion<f64>)>,
+    ) {
+        let grid = self.grid.as_mut().expect("the grid is started");
+        if let Some((tp, qp)) = self.previous {
+            loop {
+                let tk = grid.t0 + grid.next as f64 * grid.step;
+                if tk > t {
+                    break;
+                }
+                let u = if t > tp { (tk - tp) / (t - tp) } else { 1.0 };
+                let value = slerp_shortest(&qp, &q, u.clamp(0.0, 1.0));
+                let (smoothed, kept) = grid.filter(value);
+                self.unsmoothed += usize::from(!kept);
+                out.push((tk, smoothed));
+                grid.next += 1;
+            }
+        } else if grid.t0 == t {
+            let (smoothed, kept) = grid.filter(q);
+            self.unsmoothed += usize::from(!kept);
+            out.push((t, smoothed));
+            grid.next = 1;
+        }
+        self.previous = Some((t, q));
+    }
+}
+
+impl Grid {
+    /// Filters one grid sample; `false` when the guard kept the input instead.
+    fn filter(&mut self, input: UnitQuaternion<f64>) -> (UnitQuaternion<f64>, bool) {
+        // Sign-continuous with the previous input.
+        let input = match self.last_in {
+            Some(prev) if prev.coords.dot(&input.coords) < 0.0 => {
+                UnitQuaternion::new_unchecked(-input.into_inner())
+            }
+            _ => input,
+        };
+        let Some(sos) = &self.sos else {
+            self.last_in = Some(input);
+            self.last_out = Some(input);
+            return (input, true);
+        };
+        if self.last_in.is_none() {
+            for (c, state) in self.state.iter_mut().enumerate() {
+                for (z, zi) in state.iter_mut().zip(&self.zi) {
+                    *z = [zi[0] * input.coords[c], zi[1] * input.coords[c]];
+                }
+            }
+        }
+        let mut f = [0.0; 4];
+        for (c, state) in self.state.iter_mut().enumerate() {
+            f[c] = sosfilt_step(sos, input.coords[c], state);
+        }
+        // nalgebra stores quaternions as (x, y, z, w).
+        let filtered = Quaternion::new(f[3], f[0], f[1], f[2]);
+        let norm = filtered.norm();
+        let candidate = (norm.is_finite() && norm > 0.1)
+            .then(|| UnitQuaternion::new_unchecked(filtered / norm));
+        let step = |a: Option<UnitQuaternion<f64>>, b: &UnitQuaternion<f64>| {
+            a.map_or(0.0, |a| 2.0 * a.coords.dot(&b.coords).abs().min(1.0).acos())
+        };
+        self.recent_steps[self.steps_seen % GUARD_SAMPLES] = step(self.last_in, &input);
+        self.steps_seen += 1;
+        let largest_in = self.recent_steps.iter().copied().fold(0.0, f64::max);
+        let output = match candidate {
+            Some(out) if step(self.last_out, &out) <= largest_in + MAX_ADDED_STEP_RAD => Some(out),
+            _ => None,
+        };
+        self.last_in = Some(input);
+        match output {
+            Some(out) => {
+                self.last_out = Some(out);
+                (out, true)
+            }
+            None => {
+                // Restart the filter in the steady state of this input.
+                for (c, state) in self.state.iter_mut().enumerate() {
+                    for (z, zi) in state.iter_mut().zip(&self.zi) {
+                        *z = [zi[0] * input.coords[c], zi[1] * input.coords[c]];
+                    }
+                }
+                self.last_out = Some(input);
+                (input, false)
+            }
+        }
+    }
+}
+
+/// The mean rate of samples, Hz.
+fn mean_rate(samples: &[(f64, UnitQuaternion<f64>)]) -> f64 {
+    let n = samples.len();
+    (n - 1) as f64 / (samples[n - 1].0 - samples[0].0)
 }

@@ -31,10 +31,10 @@ const EXPECTED_COLUMNS: &str = "a time column (time_s, time_ms or time_us), `sen
 
 /// Column positions resolved from the header.
 #[derive(Debug, Clone, PartialEq)]
-struct Layout {
+pub(crate) struct Layout {
     columns: usize,
     time: usize,
-    clock: ClockUnit,
+    pub(crate) clock: ClockUnit,
     sensor: usize,
     quaternion: Option<[usize; 4]>,
     ypr: Option<[usize; 3]>,
@@ -78,7 +78,7 @@ fn mag_scale(unit: &str) -> Option<f64> {
 }
 
 impl Layout {
-    fn from_header(header: &[u8], path: &Path, line: u64) -> Result<Layout, ReadError> {
+    pub(crate) fn from_header(header: &[u8], path: &Path, line: u64) -> Result<Layout, ReadError> {
         let text = std::str::from_utf8(header).map_err(|_| {
             ReadError::line(
                 path,
@@ -361,42 +361,25 @@ fn read_sized(
             take.drop_line(line_no, "skipped by --skip-lines", line);
             continue;
         }
-        let first = line.iter().find(|b| !b.is_ascii_whitespace());
-        match first {
-            None => continue,
-            Some(b'#') => continue,
-            _ => {}
-        }
-        let mut fields = [&b""[..]; MAX_COLUMNS];
-        let n = split_fields(line, b',', &mut fields);
-        if n != layout.columns {
-            take.drop_line(
-                line_no,
-                format!(
-                    "expected {} comma-separated fields as in the header, found {n}",
-                    layout.columns
-                ),
-                line,
-            );
-            continue;
-        }
-        let number = |i: usize| parse_f64(fields[i]).ok_or(i);
-        let time = match number(layout.time) {
-            Ok(t) => t,
-            Err(i) => {
-                let reason = format!("time {}", number_problem(fields[i]));
+        let row = match parse_row(&layout, line) {
+            Ok(Some(row)) => row,
+            Ok(None) => continue,
+            Err(reason) => {
                 take.drop_line(line_no, reason, line);
                 continue;
             }
         };
-        let id = fields[layout.sensor].trim_ascii();
+        let Row {
+            time,
+            id,
+            quaternion,
+            ypr,
+            imu,
+            mag,
+        } = row;
         let sensor = match sensors.find(id) {
             Some(s) => s,
             None => {
-                if id.is_empty() {
-                    take.drop_line(line_no, "sensor is empty", line);
-                    continue;
-                }
                 let Ok(name) = std::str::from_utf8(id) else {
                     take.drop_line(line_no, "sensor is not UTF-8 text", line);
                     continue;
@@ -406,64 +389,13 @@ fn read_sized(
                 idx
             }
         };
-        let result = (|| {
-            let mut q = None;
-            if let Some(c) = layout.quaternion {
-                let v = Quaternion::new(number(c[0])?, number(c[1])?, number(c[2])?, number(c[3])?);
-                q = Some(v);
-            }
-            let mut ypr = None;
-            if let Some(c) = layout.ypr {
-                ypr = Some(YawPitchRollDeg {
-                    yaw: number(c[0])?,
-                    pitch: number(c[1])?,
-                    roll: number(c[2])?,
-                });
-            }
-            let vec3 = |(c, scale): ([usize; 3], f64)| -> Result<Vector3<f64>, usize> {
-                Ok(Vector3::new(number(c[0])?, number(c[1])?, number(c[2])?) * scale)
-            };
-            let mut imu = None;
-            if let (Some(g), Some(a)) = (layout.gyro, layout.accel) {
-                imu = Some(ImuSample {
-                    gyro_rad_s: vec3(g)?,
-                    accel_m_s2: vec3(a)?,
-                });
-            }
-            let mag = layout.mag.map(vec3).transpose()?;
-            Ok((q, ypr, imu, mag))
-        })();
-        let (q, ypr, imu, mag) = match result {
-            Ok(values) => values,
-            Err(i) => {
-                let reason = format!(
-                    "column {} {}",
-                    column_name(&layout, i),
-                    number_problem(fields[i])
-                );
-                take.drop_line(line_no, reason, line);
-                continue;
-            }
-        };
+        let q = quaternion.map(|(q, norm)| {
+            worst_norm_error = worst_norm_error.max((norm - 1.0).abs());
+            q
+        });
         let push = |r: Result<(), _>| r.map_err(|e| ReadError::take(path, e));
         if let Some(q) = q {
-            let norm = q.norm();
-            if norm < 1e-9 {
-                take.drop_line(
-                    line_no,
-                    "quaternion is zero; expected a unit quaternion qw,qx,qy,qz",
-                    line,
-                );
-                continue;
-            }
-            worst_norm_error = worst_norm_error.max((norm - 1.0).abs());
-            push(take.push_quaternion(
-                sensor,
-                time,
-                UnitQuaternion::new_unchecked(q / norm),
-                line_no,
-                line,
-            ))?;
+            push(take.push_quaternion(sensor, time, q, line_no, line))?;
         }
         if let Some(ypr) = ypr {
             push(take.push_yaw_pitch_roll(sensor, time, ypr, line_no, line))?;
@@ -488,6 +420,94 @@ fn read_sized(
         .map_err(|e| ReadError::take(path, e))
 }
 
+/// One data row's values.
+pub(crate) struct Row<'a> {
+    pub time: f64,
+    /// The sensor id as written (trimmed, never empty).
+    pub id: &'a [u8],
+    /// The quaternion normalised, and the norm it had.
+    pub quaternion: Option<(UnitQuaternion<f64>, f64)>,
+    pub ypr: Option<YawPitchRollDeg>,
+    pub imu: Option<ImuSample>,
+    pub mag: Option<Vector3<f64>>,
+}
+
+/// Parses a data row; `Ok(None)` for a blank or comment line, `Err` with the reason to drop it.
+#[inline]
+pub(crate) fn parse_row<'a>(layout: &Layout, line: &'a [u8]) -> Result<Option<Row<'a>>, String> {
+    let first = line.iter().find(|b| !b.is_ascii_whitespace());
+    match first {
+        None | Some(b'#') => return Ok(None),
+        _ => {}
+    }
+    let mut fields = [&b""[..]; MAX_COLUMNS];
+    let n = split_fields(line, b',', &mut fields);
+    if n != layout.columns {
+        return Err(format!(
+            "expected {} comma-separated fields as in the header, found {n}",
+            layout.columns
+        ));
+    }
+    let number = |i: usize| parse_f64(fields[i]).ok_or(i);
+    let time = number(layout.time).map_err(|i| format!("time {}", number_problem(fields[i])))?;
+    let id = fields[layout.sensor].trim_ascii();
+    if id.is_empty() {
+        return Err("sensor is empty".into());
+    }
+    let values = (|| {
+        let mut q = None;
+        if let Some(c) = layout.quaternion {
+            let v = Quaternion::new(number(c[0])?, number(c[1])?, number(c[2])?, number(c[3])?);
+            q = Some(v);
+        }
+        let mut ypr = None;
+        if let Some(c) = layout.ypr {
+            ypr = Some(YawPitchRollDeg {
+                yaw: number(c[0])?,
+                pitch: number(c[1])?,
+                roll: number(c[2])?,
+            });
+        }
+        let vec3 = |(c, scale): ([usize; 3], f64)| -> Result<Vector3<f64>, usize> {
+            Ok(Vector3::new(number(c[0])?, number(c[1])?, number(c[2])?) * scale)
+        };
+        let mut imu = None;
+        if let (Some(g), Some(a)) = (layout.gyro, layout.accel) {
+            imu = Some(ImuSample {
+                gyro_rad_s: vec3(g)?,
+                accel_m_s2: vec3(a)?,
+            });
+        }
+        let mag = layout.mag.map(vec3).transpose()?;
+        Ok((q, ypr, imu, mag))
+    })();
+    let (q, ypr, imu, mag) = values.map_err(|i: usize| {
+        format!(
+            "column {} {}",
+            column_name(layout, i),
+            number_problem(fields[i])
+        )
+    })?;
+    let quaternion = match q {
+        Some(q) => {
+            let norm = q.norm();
+            if norm < 1e-9 {
+                return Err("quaternion is zero; expected a unit quaternion qw,qx,qy,qz".into());
+            }
+            Some((UnitQuaternion::new_unchecked(q / norm), norm))
+        }
+        None => None,
+    };
+    Ok(Some(Row {
+        time,
+        id,
+        quaternion,
+        ypr,
+        imu,
+        mag,
+    }))
+}
+
 fn column_name(layout: &Layout, index: usize) -> String {
     let named: [(&str, Option<&[usize]>); 5] = [
         ("qw,qx,qy,qz", layout.quaternion.as_ref().map(|c| &c[..])),
@@ -505,7 +525,7 @@ fn column_name(layout: &Layout, index: usize) -> String {
 }
 
 /// Parses `world: ned` / `world = ned` in a comment; `None` when the comment is something else.
-fn world_directive(comment: &[u8]) -> Option<Result<World, crate::world::UnknownWorld>> {
+pub(crate) fn world_directive(comment: &[u8]) -> Option<Result<World, crate::world::UnknownWorld>> {
     let text = std::str::from_utf8(comment).ok()?.trim();
     let rest = text.strip_prefix("world")?.trim_start();
     let value = rest.strip_prefix(':').or_else(|| rest.strip_prefix('='))?;

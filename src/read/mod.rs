@@ -6,6 +6,7 @@ pub mod imubake_csv;
 pub mod lines;
 pub mod opensense_sto;
 pub mod sou;
+pub mod stream;
 pub mod xio_session;
 pub mod xsens_dot;
 pub mod xsens_mtw;

@@ -68,6 +68,28 @@ pub fn looks_like(head: &[u8]) -> bool {
     matching >= 1
 }
 
+/// Parses a SOU line: its timestamp (ms), SOU id and the six angles (yaw1, pitch1, roll1, yaw2,
+/// pitch2, roll2, degrees); `Err` with the reason to drop it.
+pub fn parse_line(line: &[u8]) -> Result<(u64, &str, [f64; 6]), String> {
+    if let Some(problem) = format_problem(line) {
+        return Err(problem);
+    }
+    let mut f = [&b""[..]; 8];
+    split_fields(line, b',', &mut f);
+    let timestamp = std::str::from_utf8(f[0])
+        .ok()
+        .and_then(|s| s.parse::<u64>().ok())
+        .ok_or("timestamp_ms does not fit in 64 bits")?;
+    let mut angles = [0.0; 6];
+    for (i, angle) in angles.iter_mut().enumerate() {
+        *angle = parse_f64(f[i + 2])
+            .ok_or_else(|| format!("{} is not a finite number", FIELD_NAMES[i + 2]))?;
+    }
+    // The pattern admits only ASCII letters and digits here.
+    let sou_id = std::str::from_utf8(f[1]).map_err(|_| "SOU_ID is not text")?;
+    Ok((timestamp, sou_id, angles))
+}
+
 pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
     read_single_file(path, options, read_from)
 }
@@ -87,43 +109,24 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
         if line.trim_ascii().is_empty() {
             continue;
         }
-        if let Some(problem) = format_problem(line) {
-            take.drop_line(line_no, problem, line);
-            continue;
-        }
-        let mut f = [&b""[..]; 8];
-        split_fields(line, b',', &mut f);
-        let Some(timestamp) = std::str::from_utf8(f[0])
-            .ok()
-            .and_then(|s| s.parse::<u64>().ok())
-        else {
-            take.drop_line(line_no, "timestamp_ms does not fit in 64 bits", line);
-            continue;
-        };
-        let mut angles = [0.0; 6];
-        let mut bad = None;
-        for (i, angle) in angles.iter_mut().enumerate() {
-            match parse_f64(f[i + 2]) {
-                Some(v) => *angle = v,
-                None => {
-                    bad = Some(i + 2);
-                    break;
-                }
+        let (timestamp, sou_id, angles) = match parse_line(line) {
+            Ok(row) => row,
+            Err(problem) => {
+                take.drop_line(line_no, problem, line);
+                continue;
             }
-        }
-        if let Some(i) = bad {
-            let reason = format!("{} is not a finite number", FIELD_NAMES[i]);
-            take.drop_line(line_no, reason, line);
-            continue;
-        }
-        // The pattern admits only ASCII letters and digits here.
-        let sou_id = String::from_utf8_lossy(f[1]).into_owned();
-        let (n0, n1) = *nodes.entry(sou_id).or_insert_with_key(|id| {
-            (
-                take.sensor(&format!("{id}_0")),
-                take.sensor(&format!("{id}_1")),
-            )
-        });
+        };
+        let (n0, n1) = match nodes.get(sou_id) {
+            Some(&pair) => pair,
+            None => {
+                let pair = (
+                    take.sensor(&format!("{sou_id}_0")),
+                    take.sensor(&format!("{sou_id}_1")),
+                );
+                nodes.insert(sou_id.to_string(), pair);
+                pair
+            }
+        };
         let t = timestamp as f64;
         let ypr = |a: &[f64]| YawPitchRollDeg {
             yaw: a[0],

@@ -117,15 +117,34 @@ pub fn compatible(q: &UnitQuaternion<f64>, order: EulerOrder, previous: [f64; 3]
 /// The Euler discontinuity filter: frame 0 is [`from_quaternion`], every later frame is
 /// [`compatible`] with the previous output. Angles may grow beyond ±π on continuous spins.
 pub fn filter_track(track: &[UnitQuaternion<f64>], order: EulerOrder) -> Vec<[f64; 3]> {
-    let mut out: Vec<[f64; 3]> = Vec::with_capacity(track.len());
-    for q in track {
-        let angles = match out.last() {
-            None => from_quaternion(q, order),
-            Some(previous) => compatible(q, order, *previous),
-        };
-        out.push(angles);
+    let mut filter = EulerFilter::new(order);
+    track.iter().map(|q| filter.next(q)).collect()
+}
+
+/// The incremental core of [`filter_track`]: one frame at a time.
+#[derive(Debug, Clone, Copy)]
+pub struct EulerFilter {
+    order: EulerOrder,
+    previous: Option<[f64; 3]>,
+}
+
+impl EulerFilter {
+    pub fn new(order: EulerOrder) -> EulerFilter {
+        EulerFilter {
+            order,
+            previous: None,
+        }
     }
-    out
+
+    /// The next frame's angles (radians, application order).
+    pub fn next(&mut self, q: &UnitQuaternion<f64>) -> [f64; 3] {
+        let angles = match self.previous {
+            None => from_quaternion(q, self.order),
+            Some(previous) => compatible(q, self.order, previous),
+        };
+        self.previous = Some(angles);
+        angles
+    }
 }
 
 /// Application-order angles from Blender's per-axis storage (`[euler.x, euler.y, euler.z]` of an

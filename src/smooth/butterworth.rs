@@ -178,18 +178,23 @@ pub fn sosfilt(sos: &[Sos], x: &[f64]) -> Vec<f64> {
 /// resized (missing sections start from zero).
 pub fn sosfilt_with_state(sos: &[Sos], x: &[f64], state: &mut Vec<[f64; 2]>) -> Vec<f64> {
     state.resize(sos.len(), [0.0; 2]);
-    let mut y = Vec::with_capacity(x.len());
-    for &sample in x {
-        let mut cur = sample;
-        for (s, z) in sos.iter().zip(state.iter_mut()) {
-            let new = s[0] * cur + z[0];
-            z[0] = s[1] * cur - s[4] * new + z[1];
-            z[1] = s[2] * cur - s[5] * new;
-            cur = new;
-        }
-        y.push(cur);
+    x.iter()
+        .map(|&sample| sosfilt_step(sos, sample, state))
+        .collect()
+}
+
+/// One sample through the cascade (transposed direct form II), updating `state` (one `[f64; 2]`
+/// per section): the incremental core of [`sosfilt_with_state`].
+#[inline]
+pub fn sosfilt_step(sos: &[Sos], sample: f64, state: &mut [[f64; 2]]) -> f64 {
+    let mut cur = sample;
+    for (s, z) in sos.iter().zip(state.iter_mut()) {
+        let new = s[0] * cur + z[0];
+        z[0] = s[1] * cur - s[4] * new + z[1];
+        z[1] = s[2] * cur - s[5] * new;
+        cur = new;
     }
-    y
+    cur
 }
 
 /// `scipy.signal.sosfilt_zi(sos)`: the per-section state of the steady state of a unit step,

@@ -185,6 +185,32 @@ impl FromStr for Method {
 }
 
 impl Method {
+    /// Whether the method uses only the past (a stream can run it): none, or causal Butterworth.
+    pub fn is_causal(&self) -> bool {
+        matches!(
+            self,
+            Method::None | Method::Butterworth { causal: true, .. }
+        )
+    }
+
+    /// The causal form of the method: Butterworth runs causal; the Gaussian and FFT filters,
+    /// which look ahead, have none.
+    pub fn to_causal(&self) -> Result<Method, String> {
+        match self {
+            Method::None => Ok(Method::None),
+            Method::Butterworth {
+                order, cutoff_hz, ..
+            } => Ok(Method::Butterworth {
+                order: *order,
+                cutoff_hz: *cutoff_hz,
+                causal: true,
+            }),
+            Method::Gaussian { .. } | Method::Fft { .. } => Err(format!(
+                "`{self}` looks ahead in time and cannot run causally; use butterworth (causal) or none"
+            )),
+        }
+    }
+
     /// Checks the options' ranges (those that do not depend on the sample rate).
     pub fn validate(&self) -> Result<(), String> {
         match self {

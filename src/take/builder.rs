@@ -1,18 +1,13 @@
 //! Collects rows as readers parse them and turns them into a [`Take`].
 //!
-//! Readers push samples in file order with their line numbers. Per stream of a sensor:
-//! - a row earlier than the previous row is kept aside and sorted into place at the end
-//!   (reported as repaired);
-//! - a row repeating a time is dropped, the first kept (reported as dropped);
-//! - a row more than [`CLOCK_RESET_S`] from the previous row is held until up to
-//!   [`LOOKAHEAD_ROWS`] more rows have come: when most of them continue from the previous row it
-//!   is a damaged timestamp, dropped and reported (`time out of sequence`); when they continue
-//!   from it, a forward jump is a gap and a backward jump a clock reset, which fails the take.
-//!   When the rows after such a jump continue from it and the only row before it is the
-//!   stream's first, that first row is the one dropped.
+//! Readers push samples in file order with their line numbers; each stream of each sensor is
+//! cleaned by the rules of [`super::sequence`] (late rows kept aside and sorted into place at the
+//! end, reported as repaired; repeated times dropped; a jump of more than [`CLOCK_RESET_S`]
+//! judged by the rows after it: a damaged timestamp dropped, a gap kept, a clock reset an error).
 //!
 //! So one damaged timestamp costs one sample, not the take.
 
+use super::sequence::{Dropped, Held, Reset, Sequencer, Sink};
 use super::{
     ImuSample, InputFormat, LineReport, OrientationTrack, Sensor, SourceInfo, Take, Track,
     YawPitchRollDeg,
@@ -26,13 +21,10 @@ use std::path::PathBuf;
 /// larger than this either way is looked at with the rows that follow it.
 pub const CLOCK_RESET_S: f64 = 1.0;
 
-/// How many rows of a stream after a jump decide whether the jump was one damaged timestamp.
-pub const LOOKAHEAD_ROWS: usize = 8;
-
-const OUT_OF_SEQUENCE: &str = "time out of sequence: more than 1 s from the previous sample of \
+pub(crate) const OUT_OF_SEQUENCE: &str = "time out of sequence: more than 1 s from the previous sample of \
      the same sensor, while the samples after it continue from that one; dropped";
 
-const REPEATED_TIME: &str =
+pub(crate) const REPEATED_TIME: &str =
     "repeats the time of an earlier sample of the same sensor; the first is kept";
 const OUT_OF_ORDER: &str = "earlier than the previous sample of the same sensor; sorted into place";
 
@@ -74,7 +66,14 @@ impl ClockUnit {
 
 /// Index of a sensor inside a [`TakeBuilder`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct SensorIdx(usize);
+pub struct SensorIdx(pub(crate) usize);
+
+impl SensorIdx {
+    /// The position of the sensor, in the order sensors were first named.
+    pub fn index(self) -> usize {
+        self.0
+    }
+}
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum BuildError {
@@ -106,176 +105,92 @@ fn first_drop_hint(dropped: &[LineReport]) -> String {
     }
 }
 
-/// A row held aside with its report: a late row waiting to be sorted into place, a row whose
-/// time jumped, or a row after such a jump.
-struct Held<T> {
-    raw_time: f64,
-    value: T,
-    report: LineReport,
-}
-
-/// A row more than [`CLOCK_RESET_S`] from the previous row of its stream, and the rows after it
-/// (up to [`LOOKAHEAD_ROWS`]) that decide what it is: out of sequence when most of them continue
-/// from the previous row, else a gap (forward) or a clock reset (backward).
-struct Suspect<T> {
-    row: Held<T>,
-    following: Vec<Held<T>>,
-}
-
-/// What a stream did with a row besides keeping it.
+/// What a stream did with a row besides keeping it in order.
 enum Event {
-    /// A repeated time: the row is dropped (the first is kept).
-    Duplicate(LineReport),
-    /// A time far from both neighbours: the row is dropped.
-    OutOfSequence(LineReport),
+    Dropped(Dropped),
     /// Earlier than the previous row: sorted into place at the end.
     Late,
 }
 
-/// A backward jump that the following rows continue: the clock was reset.
-struct Reset {
-    previous: f64,
-    time: f64,
-    report: LineReport,
-}
-
+/// One stream of one sensor: the rows kept in order, the late ones to sort into place at the
+/// end, and the rules' state.
 struct Stream<T> {
     raw_times: Vec<f64>,
     values: Vec<T>,
     late: Vec<Held<T>>,
-    suspect: Option<Suspect<T>>,
-    /// The first kept row's report: when the rows after it all sit far from it, it is the one out
-    /// of sequence.
-    first_report: Option<LineReport>,
+    sequencer: Sequencer<T>,
 }
 
-impl<T> Default for Stream<T> {
-    fn default() -> Self {
-        Stream {
-            raw_times: Vec::new(),
-            values: Vec::new(),
-            late: Vec::new(),
-            suspect: None,
-            first_report: None,
-        }
+/// A stream's storage and the builder's events, as the sequencer's sink.
+struct Store<'a, T> {
+    raw_times: &'a mut Vec<f64>,
+    values: &'a mut Vec<T>,
+    late: &'a mut Vec<Held<T>>,
+    events: &'a mut Vec<Event>,
+}
+
+impl<T> Sink<T> for Store<'_, T> {
+    #[inline]
+    fn keep(&mut self, raw_time: f64, value: T) {
+        self.raw_times.push(raw_time);
+        self.values.push(value);
+    }
+
+    fn late(&mut self, row: Held<T>) {
+        self.late.push(row);
+        self.events.push(Event::Late);
+    }
+
+    fn dropped(&mut self, row: Dropped) {
+        self.events.push(Event::Dropped(row));
     }
 }
 
 impl<T> Stream<T> {
+    fn new(reset_units: f64) -> Self {
+        Stream {
+            raw_times: Vec::new(),
+            values: Vec::new(),
+            late: Vec::new(),
+            sequencer: Sequencer::new(reset_units),
+        }
+    }
+
+    fn parts<'a>(&'a mut self, events: &'a mut Vec<Event>) -> (&'a mut Sequencer<T>, Store<'a, T>) {
+        let Stream {
+            raw_times,
+            values,
+            late,
+            sequencer,
+        } = self;
+        (
+            sequencer,
+            Store {
+                raw_times,
+                values,
+                late,
+                events,
+            },
+        )
+    }
+
     /// Takes a row in file order. `report` is called only when the row must be held or reported.
+    #[inline]
     fn push(
         &mut self,
         raw_time: f64,
         value: T,
-        reset_units: f64,
         report: impl FnOnce() -> LineReport,
         events: &mut Vec<Event>,
     ) -> Result<(), Reset> {
-        if let Some(suspect) = &mut self.suspect {
-            suspect.following.push(Held {
-                raw_time,
-                value,
-                report: report(),
-            });
-            if suspect.following.len() >= LOOKAHEAD_ROWS {
-                self.resolve(reset_units, events)?;
-            }
-            return Ok(());
-        }
-        let Some(&last) = self.raw_times.last() else {
-            self.first_report = Some(report());
-            self.raw_times.push(raw_time);
-            self.values.push(value);
-            return Ok(());
-        };
-        if raw_time > last && raw_time - last <= reset_units {
-            // The hot path: the next sample in order.
-            self.raw_times.push(raw_time);
-            self.values.push(value);
-        } else if raw_time == last {
-            events.push(Event::Duplicate(report()));
-        } else if (raw_time - last).abs() > reset_units {
-            self.suspect = Some(Suspect {
-                row: Held {
-                    raw_time,
-                    value,
-                    report: report(),
-                },
-                following: Vec::new(),
-            });
-        } else {
-            self.late.push(Held {
-                raw_time,
-                value,
-                report: report(),
-            });
-            events.push(Event::Late);
-        }
-        Ok(())
+        let (sequencer, mut store) = self.parts(events);
+        sequencer.push(raw_time, value, report, &mut store)
     }
 
-    fn push_held(
-        &mut self,
-        row: Held<T>,
-        reset_units: f64,
-        events: &mut Vec<Event>,
-    ) -> Result<(), Reset> {
-        let Held {
-            raw_time,
-            value,
-            report,
-        } = row;
-        self.push(raw_time, value, reset_units, || report, events)
-    }
-
-    /// Decides what the suspect row is, then takes the rows held after it in order (which may
-    /// hold a new suspect).
-    fn resolve(&mut self, reset_units: f64, events: &mut Vec<Event>) -> Result<(), Reset> {
-        let Some(Suspect { row, following }) = self.suspect.take() else {
-            return Ok(());
-        };
-        let last = *self.raw_times.last().expect("a suspect follows a kept row");
-        let near_previous = following
-            .iter()
-            .filter(|f| (f.raw_time - last).abs() < (f.raw_time - row.raw_time).abs())
-            .count();
-        if following.is_empty() || 2 * near_previous > following.len() {
-            // The rows after it continue from the previous row (or there are none).
-            events.push(Event::OutOfSequence(row.report));
-        } else if self.raw_times.len() == 1 && self.late.is_empty() {
-            // The rows after it continue from it, and the only row before it is the stream's
-            // first: that one was out of sequence.
-            if let Some(first) = self.first_report.take() {
-                events.push(Event::OutOfSequence(first));
-            }
-            self.raw_times.clear();
-            self.values.clear();
-            self.first_report = Some(row.report);
-            self.raw_times.push(row.raw_time);
-            self.values.push(row.value);
-        } else if row.raw_time > last {
-            // A gap: the sensor was silent, then went on.
-            self.raw_times.push(row.raw_time);
-            self.values.push(row.value);
-        } else {
-            return Err(Reset {
-                previous: last,
-                time: row.raw_time,
-                report: row.report,
-            });
-        }
-        for f in following {
-            self.push_held(f, reset_units, events)?;
-        }
-        Ok(())
-    }
-
-    /// Resolves the rows still held at the end of the source.
-    fn flush(&mut self, reset_units: f64, events: &mut Vec<Event>) -> Result<(), Reset> {
-        while self.suspect.is_some() {
-            self.resolve(reset_units, events)?;
-        }
-        Ok(())
+    /// Decides the rows still held at the end of the source.
+    fn flush(&mut self, events: &mut Vec<Event>) -> Result<(), Reset> {
+        let (sequencer, mut store) = self.parts(events);
+        sequencer.flush(&mut store)
     }
 
     fn first_raw(&self) -> Option<f64> {
@@ -371,14 +286,7 @@ pub struct TakeBuilder {
 fn settle_events(events: &mut Vec<Event>, dropped: &mut Vec<LineReport>) {
     for event in events.drain(..) {
         let report = match event {
-            Event::Duplicate(r) => LineReport {
-                reason: REPEATED_TIME.to_string(),
-                ..r
-            },
-            Event::OutOfSequence(r) => LineReport {
-                reason: OUT_OF_SEQUENCE.to_string(),
-                ..r
-            },
+            Event::Dropped(dropped) => dropped_report(dropped),
             Event::Late => continue,
         };
         // A row carrying several sensors (a SOU line) is reported once.
@@ -388,7 +296,21 @@ fn settle_events(events: &mut Vec<Event>, dropped: &mut Vec<LineReport>) {
     }
 }
 
-fn clock_reset(sensor: &str, r: Reset, seconds_per_unit: f64) -> BuildError {
+/// The line report of a dropped row, with its reason.
+pub(crate) fn dropped_report(dropped: Dropped) -> LineReport {
+    match dropped {
+        Dropped::Duplicate(r) => LineReport {
+            reason: REPEATED_TIME.to_string(),
+            ..r
+        },
+        Dropped::OutOfSequence(r) => LineReport {
+            reason: OUT_OF_SEQUENCE.to_string(),
+            ..r
+        },
+    }
+}
+
+pub(crate) fn clock_reset(sensor: &str, r: Reset, seconds_per_unit: f64) -> BuildError {
     BuildError::ClockReset {
         location: r.report.location(),
         sensor: sensor.to_string(),
@@ -442,10 +364,10 @@ impl TakeBuilder {
         let idx = SensorIdx(self.sensors.len());
         self.sensors.push(SensorStreams {
             id: id.to_string(),
-            orientation_q: Stream::default(),
-            orientation_ypr: Stream::default(),
-            inertial: Stream::default(),
-            magnetometer: Stream::default(),
+            orientation_q: Stream::new(self.reset_units),
+            orientation_ypr: Stream::new(self.reset_units),
+            inertial: Stream::new(self.reset_units),
+            magnetometer: Stream::new(self.reset_units),
         });
         self.by_id.insert(id.to_string(), idx);
         idx
@@ -538,13 +460,7 @@ impl TakeBuilder {
         let file = self.current_file.as_deref();
         let make_report = || LineReport::new(file, line, String::new(), raw);
         let sensor_streams = &mut self.sensors[sensor.0];
-        let pushed = stream(sensor_streams).push(
-            raw_time,
-            value,
-            self.reset_units,
-            make_report,
-            &mut self.events,
-        );
+        let pushed = stream(sensor_streams).push(raw_time, value, make_report, &mut self.events);
         let id = &self.sensors[sensor.0].id;
         settle_events(&mut self.events, &mut self.dropped);
         pushed.map_err(|r| clock_reset(id, r, self.clock.seconds_per_unit()))
@@ -558,7 +474,6 @@ impl TakeBuilder {
             format,
             world,
             clock,
-            reset_units,
             mut sensors,
             mut dropped,
             mut repaired,
@@ -570,10 +485,10 @@ impl TakeBuilder {
         for s in &mut sensors {
             let flushed = s
                 .orientation_q
-                .flush(reset_units, &mut events)
-                .and_then(|()| s.orientation_ypr.flush(reset_units, &mut events))
-                .and_then(|()| s.inertial.flush(reset_units, &mut events))
-                .and_then(|()| s.magnetometer.flush(reset_units, &mut events));
+                .flush(&mut events)
+                .and_then(|()| s.orientation_ypr.flush(&mut events))
+                .and_then(|()| s.inertial.flush(&mut events))
+                .and_then(|()| s.magnetometer.flush(&mut events));
             settle_events(&mut events, &mut dropped);
             flushed.map_err(|r| clock_reset(&s.id, r, clock.seconds_per_unit()))?;
         }

@@ -4,11 +4,15 @@
 mod builder;
 mod format;
 mod samples;
+mod sequence;
+mod stream;
 mod track;
 
 pub use builder::{BuildError, ClockUnit, SensorIdx, TakeBuilder};
 pub use format::InputFormat;
 pub use samples::{ImuSample, YawPitchRollDeg};
+pub use sequence::LOOKAHEAD_ROWS;
+pub use stream::{DEFAULT_REORDER_S, StreamSample, StreamValue, TakeStream};
 pub use track::{Track, TrackError};
 
 use crate::world::World;

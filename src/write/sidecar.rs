@@ -60,6 +60,9 @@ pub struct PipelineRecord {
     pub trim: Option<TrimRecord>,
     /// `"quaternion"`, or `"legacy-euler"` for paper 002's Listing-2 mappings.
     pub mode: &'static str,
+    /// Causal mode: the take ran through the stream's stages.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub causal: bool,
 }
 
 #[derive(Debug, Clone, Serialize)]

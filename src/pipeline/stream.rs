@@ -1,0 +1,310 @@
+//! The pipeline on a stream: samples in, one [`Pose`] per frame out, as soon as it can be known.
+//! Each stage runs its incremental core, in the order of [`super::run`]:
+//!
+//! 1. sources: `q_rig_sensor = C ⊗ q_world_sensor`;
+//! 2. calibration ([`CalibrationCore`]): until the window has passed for every sensor no frame
+//!    comes out (samples are kept), only [`StreamStatus::Calibrating`] with the seconds left;
+//!    then the kept samples go on through the stages;
+//! 3. bone world: `H ⊗ q_rig_sensor ⊗ q_bone_sensor⁻¹`;
+//! 4. smoothing ([`CausalSmoother`]), causal only: Butterworth runs causal; the Gaussian and FFT
+//!    filters, which look ahead, are refused;
+//! 5. resampling ([`FrameResampler`]): frame n once every sensor has a sample at or after its
+//!    time, or is stale (held at its last pose, and reported);
+//! 6. relative rotations ([`frame_to_local`]), 7. the root.
+//!
+//! What looks ahead stays with whole takes: zero-phase filters, and the heading from the
+//! direction of travel (a stream takes its heading from a declared forward axis or a known mount).
+//! The whole-take path with causal settings ([`super::run`] with `causal`) is this stream fed
+//! the take's samples, so a stream and a file of the same rows give the same frames.
+//!
+//! Once warmed up, a frame costs no allocation: the pose handed out is reused.
+
+use super::calibrate::{Calibration, CalibrationCore};
+use super::relative::frame_to_local;
+use super::resample::{DEFAULT_STALE_AFTER_S, FrameResampler};
+use super::root::RootMode;
+use super::smoothing::CausalSmoother;
+use super::{PipelineError, PipelineOptions};
+use crate::anim::Pose;
+use crate::fps::Fps;
+use crate::mapping::{CalibrationWindow, Mapping, ResolvedSensor};
+use crate::rig::Rig;
+use crate::world::World;
+use nalgebra::{UnitQuaternion, Vector3};
+use std::path::Path;
+
+/// What a stream is doing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StreamStatus {
+    /// Waiting for the calibration window to pass: hold the pose for this much longer.
+    Calibrating { left_s: f64 },
+    /// Frames are coming out; the next is this one.
+    Running { next_frame: u64 },
+}
+
+/// The pipeline's incremental cores, strung together (see the module documentation).
+pub struct PoseStream {
+    rig: Rig,
+    fps: Fps,
+    root_mode: RootMode,
+    to_rig: UnitQuaternion<f64>,
+    sensors: Vec<ResolvedSensor>,
+    calibration: CalibrationCore,
+    mapping_file: String,
+    /// Samples (sensor, time, `q_rig_sensor`) kept until the calibration is solved.
+    pending: Vec<(usize, f64, UnitQuaternion<f64>)>,
+    smoothers: Vec<CausalSmoother>,
+    resampler: FrameResampler,
+    /// The latest sample time of any sensor.
+    latest_s: f64,
+    warnings: Vec<String>,
+    // Scratch, reused frame after frame.
+    smoothed: Vec<(f64, UnitQuaternion<f64>)>,
+    values: Vec<Option<UnitQuaternion<f64>>>,
+    frame_world: Vec<UnitQuaternion<f64>>,
+    bone_world: Vec<Option<UnitQuaternion<f64>>>,
+    pose: Pose,
+}
+
+impl PoseStream {
+    /// A stream for `sensors` (resolved against `rig`, in mapping order) whose samples are in
+    /// `world`, calibrated over `window`, with `options`' frame rate, smoothing (made causal) and
+    /// root. `mapping_file` names the mapping in errors.
+    pub fn new(
+        rig: &Rig,
+        sensors: Vec<ResolvedSensor>,
+        window: Option<CalibrationWindow>,
+        world: World,
+        options: &PipelineOptions,
+        mapping_file: &str,
+    ) -> Result<PoseStream, PipelineError> {
+        let mut smoothers = Vec::with_capacity(sensors.len());
+        for s in &sensors {
+            let bone = &rig.joints()[s.bone].name;
+            let method = options.smoothing.for_bone(bone);
+            let smoother =
+                CausalSmoother::new(method, options.sensor_rate_hz).map_err(|reason| {
+                    PipelineError::NotCausal {
+                        bone: bone.clone(),
+                        reason,
+                    }
+                })?;
+            smoothers.push(smoother);
+        }
+        let calibration = CalibrationCore::new(rig, sensors.clone(), window, mapping_file)?;
+        let n = sensors.len();
+        let mut resampler = FrameResampler::new(options.fps, n);
+        resampler.stale_after_s = DEFAULT_STALE_AFTER_S;
+        let joints = rig.len();
+        Ok(PoseStream {
+            rig: rig.clone(),
+            fps: options.fps,
+            root_mode: options.root,
+            to_rig: world.to_rig(),
+            sensors,
+            calibration,
+            mapping_file: mapping_file.to_string(),
+            pending: Vec::new(),
+            smoothers,
+            resampler,
+            latest_s: f64::NEG_INFINITY,
+            warnings: Vec::new(),
+            smoothed: Vec::new(),
+            values: vec![None; n],
+            frame_world: vec![UnitQuaternion::identity(); joints],
+            bone_world: vec![None; joints],
+            pose: Pose {
+                frame: 0,
+                time_s: 0.0,
+                local: vec![UnitQuaternion::identity(); joints],
+                root: Vector3::zeros(),
+            },
+        })
+    }
+
+    /// A stream for every sensor of `mapping` (resolved against `rig`), calibrated over the
+    /// mapping's window, with samples in `world`.
+    pub fn from_mapping(
+        rig: &Rig,
+        mapping: &Mapping,
+        mapping_file: &Path,
+        world: World,
+        options: &PipelineOptions,
+    ) -> Result<PoseStream, PipelineError> {
+        let mut warnings = Vec::new();
+        let sensors = mapping.resolve(rig, mapping_file)?;
+        let window = super::calibrate::window(mapping, &sensors, &mut warnings);
+        let mut stream = PoseStream::new(
+            rig,
+            sensors,
+            window,
+            world,
+            options,
+            &mapping_file.display().to_string(),
+        )?;
+        stream.warnings = warnings;
+        Ok(stream)
+    }
+
+    /// The index [`PoseStream::push`] takes for the sensor with this id, if it drives a bone.
+    pub fn sensor_index(&self, id: &str) -> Option<usize> {
+        self.sensors.iter().position(|s| s.sensor == id)
+    }
+
+    pub fn status(&self) -> StreamStatus {
+        match self.calibration.result() {
+            None => StreamStatus::Calibrating {
+                left_s: self.calibration.left_s(),
+            },
+            Some(_) => StreamStatus::Running {
+                next_frame: self.resampler.next_frame(),
+            },
+        }
+    }
+
+    /// The calibration, once solved.
+    pub fn calibration(&self) -> Option<&Calibration> {
+        self.calibration.result()
+    }
+
+    /// What the stream has had to say so far.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// The sensors driving bones, in mapping order (the index [`PoseStream::push`] takes).
+    pub fn sensors(&self) -> &[ResolvedSensor] {
+        &self.sensors
+    }
+
+    /// The latest sample time seen.
+    pub fn latest_s(&self) -> f64 {
+        self.latest_s
+    }
+
+    /// A sample of sensor `sensor` (its index in [`PoseStream::sensors`]) at `t` seconds, as
+    /// `q_world_sensor`; times increase per sensor. Each frame it completes goes to `on_pose`.
+    pub fn push(
+        &mut self,
+        sensor: usize,
+        t: f64,
+        q_world_sensor: UnitQuaternion<f64>,
+        on_pose: &mut impl FnMut(&Pose),
+    ) {
+        let q = self.to_rig * q_world_sensor;
+        self.push_rig(sensor, t, q, on_pose);
+    }
+
+    /// [`PoseStream::push`] for a sample already in the rig world (`q_rig_sensor`, stage 1 done).
+    pub fn push_rig(
+        &mut self,
+        sensor: usize,
+        t: f64,
+        q: UnitQuaternion<f64>,
+        on_pose: &mut impl FnMut(&Pose),
+    ) {
+        self.latest_s = self.latest_s.max(t);
+        self.resampler.saw_input(sensor, t);
+        if self.calibration.result().is_none() {
+            self.calibration.push(sensor, t, q);
+            self.pending.push((sensor, t, q));
+            let stale: Vec<bool> = (0..self.sensors.len())
+                .map(|i| self.resampler.is_stale(i))
+                .collect();
+            if self
+                .calibration
+                .try_solve(|i| stale[i], &mut self.warnings)
+                .is_some()
+            {
+                self.replay(on_pose);
+            }
+            return;
+        }
+        self.feed(sensor, t, q);
+        self.emit(None, on_pose);
+    }
+
+    /// The end of the stream: the calibration solved with what there is, every sensor's last
+    /// samples smoothed, and the frames up to the latest sample's (floor(t_last · fps)) out.
+    pub fn finish(&mut self, on_pose: &mut impl FnMut(&Pose)) -> Result<(), PipelineError> {
+        if self.calibration.result().is_none() {
+            self.calibration
+                .finish(&self.mapping_file, &mut self.warnings)?;
+            self.replay(on_pose);
+        }
+        for (i, smoother) in self.smoothers.iter_mut().enumerate() {
+            self.smoothed.clear();
+            smoother.finish(&mut self.smoothed);
+            for &(t, q) in &self.smoothed {
+                self.resampler.push(i, t, q);
+            }
+            self.resampler.end(i);
+        }
+        if self.latest_s.is_finite() {
+            let last = self.fps.frame_count(self.latest_s) - 1;
+            self.emit(Some(last), on_pose);
+        }
+        for (s, smoother) in self.sensors.iter().zip(&self.smoothers) {
+            let bone = &self.rig.joints()[s.bone].name;
+            if let Some(why) = smoother.not_smoothed() {
+                self.warnings
+                    .push(format!("`{bone}` is not smoothed: {}", why.0));
+            } else if smoother.unsmoothed() > 0 {
+                self.warnings.push(format!(
+                    "`{bone}`: {} samples left unsmoothed (smoothing would have turned them further than the sensor did)",
+                    smoother.unsmoothed()
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends the samples kept during calibration on through the stages.
+    fn replay(&mut self, on_pose: &mut impl FnMut(&Pose)) {
+        let pending = std::mem::take(&mut self.pending);
+        for &(sensor, t, q) in &pending {
+            self.feed(sensor, t, q);
+        }
+        self.emit(None, on_pose);
+    }
+
+    /// Stages 3 and 4 for one sample, into the resampler.
+    fn feed(&mut self, sensor: usize, t: f64, q_rig: UnitQuaternion<f64>) {
+        let calibration = self.calibration.result().expect("solved");
+        let bone = calibration.heading * q_rig * calibration.mounts[sensor].inverse();
+        self.smoothed.clear();
+        self.smoothers[sensor].push(t, bone, &mut self.smoothed);
+        for &(ts, qs) in &self.smoothed {
+            self.resampler.push(sensor, ts, qs);
+        }
+    }
+
+    /// Stages 5–7: every frame that is ready (up to `last_frame`), as a pose.
+    fn emit(&mut self, last_frame: Option<u64>, on_pose: &mut impl FnMut(&Pose)) {
+        let PoseStream {
+            rig,
+            fps,
+            root_mode,
+            sensors,
+            resampler,
+            values,
+            frame_world,
+            bone_world,
+            pose,
+            ..
+        } = self;
+        resampler.emit(last_frame, values, |n, values| {
+            bone_world.iter_mut().for_each(|b| *b = None);
+            for (s, v) in sensors.iter().zip(values) {
+                bone_world[s.bone] = *v;
+            }
+            frame_to_local(rig, |j| bone_world[j], frame_world, &mut pose.local);
+            pose.frame = n;
+            pose.time_s = fps.frame_time_of(n);
+            pose.root = match root_mode {
+                RootMode::Fixed => rig.joints()[0].offset,
+            };
+            on_pose(pose);
+        });
+    }
+}

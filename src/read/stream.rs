@@ -1,0 +1,213 @@
+//! Lines of a capture as they arrive (a serial port, a datagram, a capture replayed), parsed by
+//! the readers' own line parsers and fed to a [`TakeStream`]: the line-level cleaning of files
+//! (a line that is not data is dropped and reported) then the stream's reorder buffer and
+//! per-sensor rules.
+//!
+//! Formats: paper 002's SOU lines, and imubake CSV rows after their header line (and any
+//! `# world:` comment before it).
+
+use super::{ReadError, imubake_csv, sou};
+use crate::take::{
+    ClockUnit, DEFAULT_REORDER_S, LineReport, SensorIdx, StreamSample, StreamValue, TakeStream,
+    YawPitchRollDeg,
+};
+use crate::world::World;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// The line formats a stream can carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LineFormat {
+    Sou,
+    ImubakeCsv,
+}
+
+/// A capture arriving line by line (see the module documentation).
+pub struct LineStream {
+    format: LineFormat,
+    /// Names the stream in reports (a port, an address, a file).
+    name: PathBuf,
+    reorder_s: f64,
+    /// Once the clock unit is known (at once for SOU, at the header for CSV).
+    take: Option<TakeStream>,
+    world: World,
+    csv: Option<imubake_csv::Layout>,
+    /// SOU id → its two nodes.
+    nodes: HashMap<String, (SensorIdx, SensorIdx)>,
+    /// CSV sensor id → its index.
+    ids: HashMap<Vec<u8>, SensorIdx>,
+    dropped: Vec<LineReport>,
+}
+
+impl LineStream {
+    /// A stream of `format` lines; `name` names it in reports; rows are reordered within
+    /// `reorder_s` seconds ([`DEFAULT_REORDER_S`] by default).
+    pub fn new(format: LineFormat, name: impl Into<PathBuf>, reorder_s: Option<f64>) -> Self {
+        let reorder_s = reorder_s.unwrap_or(DEFAULT_REORDER_S);
+        let (take, world) = match format {
+            LineFormat::Sou => (
+                Some(TakeStream::new(ClockUnit::Milliseconds, reorder_s)),
+                World::Ned,
+            ),
+            LineFormat::ImubakeCsv => (None, World::Enu),
+        };
+        LineStream {
+            format,
+            name: name.into(),
+            reorder_s,
+            take,
+            world,
+            csv: None,
+            nodes: HashMap::new(),
+            ids: HashMap::new(),
+            dropped: Vec::new(),
+        }
+    }
+
+    /// The sensors' world, as the format declares it (a CSV's `# world:` comment, else ENU;
+    /// NED for SOU).
+    pub fn world(&self) -> World {
+        self.world
+    }
+
+    /// The stream of samples, once the format's clock is known.
+    pub fn take(&self) -> Option<&TakeStream> {
+        self.take.as_ref()
+    }
+
+    /// Lines dropped by the line parsers (the stream's own are in [`TakeStream::dropped_lines`]).
+    pub fn dropped_lines(&self) -> &[LineReport] {
+        &self.dropped
+    }
+
+    fn drop_line(&mut self, line_no: u64, reason: impl Into<String>, line: &[u8]) {
+        self.dropped
+            .push(LineReport::new(None, line_no, reason, line));
+    }
+
+    /// One line (without its line ending); the samples it lets out are appended to `out`.
+    pub fn push_line(
+        &mut self,
+        line_no: u64,
+        line: &[u8],
+        out: &mut Vec<StreamSample>,
+    ) -> Result<(), ReadError> {
+        if line.trim_ascii().is_empty() {
+            return Ok(());
+        }
+        match self.format {
+            LineFormat::Sou => self.push_sou(line_no, line, out),
+            LineFormat::ImubakeCsv => self.push_csv(line_no, line, out),
+        }
+    }
+
+    fn push_sou(
+        &mut self,
+        line_no: u64,
+        line: &[u8],
+        out: &mut Vec<StreamSample>,
+    ) -> Result<(), ReadError> {
+        let (timestamp, id, angles) = match sou::parse_line(line) {
+            Ok(row) => row,
+            Err(problem) => {
+                self.drop_line(line_no, problem, line);
+                return Ok(());
+            }
+        };
+        let take = self.take.as_mut().expect("a SOU stream's clock is known");
+        let (n0, n1) = match self.nodes.get(id) {
+            Some(&pair) => pair,
+            None => {
+                let pair = (
+                    take.sensor(&format!("{id}_0")),
+                    take.sensor(&format!("{id}_1")),
+                );
+                self.nodes.insert(id.to_string(), pair);
+                pair
+            }
+        };
+        let ypr = |a: &[f64]| {
+            StreamValue::YawPitchRoll(YawPitchRollDeg {
+                yaw: a[0],
+                pitch: a[1],
+                roll: a[2],
+            })
+        };
+        let t = timestamp as f64;
+        let name = &self.name;
+        let stream_error = |e| ReadError::take(name, e);
+        take.push(n0, t, ypr(&angles[..3]), line_no, line, out)
+            .map_err(stream_error)?;
+        take.push(n1, t, ypr(&angles[3..]), line_no, line, out)
+            .map_err(stream_error)
+    }
+
+    fn push_csv(
+        &mut self,
+        line_no: u64,
+        line: &[u8],
+        out: &mut Vec<StreamSample>,
+    ) -> Result<(), ReadError> {
+        let Some(layout) = &self.csv else {
+            let t = line.trim_ascii();
+            if let Some(comment) = t.strip_prefix(b"#") {
+                if let Some(w) = imubake_csv::world_directive(comment) {
+                    self.world =
+                        w.map_err(|e| ReadError::line(&self.name, line_no, e.to_string()))?;
+                }
+                return Ok(());
+            }
+            let layout = imubake_csv::Layout::from_header(line, &self.name, line_no)?;
+            self.take = Some(TakeStream::new(layout.clock.clone(), self.reorder_s));
+            self.csv = Some(layout);
+            return Ok(());
+        };
+        let row = match imubake_csv::parse_row(layout, line) {
+            Ok(Some(row)) => row,
+            Ok(None) => return Ok(()),
+            Err(reason) => {
+                self.drop_line(line_no, reason, line);
+                return Ok(());
+            }
+        };
+        let value = match (row.quaternion, row.ypr) {
+            (Some((q, _)), _) => StreamValue::Quaternion(q),
+            (None, Some(ypr)) => StreamValue::YawPitchRoll(ypr),
+            // Raw readings wait for fusion on streams.
+            (None, None) => return Ok(()),
+        };
+        let take = self.take.as_mut().expect("the header set the clock");
+        let sensor = match self.ids.get(row.id) {
+            Some(&s) => s,
+            None => {
+                let Ok(name) = std::str::from_utf8(row.id) else {
+                    self.dropped.push(LineReport::new(
+                        None,
+                        line_no,
+                        "sensor is not UTF-8 text",
+                        line,
+                    ));
+                    return Ok(());
+                };
+                let s = take.sensor(name);
+                self.ids.insert(row.id.to_vec(), s);
+                s
+            }
+        };
+        take.push(sensor, row.time, value, line_no, line, out)
+            .map_err(|e| ReadError::take(&self.name, e))
+    }
+
+    /// The end of the stream: every row still held comes out.
+    pub fn finish(&mut self, out: &mut Vec<StreamSample>) -> Result<(), ReadError> {
+        match &mut self.take {
+            Some(take) => take.finish(out).map_err(|e| ReadError::take(&self.name, e)),
+            None => Ok(()),
+        }
+    }
+
+    /// The name reports give the stream.
+    pub fn name(&self) -> &Path {
+        &self.name
+    }
+}
