@@ -19,16 +19,18 @@ install_venv() { # name requirements-file
   stamp="$(sha256sum "$2" | cut -d' ' -f1)"
   if [ "$(cat "$dir.stamp" 2>/dev/null)" != "$stamp" ] || [ ! -x "$dir/bin/python" ]; then
     step "installing $2 into $dir (bpy is about 1 GB the first time)"
-    rm -rf "$dir"
-    python3 -m venv "$dir"
-    "$dir/bin/python" -m pip install --quiet --upgrade pip
+    # An existing venv is updated in place, so adding a package does not download bpy again.
+    if [ ! -x "$dir/bin/python" ]; then
+      python3 -m venv "$dir"
+      "$dir/bin/python" -m pip install --quiet --upgrade pip
+    fi
     "$dir/bin/python" -m pip install --quiet -r "$2"
     echo "$stamp" > "$dir.stamp"
   fi
 }
 install_venv venv scripts/test-requirements.txt
 install_venv venv-blender42 scripts/test-requirements-blender42.txt
-"$CACHE/venv/bin/python" -c 'import bpy, numpy, scipy, h5py; print("venv: Blender", bpy.app.version_string, "numpy", numpy.__version__, "scipy", scipy.__version__)'
+"$CACHE/venv/bin/python" -c 'import bpy, numpy, scipy, h5py, vqf, ahrs; print("venv: Blender", bpy.app.version_string, "numpy", numpy.__version__, "scipy", scipy.__version__)'
 "$CACHE/venv-blender42/bin/python" -c 'import bpy; print("venv-blender42: Blender", bpy.app.version_string)'
 
 # Khronos glTF-Validator (npm package; run through scripts/gltf_validate.mjs).

@@ -12,6 +12,7 @@ pub mod config;
 pub mod convert;
 pub mod diagnostic;
 pub mod fps;
+pub mod fusion;
 pub mod inspect;
 pub mod ledger;
 pub mod mapping;

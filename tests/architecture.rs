@@ -10,7 +10,7 @@ use std::path::Path;
 const LAYERS: [&[&str]; 11] = [
     &["fps", "world", "rotation", "diagnostic"],
     &["take"],
-    &["read", "bvh", "smooth", "inspect"],
+    &["read", "bvh", "smooth", "inspect", "fusion"],
     &["rig"],
     &["mapping", "anim"],
     &["pipeline"],

@@ -1,0 +1,531 @@
+//! Orientation from raw readings: gyroscope (rad/s), accelerometer (specific force, m/s²) and
+//! magnetometer (any unit), all in the sensor frame → `q_enu_sensor`, whatever a filter's
+//! textbook frame.
+//!
+//! Each filter is an incremental core with x-io Fusion's shape, [`Ahrs::update`]`(gyr, acc, mag,
+//! dt)`; [`fuse`] runs one over a sensor's whole track. Filters:
+//! - [`vqf`] (the default): VQF, through `vqf-rs`;
+//! - [`madgwick`] (β), [`mahony`] (k_P, k_I), [`trust`] (paper 000's blend), [`gyro`] (paper 004's
+//!   integration only).
+//!
+//! Each runs 9D (with the magnetometer) or 6D (without: the heading is then arbitrary and drifts;
+//! calibration aligns it).
+
+pub mod gyro;
+pub mod init;
+pub mod madgwick;
+pub mod mahony;
+pub mod trust;
+pub mod vqf;
+
+use crate::take::{ImuSample, Track};
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::Serialize;
+use std::fmt;
+use std::str::FromStr;
+
+/// What a filter rejected at its last step.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Rejected {
+    /// The magnetometer was set aside (a disturbed field).
+    pub magnetic: bool,
+    /// The accelerometer was set aside (the body accelerating).
+    pub acceleration: bool,
+}
+
+/// An attitude filter's incremental core.
+pub trait Ahrs {
+    /// One step: the gyroscope (rad/s), the accelerometer (m/s²) and, when there is one, the
+    /// magnetometer, all in the sensor frame, `dt` seconds after the previous step.
+    fn update(
+        &mut self,
+        gyr: &Vector3<f64>,
+        acc: &Vector3<f64>,
+        mag: Option<&Vector3<f64>>,
+        dt: f64,
+    );
+    /// `q_enu_sensor`.
+    fn orientation(&self) -> UnitQuaternion<f64>;
+    /// The gyroscope bias the filter estimates, rad/s (subtracted from the readings).
+    fn gyro_bias(&self) -> Option<Vector3<f64>> {
+        None
+    }
+    fn rejected(&self) -> Rejected {
+        Rejected::default()
+    }
+}
+
+/// `q_enu_nwu`: north (NWU's x) is ENU's y, west (NWU's y) is ENU's −x.
+pub fn nwu_to_enu() -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2)
+}
+
+/// A filter and its parameters (`--fusion NAME[:key=value,...]`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "method", rename_all = "lowercase")]
+pub enum Filter {
+    Vqf {
+        tau_acc: f64,
+        tau_mag: f64,
+    },
+    Madgwick {
+        beta: f64,
+    },
+    Mahony {
+        kp: f64,
+        ki: f64,
+    },
+    Trust {
+        /// The gyro's range, °/s.
+        range_dps: f64,
+    },
+    Gyro,
+}
+
+/// The fusion settings: a filter, and whether to leave the magnetometer out (6D).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Fusion {
+    #[serde(flatten)]
+    pub filter: Filter,
+    /// Ignore the magnetometer even when there is one.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub six_d: bool,
+}
+
+impl Default for Fusion {
+    fn default() -> Self {
+        let p = vqf::VqfParams::default();
+        Fusion {
+            filter: Filter::Vqf {
+                tau_acc: p.tau_acc,
+                tau_mag: p.tau_mag,
+            },
+            six_d: false,
+        }
+    }
+}
+
+impl fmt::Display for Fusion {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.filter {
+            Filter::Vqf { tau_acc, tau_mag } => {
+                write!(f, "vqf:tau_acc={tau_acc},tau_mag={tau_mag}")?
+            }
+            Filter::Madgwick { beta } => write!(f, "madgwick:beta={beta}")?,
+            Filter::Mahony { kp, ki } => write!(f, "mahony:kp={kp},ki={ki}")?,
+            Filter::Trust { range_dps } => write!(f, "trust:range={range_dps}")?,
+            Filter::Gyro => write!(f, "gyro")?,
+        }
+        if self.six_d {
+            f.write_str(if matches!(self.filter, Filter::Gyro) {
+                ":6d"
+            } else {
+                ",6d"
+            })?;
+        }
+        Ok(())
+    }
+}
+
+impl FromStr for Fusion {
+    type Err = String;
+
+    /// `vqf[:tau_acc=3,tau_mag=9]`, `madgwick[:beta=0.12]`, `mahony[:kp=0.74,ki=0.0012]`,
+    /// `trust[:range=2000]`, `gyro`; any of them with `6d` among the options to leave the
+    /// magnetometer out.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let (name, args) = s.trim().split_once(':').unwrap_or((s.trim(), ""));
+        let mut six_d = false;
+        let mut pairs = Vec::new();
+        for a in args.split(',').map(str::trim).filter(|a| !a.is_empty()) {
+            if a.eq_ignore_ascii_case("6d") {
+                six_d = true;
+                continue;
+            }
+            let (k, v) = a
+                .split_once('=')
+                .ok_or_else(|| format!("`{s}`: `{a}` needs a value, e.g. {a}=1"))?;
+            let v: f64 = v
+                .trim()
+                .parse()
+                .ok()
+                .filter(|x: &f64| x.is_finite() && *x >= 0.0)
+                .ok_or_else(|| format!("`{s}`: `{a}` is not a number ≥ 0"))?;
+            pairs.push((k.trim().to_ascii_lowercase(), v));
+        }
+        let take = |allowed: &[&str], defaults: &mut [f64]| -> Result<(), String> {
+            for (k, v) in &pairs {
+                match allowed.iter().position(|a| a == k) {
+                    Some(i) => defaults[i] = *v,
+                    None => {
+                        return Err(format!(
+                            "`{s}`: unknown option `{k}` for {name}; expected {} or 6d",
+                            allowed.join(", ")
+                        ));
+                    }
+                }
+            }
+            Ok(())
+        };
+        let filter = match name.to_ascii_lowercase().as_str() {
+            "vqf" => {
+                let d = vqf::VqfParams::default();
+                let mut v = [d.tau_acc, d.tau_mag];
+                take(&["tau_acc", "tau_mag"], &mut v)?;
+                Filter::Vqf {
+                    tau_acc: v[0],
+                    tau_mag: v[1],
+                }
+            }
+            "madgwick" => {
+                let mut v = [DEFAULT_MADGWICK_BETA];
+                take(&["beta"], &mut v)?;
+                Filter::Madgwick { beta: v[0] }
+            }
+            "mahony" => {
+                let mut v = [DEFAULT_MAHONY_KP, DEFAULT_MAHONY_KI];
+                take(&["kp", "ki"], &mut v)?;
+                Filter::Mahony { kp: v[0], ki: v[1] }
+            }
+            "trust" => {
+                let mut v = [DEFAULT_GYRO_RANGE_DPS];
+                take(&["range"], &mut v)?;
+                Filter::Trust { range_dps: v[0] }
+            }
+            "gyro" => {
+                take(&[], &mut [])?;
+                Filter::Gyro
+            }
+            _ => {
+                return Err(format!(
+                    "unknown fusion `{name}`; expected vqf, madgwick, mahony, trust or gyro"
+                ));
+            }
+        };
+        Ok(Fusion { filter, six_d })
+    }
+}
+
+/// Madgwick's β by default: BROAD's best over all its trials (its published runs).
+pub const DEFAULT_MADGWICK_BETA: f64 = 0.12;
+/// Mahony's gains by default: BROAD's best over all its trials.
+pub const DEFAULT_MAHONY_KP: f64 = 0.74;
+pub const DEFAULT_MAHONY_KI: f64 = 0.0012;
+/// The trust filter's gyro range by default, °/s (common MEMS gyros' largest range).
+pub const DEFAULT_GYRO_RANGE_DPS: f64 = 2000.0;
+
+impl Fusion {
+    /// The filter's core, starting from the first readings' attitude (VQF starts itself).
+    pub fn core(
+        &self,
+        q0: UnitQuaternion<f64>,
+        sample_time_s: f64,
+        nine_d: bool,
+    ) -> Box<dyn Ahrs + Send> {
+        match self.filter {
+            Filter::Vqf { tau_acc, tau_mag } => Box::new(vqf::Vqf::new(
+                &vqf::VqfParams {
+                    tau_acc,
+                    tau_mag,
+                    ..vqf::VqfParams::default()
+                },
+                sample_time_s,
+                nine_d,
+            )),
+            Filter::Madgwick { beta } => Box::new(madgwick::Madgwick::new(beta, q0)),
+            Filter::Mahony { kp, ki } => Box::new(mahony::Mahony::new(kp, ki, q0)),
+            Filter::Trust { range_dps } => Box::new(trust::Trust::new(range_dps.to_radians(), q0)),
+            Filter::Gyro => Box::new(gyro::GyroIntegration::new(q0)),
+        }
+    }
+}
+
+/// Why raw readings cannot be fused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FusionError {
+    #[error(
+        "sensor `{sensor}`: gyroscope rates reach {max:.0} rad/s, more than any body turns (35 rad/s \
+         is already 2000 °/s). Hint: the readings are probably in °/s: name the columns gx_dps, gy_dps, gz_dps"
+    )]
+    GyroUnits { sensor: String, max: f64 },
+    #[error("sensor `{sensor}`: the accelerometer reads {norm:.2} at rest, not 9.81 m/s². {hint}")]
+    AccelUnits {
+        sensor: String,
+        norm: f64,
+        hint: &'static str,
+    },
+    #[error("sensor `{sensor}`: no usable accelerometer reading to start from")]
+    NoStart { sensor: String },
+}
+
+/// What fusing a sensor came to, for the sidecar and the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct FusionStats {
+    /// `9d` or `6d`.
+    pub variant: &'static str,
+    /// The filter's last gyro bias estimate, °/s (for filters that estimate one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gyro_bias_dps: Option<[f64; 3]>,
+    /// Share of samples in which the magnetometer was set aside as disturbed.
+    pub magnetic_rejected: f64,
+    /// Share of samples in which the accelerometer was set aside.
+    pub acceleration_rejected: f64,
+    /// Over time (every 0.1 s): (time s, gyro bias magnitude °/s, magnetometer set aside,
+    /// accelerometer set aside), for the report.
+    #[serde(skip)]
+    pub series: Vec<(f64, f64, bool, bool)>,
+}
+
+/// A sensor's fused orientation track and what it came to.
+#[derive(Debug, Clone)]
+pub struct Fused {
+    /// `q_enu_sensor` at each inertial sample's time.
+    pub track: Track<UnitQuaternion<f64>>,
+    pub stats: FusionStats,
+    pub warnings: Vec<String>,
+}
+
+/// The median of a few values (sorted copy).
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Checks that readings are in the units the columns say: gyro rates no body reaches (°/s read
+/// as rad/s) and an accelerometer whose typical norm is not gravity's (g read as m/s², or another
+/// scale) are errors; a gyro that sits at its limit is a warning.
+fn check_units(sensor: &str, inertial: &Track<ImuSample>) -> Result<Vec<String>, FusionError> {
+    let mut warnings = Vec::new();
+    let max_rate = inertial
+        .values()
+        .iter()
+        .flat_map(|s| s.gyro_rad_s.iter().copied())
+        .fold(0.0f64, |m, w| m.max(w.abs()));
+    if max_rate > 35.0 {
+        return Err(FusionError::GyroUnits {
+            sensor: sensor.to_string(),
+            max: max_rate,
+        });
+    }
+    let norms: Vec<f64> = inertial
+        .values()
+        .iter()
+        .step_by((inertial.len() / 2000).max(1))
+        .map(|s| s.accel_m_s2.norm())
+        .collect();
+    let norm = median(norms);
+    if !(6.0..=14.0).contains(&norm) {
+        let hint = if (0.6..=1.4).contains(&norm) {
+            "Hint: the readings are probably in g: name the columns ax_g, ay_g, az_g"
+        } else {
+            "Hint: check the accelerometer's unit (m/s² by default, _g for g)"
+        };
+        return Err(FusionError::AccelUnits {
+            sensor: sensor.to_string(),
+            norm,
+            hint,
+        });
+    }
+    // A saturated axis: many readings at exactly the largest magnitude on that axis.
+    for axis in 0..3 {
+        let peak = inertial
+            .values()
+            .iter()
+            .map(|s| s.gyro_rad_s[axis].abs())
+            .fold(0.0f64, f64::max);
+        let at_peak = inertial
+            .values()
+            .iter()
+            .filter(|s| peak > 1.0 && s.gyro_rad_s[axis].abs() == peak)
+            .count();
+        if at_peak >= 5 {
+            warnings.push(format!(
+                "sensor `{sensor}`: the gyroscope's {} axis sits at {:.0} °/s on {at_peak} samples: \
+                 it saturated, and the orientation drifts there",
+                ["x", "y", "z"][axis],
+                peak.to_degrees()
+            ));
+        }
+    }
+    Ok(warnings)
+}
+
+/// Whether a magnetometer track carries a field: not all zero, not stuck at one value.
+fn magnetometer_works(mag: &Track<Vector3<f64>>) -> bool {
+    let first = mag.values()[0];
+    first.norm() > 0.0 && mag.values().iter().any(|m| *m != first)
+}
+
+/// Fuses one sensor's whole track with `fusion`: inertial samples (gyro and accelerometer at the
+/// same instants) with the latest magnetometer sample at or before each (magnetometers often run
+/// slower), each step's `dt` from the samples' own times. The first step starts from the first
+/// accelerometer (and magnetometer) reading's attitude; the orientation comes out at every
+/// inertial sample.
+pub fn fuse(
+    sensor: &str,
+    inertial: &Track<ImuSample>,
+    magnetometer: Option<&Track<Vector3<f64>>>,
+    fusion: &Fusion,
+) -> Result<Fused, FusionError> {
+    let mut warnings = check_units(sensor, inertial)?;
+    let mag = magnetometer.filter(|m| {
+        let works = magnetometer_works(m);
+        if !works {
+            warnings.push(format!(
+                "sensor `{sensor}`: the magnetometer reads nothing (zero or one value throughout); \
+                 fused without it (6D)"
+            ));
+        }
+        works
+    });
+    let nine_d = mag.is_some() && !fusion.six_d;
+    let mag = mag.filter(|_| nine_d);
+    let times = inertial.times_s();
+    let dts: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    let nominal_dt = if dts.is_empty() { 0.01 } else { median(dts) };
+    let mut mag_index = 0;
+    let mag_at = |t: f64, index: &mut usize| -> Option<Vector3<f64>> {
+        let m = mag?;
+        let mt = m.times_s();
+        while *index + 1 < mt.len() && mt[*index + 1] <= t {
+            *index += 1;
+        }
+        (mt[*index] <= t || *index == 0).then(|| m.values()[*index])
+    };
+    let first = &inertial.values()[0];
+    let first_mag = mag_at(times[0], &mut mag_index);
+    let q0 = init::attitude(&first.accel_m_s2, first_mag.as_ref()).ok_or_else(|| {
+        FusionError::NoStart {
+            sensor: sensor.to_string(),
+        }
+    })?;
+    let mut core = fusion.core(q0, nominal_dt, nine_d);
+    let mut out = Vec::with_capacity(inertial.len());
+    let (mut mag_rejected, mut acc_rejected) = (0usize, 0usize);
+    let mut series = Vec::new();
+    let mut next_series_t = f64::NEG_INFINITY;
+    for (i, (t, s)) in inertial.iter().enumerate() {
+        let dt = if i == 0 { nominal_dt } else { t - times[i - 1] };
+        let m = mag_at(t, &mut mag_index);
+        core.update(&s.gyro_rad_s, &s.accel_m_s2, m.as_ref(), dt);
+        out.push(core.orientation());
+        let rejected = core.rejected();
+        mag_rejected += usize::from(rejected.magnetic);
+        acc_rejected += usize::from(rejected.acceleration);
+        if t >= next_series_t {
+            let bias = core.gyro_bias().map_or(0.0, |b| b.norm().to_degrees());
+            series.push((t, bias, rejected.magnetic, rejected.acceleration));
+            next_series_t = t + 0.1;
+        }
+    }
+    let n = inertial.len() as f64;
+    let stats = FusionStats {
+        variant: if nine_d { "9d" } else { "6d" },
+        gyro_bias_dps: core
+            .gyro_bias()
+            .map(|b| [b.x.to_degrees(), b.y.to_degrees(), b.z.to_degrees()]),
+        magnetic_rejected: mag_rejected as f64 / n,
+        acceleration_rejected: acc_rejected as f64 / n,
+        series,
+    };
+    let track = Track::new(times.to_vec(), out).expect("the inertial track's times");
+    Ok(Fused {
+        track,
+        stats,
+        warnings,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Standard gravity, m/s².
+    const G: f64 = 9.80665;
+
+    #[test]
+    fn fusion_settings_parse_and_print() {
+        let f: Fusion = "madgwick:beta=0.05,6d".parse().unwrap();
+        assert_eq!(f.filter, Filter::Madgwick { beta: 0.05 });
+        assert!(f.six_d);
+        assert_eq!(f.to_string(), "madgwick:beta=0.05,6d");
+        assert_eq!("vqf".parse::<Fusion>().unwrap(), Fusion::default());
+        assert!(
+            "vqf:beta=1"
+                .parse::<Fusion>()
+                .unwrap_err()
+                .contains("unknown option `beta`")
+        );
+        assert!("kalman".parse::<Fusion>().is_err());
+        assert_eq!(
+            "mahony".parse::<Fusion>().unwrap().filter,
+            Filter::Mahony {
+                kp: 0.74,
+                ki: 0.0012
+            }
+        );
+        assert_eq!("gyro:6d".parse::<Fusion>().unwrap().to_string(), "gyro:6d");
+    }
+
+    /// A sensor spinning at a constant rate about its own z with the accelerometer reading gravity
+    /// along z: every filter follows the spin (the heading turns, the inclination stays).
+    #[test]
+    fn every_filter_follows_a_spin_about_the_vertical() {
+        let rate = 1.0; // rad/s
+        let n = 500;
+        let dt = 0.01;
+        let times: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        let samples = vec![
+            ImuSample {
+                gyro_rad_s: Vector3::new(0.0, 0.0, rate),
+                accel_m_s2: Vector3::new(0.0, 0.0, G),
+            };
+            n
+        ];
+        let inertial = Track::new(times, samples).unwrap();
+        for spec in ["vqf", "madgwick", "mahony", "trust", "gyro", "vqf:6d"] {
+            let fusion: Fusion = spec.parse().unwrap();
+            let fused = fuse("s", &inertial, None, &fusion).unwrap();
+            assert_eq!(fused.stats.variant, "6d");
+            let q = fused.track.values();
+            // Turned by rate · (n − 1) · dt about +z between the first and last sample.
+            let turn = q[0].inverse() * q[n - 1];
+            let expected =
+                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rate * (n - 1) as f64 * dt);
+            assert!(
+                turn.angle_to(&expected).to_degrees() < 1.0,
+                "{spec}: {:.3}°",
+                turn.angle_to(&expected).to_degrees()
+            );
+            let up = q[n - 1] * Vector3::z();
+            assert!((up - Vector3::z()).norm() < 1e-3, "{spec}: {up:?}");
+        }
+    }
+
+    #[test]
+    fn readings_in_the_wrong_units_are_errors() {
+        let track = |gyr: f64, acc: f64| {
+            Track::new(
+                vec![0.0, 0.01],
+                vec![
+                    ImuSample {
+                        gyro_rad_s: Vector3::new(gyr, 0.0, 0.0),
+                        accel_m_s2: Vector3::new(0.0, 0.0, acc),
+                    };
+                    2
+                ],
+            )
+            .unwrap()
+        };
+        let f = Fusion::default();
+        let e = fuse("s", &track(90.0, G), None, &f)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("gx_dps"), "{e}");
+        let e = fuse("s", &track(0.1, 1.0), None, &f)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("ax_g"), "{e}");
+        assert!(fuse("s", &track(0.1, G), None, &f).is_ok());
+    }
+}
