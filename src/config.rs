@@ -19,6 +19,8 @@
 //! world: ned             # override the format's world
 //! causal: false          # run the take as a live stream would (causal smoothing, no look-ahead)
 //! sensor_rate_hz: 100    # the sensors' rate, for causal smoothing (else from their first samples)
+//! fusion: vqf            # fuse raw readings even where the device gave orientations; or
+//!                        # madgwick:beta=0.1, mahony, trust, gyro, vqf:6d (no magnetometer)
 //! smoothing: butterworth:order=4,cutoff=14   # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
 //! # or with per-bone overrides:
 //! # smoothing: {method: "butterworth:cutoff=4", bones: {LeftHand: none, Head: "gaussian:sigma=0.05"}}
@@ -70,6 +72,13 @@ pub struct Config {
     /// The sensors' sample rate, Hz, for causal smoothing's grid.
     #[serde(default, deserialize_with = "sensor_rate")]
     pub sensor_rate_hz: Option<f64>,
+    /// Fusion of raw readings, for every sensor that has them.
+    #[serde(default, deserialize_with = "fusion")]
+    pub fusion: Option<crate::fusion::Fusion>,
+}
+
+fn fusion<'de, D: Deserializer<'de>>(d: D) -> Result<Option<crate::fusion::Fusion>, D::Error> {
+    parsed(d, "fusion")
 }
 
 /// A key's value parsed with `FromStr`, its error naming the key.
@@ -220,6 +229,7 @@ impl Config {
             force: self.force || below.force,
             causal: self.causal || below.causal,
             sensor_rate_hz: self.sensor_rate_hz.or(below.sensor_rate_hz),
+            fusion: self.fusion.or(below.fusion),
         }
     }
 
@@ -256,6 +266,7 @@ impl Config {
         s.pipeline.force = self.force;
         s.pipeline.causal = self.causal;
         s.pipeline.sensor_rate_hz = self.sensor_rate_hz;
+        s.pipeline.fusion = self.fusion.clone();
         s.read.format = self.input_format;
         s.read.skip_lines = self.skip_lines.unwrap_or(0);
         s.read.skip_seconds = self.skip_seconds.unwrap_or(0.0);

@@ -10,6 +10,7 @@ use crate::mapping::{
     MappingRecord, Mount, SensorRecord, load_mapping,
 };
 use crate::pipeline::calibrate::HeadingSource;
+use crate::pipeline::sources::Origin;
 use crate::pipeline::{self, PipelineError, PipelineOptions};
 use crate::read::{
     ReadError, ReadOptions, check_text, is_stream, read_stream, read_take, read_take_from_bytes,
@@ -20,7 +21,9 @@ use crate::rig::{LengthUnit, Rig, load_rig};
 use crate::take::{LineReport, Take};
 use crate::world::{World, WorldFrom};
 use crate::write::report::{ReportInput, bone_series};
-use crate::write::sidecar::{PipelineRecord, RigRecord, Sidecar, SourceRecord, TrimRecord};
+use crate::write::sidecar::{
+    FusionRecord, PipelineRecord, RigRecord, Sidecar, SourceRecord, TrimRecord,
+};
 pub use crate::write::{Output, OutputFormat};
 use crate::write::{OutputError, TakeOutputs, remove_take_outputs, write_atomic};
 use nalgebra::UnitQuaternion;
@@ -246,12 +249,16 @@ fn mapping_record(
             pose: w.pose.label(),
             start_s: w.start_s,
             duration_s: w.duration_s,
+            second: w.second.as_ref().map(|p| {
+                serde_json::json!({"pose": p.pose.label(), "start_s": p.start_s, "duration_s": p.duration_s})
+            }),
         }),
         sensors: converted
             .sensors
             .iter()
             .zip(&converted.calibration.mounts)
-            .map(|(s, q)| SensorRecord {
+            .zip(converted.origins.iter().zip(&converted.calibration.alignment))
+            .map(|((s, q), (origin, alignment))| SensorRecord {
                 sensor: s.sensor.clone(),
                 bone: rig.joints()[s.bone].name.clone(),
                 mount_source: match s.mount {
@@ -265,6 +272,12 @@ fn mapping_record(
                     .find(|m| m.sensor == s.sensor)
                     .and_then(|m| m.forward)
                     .map(|v| [v.x, v.y, v.z]),
+                orientation: match origin {
+                    Origin::Device { .. } => "device",
+                    Origin::Fused(_) => "fused",
+                },
+                world: origin.world(),
+                heading_aligned_by: alignment.label(),
             })
             .collect(),
         legacy: None,
@@ -420,13 +433,16 @@ fn quaternion_mode(
     Ok(Conversion {
         euler_deg: pipeline::output::euler_degrees(&converted.animation),
         mapping: mapping_record(&converted, &rig, &mapping, file),
-        pipeline: pipeline_record(
-            settings,
-            &heading.heading_source,
-            heading.heading.scaled_axis().y.to_degrees(),
-            converted.first_frame,
-            "quaternion",
-        ),
+        pipeline: PipelineRecord {
+            fusion: fusion_record(settings, &converted),
+            ..pipeline_record(
+                settings,
+                &heading.heading_source,
+                heading.heading.scaled_axis().y.to_degrees(),
+                converted.first_frame,
+                "quaternion",
+            )
+        },
         world: (converted.world, world_from),
         unsmoothed: converted.unsmoothed,
         warnings: converted.warnings,
@@ -489,6 +505,32 @@ fn legacy_mode(
         warnings: legacy.warnings,
         euler_deg: legacy.euler_deg,
         animation: legacy.animation,
+    })
+}
+
+/// The sidecar's `pipeline.fusion`: `None` when no sensor was fused.
+fn fusion_record(
+    settings: &ConvertSettings,
+    converted: &pipeline::Converted,
+) -> Option<FusionRecord> {
+    let fusion = converted.fusion.clone()?;
+    let sensors = converted
+        .sensors
+        .iter()
+        .zip(&converted.origins)
+        .filter_map(|(s, origin)| match origin {
+            Origin::Fused(stats) => Some((s.sensor.clone(), stats.clone())),
+            Origin::Device { .. } => None,
+        })
+        .collect();
+    Some(FusionRecord {
+        fusion,
+        chosen_by: if settings.pipeline.fusion.is_some() {
+            "settings"
+        } else {
+            "default"
+        },
+        sensors,
     })
 }
 

@@ -152,8 +152,10 @@ const RACY_NS: u64 = 2_000_000_000;
 ///
 /// Schema 0 was a hash of the settings' `Debug` text and the crate version (any release
 /// reconverted everything); 1 is [`FingerprintInput`]; 2: causal Butterworth smoothing runs on
-/// the stream's core (its grid's rate from each sensor's first samples).
-pub const FINGERPRINT_SCHEMA: u32 = 2;
+/// the stream's core (its grid's rate from each sensor's first samples); 3: raw readings are
+/// fused (takes that failed for want of orientations convert now) and the sidecar records each
+/// sensor's origin and world.
+pub const FINGERPRINT_SCHEMA: u32 = 3;
 
 /// What decides a conversion's outputs besides the capture, in a stable serialisation: field
 /// names and values, not Rust's `Debug` text; the mapping and rig files by content, not by path.
@@ -178,6 +180,9 @@ struct FingerprintInput<'a> {
     causal: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     sensor_rate_hz: Option<f64>,
+    /// The fusion asked for, as its settings text (every parameter).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fusion: Option<String>,
 }
 
 fn file_sha256(path: &Path) -> String {
@@ -215,6 +220,7 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         report: settings.report,
         causal: p.causal,
         sensor_rate_hz: p.sensor_rate_hz,
+        fusion: p.fusion.as_ref().map(|f| f.to_string()),
     };
     let json = serde_json::to_vec(&input).expect("the fingerprint input serialises");
     format!("{FINGERPRINT_SCHEMA}:{}", hex(&Sha256::digest(&json)))

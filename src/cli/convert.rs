@@ -73,6 +73,12 @@ pub struct SettingsArgs {
     /// sensor's first samples.
     #[arg(long, value_name = "HZ", value_parser = parse_rate)]
     sensor_rate: Option<f64>,
+    /// Fuse raw gyroscope, accelerometer (and magnetometer) readings with this filter, even where
+    /// the device gave an orientation: vqf[:tau_acc=3,tau_mag=9], madgwick[:beta=0.12],
+    /// mahony[:kp=0.74,ki=0.0012], trust[:range=2000], gyro; add `6d` to leave the magnetometer
+    /// out [default: vqf, for sensors with raw readings only]
+    #[arg(long, value_name = "NAME[:key=value,...]")]
+    fusion: Option<imubake::fusion::Fusion>,
     #[command(flatten)]
     read: ReadArgs,
 }
@@ -128,6 +134,7 @@ impl SettingsArgs {
             force: self.force,
             causal: self.causal,
             sensor_rate_hz: self.sensor_rate,
+            fusion: self.fusion.clone(),
             ..self.read.layer()
         }
     }

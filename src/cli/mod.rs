@@ -2,6 +2,7 @@
 
 mod batch;
 mod convert;
+mod fuse;
 mod inspect;
 mod simulate;
 mod watch;
@@ -32,6 +33,8 @@ enum Command {
     Convert(convert::ConvertArgs),
     /// Convert many takes in parallel (files, folders, globs), skipping those already current.
     Batch(batch::BatchArgs),
+    /// Fuse raw gyroscope, accelerometer (and magnetometer) readings into orientations (CSV).
+    Fuse(fuse::FuseArgs),
     /// Summarise a capture: time frame, nodes, sample rates, gaps, dropped lines.
     Inspect(inspect::InspectArgs),
     /// Simulate the capture a mapping's sensors would record from BVH motion (tests, samples).
@@ -111,6 +114,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Convert(args) => convert::run(args),
         Command::Batch(args) => batch::run(args),
+        Command::Fuse(args) => fuse::run(args),
         Command::Inspect(args) => inspect::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Watch(args) => watch::run(args),

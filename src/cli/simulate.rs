@@ -5,6 +5,7 @@ use clap::{Args, ValueEnum};
 use imubake::bvh;
 use imubake::mapping::{MappingFile, load_mapping};
 use imubake::rig::load_rig;
+use imubake::simulate::raw::RawOptions;
 use imubake::simulate::{CaptureFormat, SimulateOptions, simulate};
 use imubake::write::write_atomic;
 use std::path::PathBuf;
@@ -64,6 +65,53 @@ pub struct SimulateArgs {
     /// The mapping's rig, if the mapping does not name one [default: mixamo]
     #[arg(long)]
     rig: Option<String>,
+    /// Write what the sensors would have measured instead of orientations: gyroscope (rad/s),
+    /// specific force (m/s², the sensor at the midpoint of its bone) and magnetic field (µT),
+    /// each in the sensor's frame.
+    #[arg(long)]
+    raw: bool,
+    /// With --raw: gyro white noise, °/s per axis.
+    #[arg(long, default_value_t = 0.3, requires = "raw")]
+    gyro_noise_dps: f64,
+    /// With --raw: the largest constant gyro bias, °/s (each sensor's drawn up to it).
+    #[arg(long, default_value_t = 0.5, requires = "raw")]
+    gyro_bias_dps: f64,
+    /// With --raw: accelerometer white noise, m/s² per axis.
+    #[arg(long, default_value_t = 0.05, requires = "raw")]
+    accel_noise: f64,
+    /// With --raw: magnetometer white noise, µT per axis.
+    #[arg(long, default_value_t = 0.3, requires = "raw")]
+    mag_noise_ut: f64,
+    /// With --raw: the Earth's field strength, µT.
+    #[arg(long, default_value_t = 50.0, requires = "raw")]
+    field_ut: f64,
+    /// With --raw: the field's dip below the horizontal, degrees.
+    #[arg(
+        long,
+        default_value_t = 65.0,
+        allow_hyphen_values = true,
+        requires = "raw"
+    )]
+    dip_deg: f64,
+    /// With --raw: leave the magnetometer out (a 6D capture).
+    #[arg(long, requires = "raw")]
+    no_magnetometer: bool,
+    /// With --raw: a magnetic disturbance, a field along east added from START to END seconds
+    /// (ramped over 0.5 s), MICROTESLA strong [default strength: 30].
+    #[arg(long, value_name = "START:END[:MICROTESLA]", requires = "raw")]
+    mag_disturbance: Option<imubake::simulate::raw::Disturbance>,
+    /// With --raw: the BVH's length unit: m, cm, mm, in, or metres per unit [default: scaled so
+    /// the rest pose is --subject-height-m tall]
+    #[arg(
+        long,
+        value_name = "UNIT",
+        requires = "raw",
+        conflicts_with = "subject_height_m"
+    )]
+    source_units: Option<imubake::simulate::raw::SourceScale>,
+    /// With --raw, when the BVH's unit is not given: the rest pose's height, metres.
+    #[arg(long, default_value_t = 1.75, requires = "raw")]
+    subject_height_m: f64,
 }
 
 fn parse_frames(s: &str) -> anyhow::Result<(usize, Option<usize>)> {
@@ -134,6 +182,19 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
             As::Sou => CaptureFormat::Sou,
         },
         bone_map,
+        raw: args.raw.then(|| RawOptions {
+            gyro_noise_dps: args.gyro_noise_dps,
+            gyro_bias_dps: args.gyro_bias_dps,
+            accel_noise: args.accel_noise,
+            mag_noise_ut: args.mag_noise_ut,
+            field_ut: args.field_ut,
+            dip_deg: args.dip_deg,
+            magnetometer: !args.no_magnetometer,
+            disturbance: args.mag_disturbance,
+            source_scale: args.source_units.unwrap_or(
+                imubake::simulate::raw::SourceScale::RestHeight(args.subject_height_m),
+            ),
+        }),
     };
     let simulated = simulate(&motion, &rig, &mapping, &options)?;
     write_atomic(&args.output, |w| w.write_all(simulated.text.as_bytes()))

@@ -60,12 +60,33 @@ impl PoseRef {
     }
 }
 
-/// A window of the take in which the subject holds `pose`.
+/// A window of the take in which the subject holds `pose`, and optionally a second one: the turn
+/// of each bone between the two poses gives the heading of sensors that have none of their own
+/// (fused without a magnetometer), as SlimeVR's mounting reset does.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CalibrationWindow {
     pub pose: PoseRef,
     pub start_s: f64,
     pub duration_s: f64,
+    pub second: Option<SecondPose>,
+}
+
+/// The second calibration pose (`calibration.second`), held after the first.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SecondPose {
+    pub pose: PoseRef,
+    pub start_s: f64,
+    pub duration_s: f64,
+}
+
+impl CalibrationWindow {
+    /// Where the last pose ends, seconds.
+    pub fn end_s(&self) -> f64 {
+        match &self.second {
+            Some(s) => (s.start_s + s.duration_s).max(self.start_s + self.duration_s),
+            None => self.start_s + self.duration_s,
+        }
+    }
 }
 
 impl Default for CalibrationWindow {
@@ -74,6 +95,7 @@ impl Default for CalibrationWindow {
             pose: PoseRef::Rest,
             start_s: 0.0,
             duration_s: 1.0,
+            second: None,
         }
     }
 }
@@ -215,6 +237,44 @@ struct RawCalibration {
     start_s: f64,
     #[serde(default = "default_duration")]
     duration_s: f64,
+    #[serde(default)]
+    second: Option<RawSecondPose>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSecondPose {
+    pose: String,
+    start_s: f64,
+    #[serde(default = "default_duration")]
+    duration_s: f64,
+}
+
+/// A pose window's fields checked; `key` is `calibration` or `calibration.second`.
+fn pose_window(
+    file: &Path,
+    key: &str,
+    pose: &str,
+    start_s: f64,
+    duration_s: f64,
+) -> Result<(PoseRef, f64, f64), MappingError> {
+    let pose =
+        PoseRef::parse(pose).map_err(|e| MappingError::new(file, format!("{key}.pose"), e))?;
+    if !(start_s.is_finite() && start_s >= 0.0) {
+        return Err(MappingError::new(
+            file,
+            format!("{key}.start_s"),
+            "expected seconds ≥ 0",
+        ));
+    }
+    if !(duration_s.is_finite() && duration_s >= 0.0) {
+        return Err(MappingError::new(
+            file,
+            format!("{key}.duration_s"),
+            "expected seconds ≥ 0",
+        ));
+    }
+    Ok((pose, start_s, duration_s))
 }
 
 fn default_pose() -> String {
@@ -303,26 +363,35 @@ pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingErro
     let calibration = match raw.calibration {
         None => None,
         Some(c) => {
-            let pose = PoseRef::parse(&c.pose)
-                .map_err(|e| MappingError::new(file, "calibration.pose", e))?;
-            if !(c.start_s.is_finite() && c.start_s >= 0.0) {
-                return Err(MappingError::new(
-                    file,
-                    "calibration.start_s",
-                    "expected seconds ≥ 0",
-                ));
-            }
-            if !(c.duration_s.is_finite() && c.duration_s >= 0.0) {
-                return Err(MappingError::new(
-                    file,
-                    "calibration.duration_s",
-                    "expected seconds ≥ 0",
-                ));
-            }
+            let (pose, start_s, duration_s) =
+                pose_window(file, "calibration", &c.pose, c.start_s, c.duration_s)?;
+            let second = match c.second {
+                None => None,
+                Some(s) => {
+                    let (pose, start_s2, duration_s2) =
+                        pose_window(file, "calibration.second", &s.pose, s.start_s, s.duration_s)?;
+                    if start_s2 < start_s + duration_s {
+                        return Err(MappingError::new(
+                            file,
+                            "calibration.second.start_s",
+                            format!(
+                                "the second pose starts at {start_s2} s, before the first ends ({} s)",
+                                start_s + duration_s
+                            ),
+                        ));
+                    }
+                    Some(SecondPose {
+                        pose,
+                        start_s: start_s2,
+                        duration_s: duration_s2,
+                    })
+                }
+            };
             Some(CalibrationWindow {
                 pose,
-                start_s: c.start_s,
-                duration_s: c.duration_s,
+                start_s,
+                duration_s,
+                second,
             })
         }
     };
@@ -383,6 +452,9 @@ pub struct ResolvedSensor {
     pub bone: usize,
     pub mount: Mount,
     pub forward: Option<Vector3<f64>>,
+    /// The sensor's heading is its own, not north (fused without a magnetometer): calibration
+    /// aligns it ([`crate::pipeline::calibrate`]). Set by the sources stage.
+    pub own_heading: bool,
 }
 
 impl Mapping {
@@ -403,6 +475,7 @@ impl Mapping {
                     bone,
                     mount: s.mount.clone(),
                     forward: s.forward,
+                    own_heading: false,
                 })
             })
             .collect()
@@ -494,6 +567,9 @@ pub struct CalibrationRecord {
     pub pose: String,
     pub start_s: f64,
     pub duration_s: f64,
+    /// The second pose, when there is one: `{pose, start_s, duration_s}`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub second: Option<serde_json::Value>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -506,6 +582,14 @@ pub struct SensorRecord {
     pub mount: [f64; 4],
     #[serde(skip_serializing_if = "Option::is_none")]
     pub forward: Option<[f64; 3]>,
+    /// Where the sensor's orientation came from: `device` or `fused`.
+    pub orientation: &'static str,
+    /// The world its orientation was in (a fused one is `enu`).
+    pub world: World,
+    /// For a sensor without a heading of its own (fused 6D): how calibration aligned it
+    /// (`mount`, `forward`, `second-pose`), or `none`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heading_aligned_by: Option<&'static str>,
 }
 
 #[cfg(test)]

@@ -1,6 +1,7 @@
 //! Stage 3, bone world: each sensor's track turned into its bone's world orientation,
-//! `q_world_bone = H ⊗ q_rig_sensor ⊗ q_bone_sensor⁻¹` (heading `H` and mount `q_bone_sensor` from
-//! [`super::calibrate`]), on the sensor's own sample times.
+//! `q_world_bone = H ⊗ A_i ⊗ q_rig_sensor ⊗ q_bone_sensor⁻¹` (heading `H`, alignment `A_i` of a
+//! sensor without a heading of its own, mount `q_bone_sensor`: [`super::calibrate`]), on the
+//! sensor's own sample times.
 
 use super::calibrate::Calibration;
 use crate::take::Track;
@@ -11,13 +12,13 @@ pub fn bone_world(
     tracks: Vec<Track<UnitQuaternion<f64>>>,
     calibration: &Calibration,
 ) -> Vec<Track<UnitQuaternion<f64>>> {
-    let heading = calibration.heading;
     tracks
         .into_iter()
-        .zip(&calibration.mounts)
-        .map(|(t, mount)| {
-            let inv = mount.inverse();
-            t.map_in_place(|q| heading * q * inv)
+        .enumerate()
+        .map(|(i, t)| {
+            let world_side = calibration.heading * calibration.align[i];
+            let inv = calibration.mounts[i].inverse();
+            t.map_in_place(|q| world_side * q * inv)
         })
         .collect()
 }
@@ -44,6 +45,8 @@ mod tests {
             heading,
             heading_source: HeadingSource::None,
             mounts: vec![mount],
+            align: vec![UnitQuaternion::identity()],
+            alignment: vec![crate::pipeline::calibrate::Alignment::OwnHeading],
             warnings: vec![],
         };
         let out = bone_world(vec![track], &calibration);

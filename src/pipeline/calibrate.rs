@@ -12,10 +12,23 @@
 //! faces), else a sensor whose mount is known (its bone's pose orientation says where the body
 //! faces), else the direction of travel when the take starts by walking (read off the knees, see
 //! [`heading_from_knees`]), else none (the sensors' own heading is kept: north → +Z).
+//!
+//! Sensors without a heading of their own (fused without a magnetometer, "6D") each sit in a world
+//! turned about the vertical by an unknown `A_i⁻¹`, which a mount cannot absorb: it would turn
+//! every rotation axis of the bone about the vertical. Each such sensor is aligned on its own,
+//! `q_world_bone = H ⊗ A_i ⊗ q_rig_sensor ⊗ q_bone_sensor⁻¹`, with `Y_i = H ⊗ A_i` (about +Y):
+//! - a known mount: `Y_i` is the turn about +Y closest to `P_i ⊗ q_bone_sensor ⊗ held_i⁻¹`
+//!   ([`twist_about_y`]): the bone faces the pose's way;
+//! - a declared forward axis: `Y_i` turns `held_i ⊗ forward` to +Z;
+//! - a second pose (`calibration.second`): between the poses the bone turns by
+//!   `D_b = P2_i ⊗ P1_i⁻¹` and the sensor by `D_s = held2_i ⊗ held_i⁻¹` (both world-frame turns), so
+//!   `D_b = Y_i ⊗ D_s ⊗ Y_i⁻¹`: `Y_i` turns the horizontal part of `D_s`'s axis onto `D_b`'s. It
+//!   needs every such bone to turn about a non-vertical axis between the poses — the `skiing` pose
+//!   after `npose` turns every segment about the subject's left–right axis.
 
 use super::PipelineError;
 use super::sources::Sources;
-use crate::mapping::{CalibrationWindow, Mapping, Mount, ResolvedSensor};
+use crate::mapping::{CalibrationWindow, Mapping, Mount, PoseRef, ResolvedSensor};
 use crate::rig::Rig;
 use crate::take::Track;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -31,6 +44,8 @@ pub enum HeadingSource {
     },
     /// Walking after calibration: the knees' flexion axis points to the subject's left.
     Travel,
+    /// No sensor has a heading of its own: each was aligned to the pose on its own.
+    Aligned,
     None,
 }
 
@@ -40,6 +55,7 @@ impl HeadingSource {
             HeadingSource::DeclaredForward { .. } => "declared-forward",
             HeadingSource::KnownMount { .. } => "mounts",
             HeadingSource::Travel => "travel",
+            HeadingSource::Aligned => "per-sensor",
             HeadingSource::None => "none",
         }
     }
@@ -50,7 +66,32 @@ impl HeadingSource {
             HeadingSource::DeclaredForward { sensor } | HeadingSource::KnownMount { sensor } => {
                 Some(sensor)
             }
-            HeadingSource::Travel | HeadingSource::None => None,
+            HeadingSource::Travel | HeadingSource::Aligned | HeadingSource::None => None,
+        }
+    }
+}
+
+/// How a sensor without a heading of its own was aligned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Alignment {
+    /// Its heading is north (a device orientation, or fused with a magnetometer).
+    OwnHeading,
+    Mount,
+    Forward,
+    SecondPose,
+    /// Could not be aligned: its bone turns about a wrong vertical axis.
+    None,
+}
+
+impl Alignment {
+    /// For the sidecar (`None` for sensors that needed no alignment).
+    pub fn label(self) -> Option<&'static str> {
+        match self {
+            Alignment::OwnHeading => None,
+            Alignment::Mount => Some("mount"),
+            Alignment::Forward => Some("forward"),
+            Alignment::SecondPose => Some("second-pose"),
+            Alignment::None => Some("none"),
         }
     }
 }
@@ -63,7 +104,18 @@ pub struct Calibration {
     pub heading_source: HeadingSource,
     /// `q_bone_sensor` per mapped sensor, in mapping order.
     pub mounts: Vec<UnitQuaternion<f64>>,
+    /// `A_i` per mapped sensor: the turn about +Y that aligns a sensor without a heading of its
+    /// own (identity for the others).
+    pub align: Vec<UnitQuaternion<f64>>,
+    pub alignment: Vec<Alignment>,
     pub warnings: Vec<String>,
+}
+
+impl Calibration {
+    /// `q_world_bone = H ⊗ A_i ⊗ q_rig_sensor ⊗ q_bone_sensor⁻¹` for sensor `i`.
+    pub fn bone_world(&self, i: usize, q_rig_sensor: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+        self.heading * self.align[i] * q_rig_sensor * self.mounts[i].inverse()
+    }
 }
 
 /// The calibration window: the mapping's, or — when a mount is to be calibrated and the mapping
@@ -102,21 +154,45 @@ pub fn calibrate(
     mapping_file: &str,
     warnings: &mut Vec<String>,
 ) -> Result<Calibration, PipelineError> {
-    let Sources { sensors, tracks } = sources;
+    let Sources {
+        sensors, tracks, ..
+    } = sources;
     let Some(w) = window else {
-        return Ok(without_window(sensors));
+        let calibration = without_window(sensors);
+        warnings.extend(calibration.warnings.iter().cloned());
+        return Ok(calibration);
     };
     check_window(w, take_end_s, mapping_file)?;
-    let pose_world = pose_world(rig, sensors, w, mapping_file)?;
-    let held = held_poses(sensors, tracks, w, warnings);
-    let travel = heading_from_knees(&knee_samples(rig, sensors, tracks, &held, w));
-    let calibration = solve(sensors, &held, &pose_world, travel);
+    let first = Held {
+        held: held_poses(sensors, tracks, w.start_s, w.duration_s, warnings),
+        pose_world: pose_world(rig, sensors, &w.pose, mapping_file)?,
+    };
+    let second = match &w.second {
+        None => None,
+        Some(p) => Some(Held {
+            held: held_poses(sensors, tracks, p.start_s, p.duration_s, warnings),
+            pose_world: pose_world(rig, sensors, &p.pose, mapping_file)?,
+        }),
+    };
+    let travel = heading_from_knees(&knee_samples(rig, sensors, tracks, &first.held, w));
+    let calibration = solve(sensors, &first, second.as_ref(), travel);
     warnings.extend(calibration.warnings.iter().cloned());
     Ok(calibration)
 }
 
 /// Without a window: the known mounts (identity for the others), the sensors' own heading.
+/// Sensors without a heading of their own cannot be aligned without a pose.
 fn without_window(sensors: &[ResolvedSensor]) -> Calibration {
+    let alignment: Vec<Alignment> = sensors
+        .iter()
+        .map(|s| {
+            if s.own_heading {
+                Alignment::None
+            } else {
+                Alignment::OwnHeading
+            }
+        })
+        .collect();
     Calibration {
         heading: UnitQuaternion::identity(),
         heading_source: HeadingSource::None,
@@ -127,7 +203,11 @@ fn without_window(sensors: &[ResolvedSensor]) -> Calibration {
                 Mount::Calibrate => UnitQuaternion::identity(),
             })
             .collect(),
-        warnings: Vec::new(),
+        align: vec![UnitQuaternion::identity(); sensors.len()],
+        warnings: unaligned_warning(sensors, &alignment, false)
+            .into_iter()
+            .collect(),
+        alignment,
     }
 }
 
@@ -136,58 +216,71 @@ fn check_window(
     take_end_s: f64,
     mapping_file: &str,
 ) -> Result<(), PipelineError> {
-    if w.start_s > take_end_s {
+    let late = std::iter::once((w.start_s, w.duration_s))
+        .chain(w.second.as_ref().map(|s| (s.start_s, s.duration_s)))
+        .find(|(start, _)| *start > take_end_s);
+    if let Some((start_s, duration_s)) = late {
         return Err(PipelineError::CalibrationOutside {
             file: mapping_file.to_string(),
-            start_s: w.start_s,
-            duration_s: w.duration_s,
+            start_s,
+            duration_s,
             end_s: take_end_s,
         });
     }
     Ok(())
 }
 
-/// Each sensor's bone's world orientation in the calibration pose.
+/// Each sensor's bone's world orientation in `pose`.
 fn pose_world(
     rig: &Rig,
     sensors: &[ResolvedSensor],
-    w: &CalibrationWindow,
+    pose: &PoseRef,
     mapping_file: &str,
 ) -> Result<Vec<UnitQuaternion<f64>>, PipelineError> {
-    let pose = rig
-        .pose(&w.pose.label())
+    let found = rig
+        .pose(&pose.label())
         .ok_or_else(|| PipelineError::UnknownPose {
             file: mapping_file.to_string(),
             rig: rig.name().to_string(),
-            pose: w.pose.label(),
+            pose: pose.label(),
             known: rig.pose_names().join(", "),
         })?;
-    let pose_world_all = rig.world_rotations(&pose.local);
+    let pose_world_all = rig.world_rotations(&found.local);
     Ok(sensors.iter().map(|s| pose_world_all[s.bone]).collect())
 }
 
-/// Each sensor's mean orientation over the window ([`held_over`]), warning about the sensors that
-/// turn by more than [`MOVED_DURING_CALIBRATION_DEG`] in it.
+/// A pose as held: each sensor's mean orientation over its window (rig world) and its bone's
+/// world orientation in the pose.
+pub struct Held {
+    pub held: Vec<UnitQuaternion<f64>>,
+    pub pose_world: Vec<UnitQuaternion<f64>>,
+}
+
+/// Each sensor's mean orientation over [start, start + duration] ([`held_over`]), warning about
+/// the sensors that turn by more than [`MOVED_DURING_CALIBRATION_DEG`] in it.
 fn held_poses(
     sensors: &[ResolvedSensor],
     tracks: &[Track<UnitQuaternion<f64>>],
-    w: &CalibrationWindow,
+    start_s: f64,
+    duration_s: f64,
     warnings: &mut Vec<String>,
 ) -> Vec<UnitQuaternion<f64>> {
-    let held: Vec<_> = tracks.iter().map(|t| held_over(t, w)).collect();
+    let end_s = start_s + duration_s;
+    let held: Vec<_> = tracks
+        .iter()
+        .map(|t| held_over(t, start_s, duration_s))
+        .collect();
     for ((s, track), mean) in sensors.iter().zip(tracks).zip(&held) {
         let moved = track
             .iter()
-            .filter(|(t, _)| *t >= w.start_s && *t <= w.start_s + w.duration_s)
+            .filter(|(t, _)| *t >= start_s && *t <= end_s)
             .map(|(_, q)| crate::rotation::angle_between(q, mean))
             .fold(0.0, f64::max)
             .to_degrees();
         if moved > MOVED_DURING_CALIBRATION_DEG {
             warnings.push(format!(
-                "sensor `{}` moved by up to {moved:.1}° during the calibration window ({} s to {} s); its mount may be off: check the mapping's `calibration`",
+                "sensor `{}` moved by up to {moved:.1}° during the calibration window ({start_s} s to {end_s} s); its mount may be off: check the mapping's `calibration`",
                 s.sensor,
-                w.start_s,
-                w.start_s + w.duration_s
             ));
         }
     }
@@ -204,6 +297,7 @@ pub struct CalibrationCore {
     window: Option<CalibrationWindow>,
     sensors: Vec<ResolvedSensor>,
     pose_world: Vec<UnitQuaternion<f64>>,
+    second_pose_world: Vec<UnitQuaternion<f64>>,
     samples: Vec<Vec<(f64, UnitQuaternion<f64>)>>,
     passed: Vec<bool>,
     latest_s: f64,
@@ -217,8 +311,12 @@ impl CalibrationCore {
         window: Option<CalibrationWindow>,
         mapping_file: &str,
     ) -> Result<CalibrationCore, PipelineError> {
-        let pose_world = match &window {
-            Some(w) => pose_world(rig, &sensors, w, mapping_file)?,
+        let first_pose_world = match &window {
+            Some(w) => pose_world(rig, &sensors, &w.pose, mapping_file)?,
+            None => Vec::new(),
+        };
+        let second_pose_world = match window.as_ref().and_then(|w| w.second.as_ref()) {
+            Some(p) => pose_world(rig, &sensors, &p.pose, mapping_file)?,
             None => Vec::new(),
         };
         let n = sensors.len();
@@ -226,7 +324,8 @@ impl CalibrationCore {
         Ok(CalibrationCore {
             window,
             sensors,
-            pose_world,
+            pose_world: first_pose_world,
+            second_pose_world,
             samples: vec![Vec::new(); n],
             passed: vec![false; n],
             latest_s: f64::NEG_INFINITY,
@@ -244,10 +343,10 @@ impl CalibrationCore {
         self.window.as_ref()
     }
 
-    /// Seconds of stream time until the window ends (0 once it has).
+    /// Seconds of stream time until the window (the second pose's, if any) ends (0 once it has).
     pub fn left_s(&self) -> f64 {
         match &self.window {
-            Some(w) => (w.start_s + w.duration_s - self.latest_s.max(0.0)).max(0.0),
+            Some(w) => (w.end_s() - self.latest_s.max(0.0)).max(0.0),
             None => 0.0,
         }
     }
@@ -267,7 +366,7 @@ impl CalibrationCore {
             samples.clear();
         }
         samples.push((t, q));
-        if t > w.start_s + w.duration_s {
+        if t > w.end_s() {
             self.passed[i] = true;
         }
     }
@@ -325,8 +424,15 @@ impl CalibrationCore {
                 ));
             }
         }
-        let held = held_poses(&self.sensors, &tracks, &w, warnings);
-        let calibration = solve(&self.sensors, &held, &self.pose_world, None);
+        let first = Held {
+            held: held_poses(&self.sensors, &tracks, w.start_s, w.duration_s, warnings),
+            pose_world: self.pose_world.clone(),
+        };
+        let second = w.second.as_ref().map(|p| Held {
+            held: held_poses(&self.sensors, &tracks, p.start_s, p.duration_s, warnings),
+            pose_world: self.second_pose_world.clone(),
+        });
+        let calibration = solve(&self.sensors, &first, second.as_ref(), None);
         warnings.extend(calibration.warnings.iter().cloned());
         self.samples = Vec::new();
         self.result = Some(calibration);
@@ -337,16 +443,17 @@ impl CalibrationCore {
 /// window's middle when no sample falls inside.
 fn held_over(
     track: &Track<UnitQuaternion<f64>>,
-    window: &CalibrationWindow,
+    start_s: f64,
+    duration_s: f64,
 ) -> UnitQuaternion<f64> {
-    let end = window.start_s + window.duration_s;
+    let end = start_s + duration_s;
     let inside: Vec<UnitQuaternion<f64>> = track
         .iter()
-        .filter(|(t, _)| *t >= window.start_s && *t <= end)
+        .filter(|(t, _)| *t >= start_s && *t <= end)
         .map(|(_, q)| *q)
         .collect();
     if inside.is_empty() {
-        return track.sample_at(window.start_s + window.duration_s / 2.0);
+        return track.sample_at(start_s + duration_s / 2.0);
     }
     mean_rotation(&inside)
 }
@@ -369,8 +476,9 @@ fn is_shank(rig: &Rig, joint: usize) -> bool {
     j.parent.is_some() && down(&j.offset) && below.into_iter().any(|v| down(&v))
 }
 
-/// For every mapped thigh–shank pair, both sensors' rotations since calibration (rig world) at
-/// the shank's samples in the seconds after the window.
+/// For every mapped thigh–shank pair whose sensors both have a heading of their own, both
+/// sensors' rotations since calibration (rig world) at the shank's samples in the seconds after
+/// the window.
 fn knee_samples(
     rig: &Rig,
     sensors: &[ResolvedSensor],
@@ -378,7 +486,7 @@ fn knee_samples(
     held: &[UnitQuaternion<f64>],
     window: &CalibrationWindow,
 ) -> Vec<Vec<(UnitQuaternion<f64>, UnitQuaternion<f64>)>> {
-    let start = window.start_s + window.duration_s;
+    let start = window.end_s();
     let end = start + TRAVEL_WINDOW_S;
     let mut legs = Vec::new();
     for (s, shank) in sensors.iter().enumerate() {
@@ -388,7 +496,7 @@ fn knee_samples(
         let Some(t) = sensors.iter().position(|o| o.bone == parent) else {
             continue;
         };
-        if !is_shank(rig, shank.bone) {
+        if !is_shank(rig, shank.bone) || shank.own_heading || sensors[t].own_heading {
             continue;
         }
         let leg = tracks[s]
@@ -451,23 +559,28 @@ pub fn heading_from_knees(
     heading_towards_plus_z(&left.cross(&Vector3::y()))
 }
 
-/// Solves heading and mounts.
+/// Solves heading, alignments and mounts.
 ///
-/// `held[i]`: sensor i's mean orientation over the window, in the rig world (`C ⊗ q`).
-/// `pose_world[i]`: its bone's world orientation in the calibration pose.
-/// `travel`: the heading from walking ([`heading_from_knees`]), used when neither a declared
-/// forward axis nor a known mount gives one.
+/// `first.held[i]`: sensor i's mean orientation over the window, in the rig world (`C ⊗ q`);
+/// `first.pose_world[i]`: its bone's world orientation in the calibration pose; `second`: the
+/// same for the second pose, if any. `travel`: the heading from walking
+/// ([`heading_from_knees`]), used when neither a declared forward axis nor a known mount gives
+/// one. Only sensors with a heading of their own give the heading `H`; the others are aligned
+/// one by one (module docs).
 pub fn solve(
     sensors: &[ResolvedSensor],
-    held: &[UnitQuaternion<f64>],
-    pose_world: &[UnitQuaternion<f64>],
+    first: &Held,
+    second: Option<&Held>,
     travel: Option<UnitQuaternion<f64>>,
 ) -> Calibration {
+    let (held, pose_world) = (&first.held, &first.pose_world);
     let mut warnings = Vec::new();
     let mut heading = None;
     // 1. A declared forward axis.
     for (i, s) in sensors.iter().enumerate() {
-        let Some(axis) = s.forward else { continue };
+        let Some(axis) = s.forward.filter(|_| !s.own_heading) else {
+            continue;
+        };
         let facing = held[i] * axis;
         match heading_towards_plus_z(&facing) {
             Some(h) => {
@@ -486,6 +599,9 @@ pub fn solve(
             let Mount::Fixed(mount) = s.mount else {
                 continue;
             };
+            if s.own_heading {
+                continue;
+            }
             let bone_world_unturned = held[i] * mount.inverse();
             let facing = bone_world_unturned * (pose_world[i].inverse() * Vector3::z());
             if let Some(h) = heading_towards_plus_z(&facing) {
@@ -502,20 +618,129 @@ pub fn solve(
     let heading = heading.or_else(|| travel.map(|h| (h, HeadingSource::Travel)));
     let (heading, heading_source) =
         heading.unwrap_or((UnitQuaternion::identity(), HeadingSource::None));
+
+    // 3. Sensors without a heading of their own, each aligned by Y_i = H ⊗ A_i.
+    let mut align = vec![UnitQuaternion::identity(); sensors.len()];
+    let mut alignment = vec![Alignment::OwnHeading; sensors.len()];
+    for (i, s) in sensors.iter().enumerate().filter(|(_, s)| s.own_heading) {
+        let by_mount = match s.mount {
+            Mount::Fixed(mount) => {
+                Some(twist_about_y(&(pose_world[i] * mount * held[i].inverse())))
+            }
+            Mount::Calibrate => None,
+        };
+        let by_forward = || {
+            s.forward
+                .and_then(|axis| heading_towards_plus_z(&(held[i] * axis)))
+        };
+        let mut by_second_pose = || {
+            second.and_then(|p| {
+                let turn = |a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>| (b * a.inverse()).scaled_axis();
+                let sensor_turn = turn(&held[i], &p.held[i]);
+                let bone_turn = turn(&pose_world[i], &p.pose_world[i]);
+                let y = yaw_between(&sensor_turn, &bone_turn);
+                if y.is_none() {
+                    warnings.push(format!(
+                        "sensor `{}`: between the two calibration poses it turned {:.0}° and its bone \
+                         should turn {:.0}°, about axes too close to vertical (or too little) to align its heading",
+                        s.sensor,
+                        sensor_turn.norm().to_degrees(),
+                        bone_turn.norm().to_degrees(),
+                    ));
+                }
+                y
+            })
+        };
+        let (y, how) = if let Some(y) = by_mount {
+            (Some(y), Alignment::Mount)
+        } else if let Some(y) = by_forward() {
+            (Some(y), Alignment::Forward)
+        } else if let Some(y) = by_second_pose() {
+            (Some(y), Alignment::SecondPose)
+        } else {
+            (None, Alignment::None)
+        };
+        if let Some(y) = y {
+            align[i] = heading.inverse() * y;
+        }
+        alignment[i] = how;
+    }
+    warnings.extend(unaligned_warning(sensors, &alignment, second.is_some()));
+    let heading_source = if heading_source == HeadingSource::None
+        && sensors.iter().all(|s| s.own_heading)
+        && alignment.iter().any(|a| *a != Alignment::None)
+    {
+        HeadingSource::Aligned
+    } else {
+        heading_source
+    };
     let mounts = sensors
         .iter()
         .enumerate()
         .map(|(i, s)| match s.mount {
             Mount::Fixed(q) => q,
-            Mount::Calibrate => pose_world[i].inverse() * heading * held[i],
+            Mount::Calibrate => pose_world[i].inverse() * heading * align[i] * held[i],
         })
         .collect();
     Calibration {
         heading,
         heading_source,
         mounts,
+        align,
+        alignment,
         warnings,
     }
+}
+
+/// The warning for sensors without a heading of their own that could not be aligned.
+fn unaligned_warning(
+    sensors: &[ResolvedSensor],
+    alignment: &[Alignment],
+    had_second_pose: bool,
+) -> Option<String> {
+    let unaligned: Vec<&str> = sensors
+        .iter()
+        .zip(alignment)
+        .filter(|(_, a)| **a == Alignment::None)
+        .map(|(s, _)| s.sensor.as_str())
+        .collect();
+    if unaligned.is_empty() {
+        return None;
+    }
+    let how = if had_second_pose {
+        "give their mounts or a `forward` axis in the mapping, or hold a second pose in which their bones turn about a horizontal axis"
+    } else {
+        "give their mounts or a `forward` axis in the mapping, or a second calibration pose (`calibration.second`, e.g. `skiing` after `npose`)"
+    };
+    Some(format!(
+        "sensor(s) {} have no magnetometer (6D): their heading is their own and could not be aligned, \
+         so their bones turn about wrong axes; {how}",
+        unaligned.join(", ")
+    ))
+}
+
+/// The rotation about +Y closest to `q` (the twist of its swing–twist split about +Y).
+pub fn twist_about_y(q: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+    let (w, y) = (q.w, q.j);
+    if w.abs() < 1e-12 && y.abs() < 1e-12 {
+        // A half turn about a horizontal axis: no twist to speak of.
+        return UnitQuaternion::identity();
+    }
+    UnitQuaternion::from_quaternion(Quaternion::new(w, 0.0, y, 0.0))
+}
+
+/// The turn about +Y taking rotation vector `sensor`'s horizontal direction onto `bone`'s: `None`
+/// when either turns by less than 10°, or about an axis within 30° of vertical.
+fn yaw_between(sensor: &Vector3<f64>, bone: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
+    let usable = |v: &Vector3<f64>| {
+        let horizontal = (v.x * v.x + v.z * v.z).sqrt();
+        v.norm().to_degrees() >= 10.0 && horizontal >= 0.5 * v.norm()
+    };
+    if !usable(sensor) || !usable(bone) {
+        return None;
+    }
+    let psi = bone.x.atan2(bone.z) - sensor.x.atan2(sensor.z);
+    Some(UnitQuaternion::from_axis_angle(&Vector3::y_axis(), psi))
 }
 
 #[cfg(test)]
@@ -532,6 +757,14 @@ mod tests {
             bone: 0,
             mount,
             forward,
+            own_heading: false,
+        }
+    }
+
+    fn held(held: UnitQuaternion<f64>, pose: UnitQuaternion<f64>) -> Held {
+        Held {
+            held: vec![held],
+            pose_world: vec![pose],
         }
     }
 
@@ -542,8 +775,8 @@ mod tests {
         assert!((held * Vector3::y() - Vector3::x()).norm() < 1e-12);
         let cal = solve(
             &[sensor(Mount::Calibrate, Some(Vector3::y()))],
-            &[held],
-            &[UnitQuaternion::identity()],
+            &self::held(held, UnitQuaternion::identity()),
+            None,
             None,
         );
         assert_eq!(cal.heading_source.label(), "declared-forward");
@@ -561,16 +794,16 @@ mod tests {
         assert!((held * Vector3::z() + Vector3::x()).norm() < 1e-12);
         let cal = solve(
             &[sensor(Mount::Fixed(UnitQuaternion::identity()), None)],
-            &[held],
-            &[UnitQuaternion::identity()],
+            &self::held(held, UnitQuaternion::identity()),
+            None,
             None,
         );
         assert_eq!(cal.heading_source.label(), "mounts");
         assert!((cal.heading * (-Vector3::x()) - Vector3::z()).norm() < 1e-12);
         let cal = solve(
             &[sensor(Mount::Calibrate, None)],
-            &[held],
-            &[UnitQuaternion::identity()],
+            &self::held(held, UnitQuaternion::identity()),
+            None,
             None,
         );
         assert_eq!(cal.heading_source, HeadingSource::None);
@@ -604,5 +837,107 @@ mod tests {
         let b = UnitQuaternion::new_unchecked(-rot(Vector3::x(), 20.0).into_inner());
         let m = mean_rotation(&[a, b]);
         assert!((m.angle().to_degrees() - 15.0).abs() < 1e-9);
+    }
+
+    /// A sensor without a heading of its own reads `q = Z⁻¹ ⊗ B ⊗ m` (rig world): its world is
+    /// turned by an unknown `Z` about +Y. Whatever aligns it must give back the bone's true
+    /// orientation `B` at another instant, where the bone turned about a horizontal axis.
+    fn check_aligned(cal: &Calibration, z: UnitQuaternion<f64>, m: UnitQuaternion<f64>) {
+        let later = rot(Vector3::new(1.0, 0.2, 0.3), 50.0) * rot(Vector3::z(), -20.0);
+        let reads = z.inverse() * later * m;
+        let bone = cal.bone_world(0, &reads);
+        assert!(
+            bone.angle_to(&later).to_degrees() < 1e-9,
+            "{:.3}°",
+            bone.angle_to(&later).to_degrees()
+        );
+    }
+
+    #[test]
+    fn sensors_without_heading_are_aligned_by_mount_forward_axis_or_second_pose() {
+        let z = rot(Vector3::y(), 73.0);
+        let m = rot(Vector3::new(0.3, -1.0, 0.5), 117.0);
+        let pose1 = rot(Vector3::z(), 90.0);
+        let pose2 = rot(Vector3::x(), -60.0) * pose1;
+        let held1 = z.inverse() * pose1 * m;
+        let held2 = z.inverse() * pose2 * m;
+        let own = |mount: Mount, forward: Option<Vector3<f64>>| ResolvedSensor {
+            own_heading: true,
+            ..sensor(mount, forward)
+        };
+        // A known mount.
+        let cal = solve(
+            &[own(Mount::Fixed(m), None)],
+            &held(held1, pose1),
+            None,
+            None,
+        );
+        assert_eq!(cal.alignment, vec![Alignment::Mount]);
+        assert_eq!(cal.heading_source, HeadingSource::Aligned);
+        check_aligned(&cal, z, m);
+        // A forward axis: the sensor axis that the pose's +Z (the facing) is, m⁻¹ ⊗ P⁻¹ ⊗ +Z.
+        let forward = m.inverse() * (pose1.inverse() * Vector3::z());
+        let cal = solve(
+            &[own(Mount::Calibrate, Some(forward))],
+            &held(held1, pose1),
+            None,
+            None,
+        );
+        assert_eq!(cal.alignment, vec![Alignment::Forward]);
+        check_aligned(&cal, z, m);
+        // A second pose, the mount unknown.
+        let second = held(held2, pose2);
+        let cal = solve(
+            &[own(Mount::Calibrate, None)],
+            &held(held1, pose1),
+            Some(&second),
+            None,
+        );
+        assert_eq!(cal.alignment, vec![Alignment::SecondPose]);
+        assert!(cal.warnings.is_empty(), "{:?}", cal.warnings);
+        check_aligned(&cal, z, m);
+        // Neither: a warning naming the sensor, and the bone's axes are off by Z.
+        let cal = solve(
+            &[own(Mount::Calibrate, None)],
+            &held(held1, pose1),
+            None,
+            None,
+        );
+        assert_eq!(cal.alignment, vec![Alignment::None]);
+        assert!(
+            cal.warnings
+                .iter()
+                .any(|w| w.contains("`s`") || w.contains(" s have")),
+            "{:?}",
+            cal.warnings
+        );
+        // A second pose that turns the bone about the vertical cannot align it.
+        let about_up = held(
+            z.inverse() * rot(Vector3::y(), 40.0) * pose1 * m,
+            rot(Vector3::y(), 40.0) * pose1,
+        );
+        let cal = solve(
+            &[own(Mount::Calibrate, None)],
+            &held(held1, pose1),
+            Some(&about_up),
+            None,
+        );
+        assert_eq!(cal.alignment, vec![Alignment::None]);
+        assert!(
+            cal.warnings
+                .iter()
+                .any(|w| w.contains("too close to vertical")),
+            "{:?}",
+            cal.warnings
+        );
+    }
+
+    #[test]
+    fn twist_about_y_keeps_the_turn_about_the_vertical() {
+        let q = rot(Vector3::y(), 35.0) * rot(Vector3::x(), 20.0);
+        let t = twist_about_y(&q);
+        assert!((t.scaled_axis() - Vector3::y() * 35f64.to_radians()).norm() < 0.05);
+        let pure = rot(Vector3::y(), -120.0);
+        assert!(twist_about_y(&pure).angle_to(&pure) < 1e-12);
     }
 }

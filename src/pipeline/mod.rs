@@ -101,6 +101,10 @@ pub struct PipelineOptions {
     /// The sensors' sample rate, when known: causal smoothing's grid uses it instead of the rate
     /// of each sensor's first samples.
     pub sensor_rate_hz: Option<f64>,
+    /// Fusion asked for (`--fusion`): every sensor with raw readings is fused with it, even when
+    /// the device gave an orientation. `None`: device orientations where there are some, the
+    /// default filter for sensors with raw readings only.
+    pub fusion: Option<crate::fusion::Fusion>,
 }
 
 impl Default for PipelineOptions {
@@ -115,6 +119,7 @@ impl Default for PipelineOptions {
             world: None,
             causal: false,
             sensor_rate_hz: None,
+            fusion: None,
         }
     }
 }
@@ -128,7 +133,12 @@ pub struct Converted {
     pub calibration: Calibration,
     /// The calibration window used, if any.
     pub window: Option<CalibrationWindow>,
+    /// The device orientations' world (fused sensors are in `enu`: `origins`).
     pub world: World,
+    /// Where each of `sensors` got its orientation.
+    pub origins: Vec<sources::Origin>,
+    /// The filter, when any sensor was fused.
+    pub fusion: Option<crate::fusion::Fusion>,
     /// Frame of the take's grid that became frame 0 (non-zero after `--trim`).
     pub first_frame: usize,
     /// `local[joint][frame]` before smoothing, when asked for (`keep_unsmoothed`).
@@ -141,7 +151,7 @@ pub enum PipelineError {
     #[error(transparent)]
     Mapping(#[from] MappingError),
     #[error(
-        "none of the mapped sensors ({mapped}) has orientation data in the take (sensors in the take: {present}); check the mapping's sensor ids"
+        "none of the mapped sensors ({mapped}) has orientation or raw readings in the take (sensors in the take: {present}); check the mapping's sensor ids"
     )]
     NoSensors { mapped: String, present: String },
     #[error(
@@ -176,6 +186,8 @@ pub enum PipelineError {
         max: usize,
         sensor_hz: f64,
     },
+    #[error(transparent)]
+    Fusion(#[from] crate::fusion::FusionError),
     #[error("`{bone}`: {reason}")]
     NotCausal { bone: String, reason: String },
     #[error(transparent)]
@@ -239,7 +251,15 @@ pub fn run(
     let resolved = mapping.resolve(rig, mapping_file)?;
 
     // 1. Sources.
-    let sources = sources::orientations(take, rig, mapping, resolved, world, &mut warnings)?;
+    let sources = sources::orientations(
+        take,
+        rig,
+        mapping,
+        resolved,
+        world,
+        options.fusion.as_ref(),
+        &mut warnings,
+    )?;
     // 2. Calibration.
     let window = calibrate::window(mapping, &sources.sensors, &mut warnings);
     let calibration = calibrate::calibrate(
@@ -250,7 +270,12 @@ pub fn run(
         &file,
         &mut warnings,
     )?;
-    let Sources { sensors, tracks } = sources;
+    let Sources {
+        sensors,
+        tracks,
+        origins,
+        fusion,
+    } = sources;
 
     // 3. Bone world orientations, on each sensor's own sample times.
     let bone_tracks = bone_world::bone_world(tracks, &calibration);
@@ -311,6 +336,8 @@ pub fn run(
         calibration,
         window,
         world,
+        origins,
+        fusion,
         first_frame: grid.first,
         unsmoothed,
         warnings,
@@ -334,7 +361,15 @@ fn run_causal(
         .or(mapping.world)
         .unwrap_or(take.source().world);
     let resolved = mapping.resolve(rig, mapping_file)?;
-    let sources = sources::orientations(take, rig, mapping, resolved, world, &mut warnings)?;
+    let sources = sources::orientations(
+        take,
+        rig,
+        mapping,
+        resolved,
+        world,
+        options.fusion.as_ref(),
+        &mut warnings,
+    )?;
     let window = calibrate::window(mapping, &sources.sensors, &mut warnings);
     let t_last = sources
         .tracks
@@ -398,6 +433,8 @@ fn run_causal(
         calibration,
         window,
         world,
+        origins: sources.origins,
+        fusion: sources.fusion,
         first_frame: grid.first,
         unsmoothed: None,
         warnings,

@@ -1,62 +1,163 @@
 //! Stage 1, sources: each mapped sensor's orientation track in the rig world,
-//! `q_rig_sensor = C ⊗ q_world_sensor`, with `C` taking the sensors' world into the rig world
-//! ([`World::to_rig`]). Sensors that carry raw readings only are where fusion will come in.
+//! `q_rig_sensor = C_w ⊗ q_w_sensor`, with `C_w` taking the sensor's own world `w` into the rig
+//! world ([`World::to_rig`]). A sensor's world is its own: a device orientation is in the take's
+//! world (or the one the user set), a fused one in `enu` ([`crate::fusion`]).
+//!
+//! Which readings give a sensor's orientation: the device's own when the take has it, unless
+//! fusion is asked for (`--fusion`); the fusion of its raw gyroscope, accelerometer (and
+//! magnetometer) readings otherwise, with the default filter when none is asked for.
 
-use super::PipelineError;
+use super::{PipelineError, parallel_map};
+use crate::fusion::{self, Fusion, FusionStats};
 use crate::mapping::{Mapping, ResolvedSensor};
 use crate::rig::Rig;
-use crate::take::{Take, Track};
+use crate::take::{Sensor, Take, Track};
 use crate::world::World;
 use nalgebra::UnitQuaternion;
 
-/// The sensors that drive bones, in mapping order, and their tracks (rig world).
+/// Where a sensor's orientation came from.
+#[derive(Debug, Clone)]
+pub enum Origin {
+    /// The device's own orientation, in `world`.
+    Device { world: World },
+    /// Fused from raw readings (world `enu`).
+    Fused(FusionStats),
+}
+
+impl Origin {
+    /// The world the sensor's orientation is in.
+    pub fn world(&self) -> World {
+        match self {
+            Origin::Device { world } => *world,
+            Origin::Fused(_) => World::Enu,
+        }
+    }
+
+    /// Whether the heading is the sensor's own (fused without a magnetometer): arbitrary, and
+    /// to be aligned at calibration.
+    pub fn heading_unknown(&self) -> bool {
+        matches!(self, Origin::Fused(s) if s.variant == "6d")
+    }
+}
+
+/// The sensors that drive bones, in mapping order, their tracks (rig world) and where each came
+/// from.
 #[derive(Debug, Clone)]
 pub struct Sources {
     pub sensors: Vec<ResolvedSensor>,
     pub tracks: Vec<Track<UnitQuaternion<f64>>>,
+    pub origins: Vec<Origin>,
+    /// The filter, when any sensor was fused.
+    pub fusion: Option<Fusion>,
+}
+
+/// What a mapped sensor's orientation will come from.
+enum Plan<'a> {
+    Missing,
+    Device(&'a crate::take::OrientationTrack),
+    Fuse(&'a Sensor),
+    /// Readings that cannot give an orientation, and why.
+    Unusable(&'static str),
+}
+
+fn plan<'a>(sensor: Option<&'a Sensor>, fusion_asked: bool) -> Plan<'a> {
+    let Some(s) = sensor else {
+        return Plan::Missing;
+    };
+    match (s.orientation(), s.inertial()) {
+        (Some(o), None) => Plan::Device(o),
+        (Some(o), Some(_)) if !fusion_asked => Plan::Device(o),
+        (_, Some(_)) => Plan::Fuse(s),
+        (None, None) => Plan::Unusable(
+            "has magnetometer readings only: fusion needs its gyroscope and accelerometer",
+        ),
+    }
 }
 
 /// The mapped sensors' orientation tracks in the rig world. A mapped sensor missing from the
-/// take, or without orientation, is a warning (its bone keeps its rest rotation), and so is a
-/// sensor of the take the mapping does not use; no usable sensor at all is an error.
+/// take, or without readings that give an orientation, is a warning (its bone keeps its rest
+/// rotation), and so is a sensor of the take the mapping does not use; no usable sensor at all is
+/// an error, and so are raw readings that cannot be right ([`fusion::FusionError`]). `world` is
+/// the device orientations' world; `fusion` the filter asked for (`None`: device orientations
+/// where there are some, the default filter elsewhere).
 pub fn orientations(
     take: &Take,
     rig: &Rig,
     mapping: &Mapping,
     resolved: Vec<ResolvedSensor>,
     world: World,
+    fusion: Option<&Fusion>,
     warnings: &mut Vec<String>,
 ) -> Result<Sources, PipelineError> {
-    let to_rig = world.to_rig();
-    let mut sensors = Vec::new();
-    let mut tracks = Vec::new();
+    let filter = fusion.cloned().unwrap_or_default();
+    let mut kept = Vec::new();
     for s in resolved {
         let bone = &rig.joints()[s.bone].name;
-        match take.sensor(&s.sensor).map(|t| t.orientation()) {
-            None => warnings.push(format!(
+        match plan(take.sensor(&s.sensor), fusion.is_some()) {
+            Plan::Missing => warnings.push(format!(
                 "sensor `{}` (mapped to `{bone}`) is not in the take; `{bone}` keeps its rest rotation",
                 s.sensor
             )),
-            Some(None) => warnings.push(format!(
-                "sensor `{}` has raw readings only and fusion is not enabled; `{bone}` keeps its rest rotation",
+            Plan::Unusable(why) => warnings.push(format!(
+                "sensor `{}` {why}; `{bone}` keeps its rest rotation",
                 s.sensor
             )),
-            Some(Some(o)) => {
-                tracks.push(o.to_quaternions().map_in_place(|q| to_rig * q));
-                sensors.push(s);
-            }
+            plan => kept.push((s, plan)),
         }
+    }
+    // Fusion is the costly part, and each sensor's is independent: spread over the cores.
+    let results = parallel_map(kept, |(s, plan)| {
+        let result = match plan {
+            Plan::Device(o) => Ok((
+                o.to_quaternions().map_in_place(|q| world.to_rig() * q),
+                Origin::Device { world },
+                Vec::new(),
+            )),
+            Plan::Fuse(sensor) => fusion::fuse(
+                sensor.id(),
+                sensor.inertial().expect("planned for raw readings"),
+                sensor.magnetometer(),
+                &filter,
+            )
+            .map(|fused| {
+                let to_rig = World::Enu.to_rig();
+                (
+                    fused.track.map_in_place(|q| to_rig * q),
+                    Origin::Fused(fused.stats),
+                    fused.warnings,
+                )
+            }),
+            Plan::Missing | Plan::Unusable(_) => unreachable!("filtered out above"),
+        };
+        (s, result)
+    });
+    let mut sources = Sources {
+        sensors: Vec::new(),
+        tracks: Vec::new(),
+        origins: Vec::new(),
+        fusion: None,
+    };
+    for (mut s, result) in results {
+        let (track, origin, fusion_warnings) = result?;
+        s.own_heading = origin.heading_unknown();
+        warnings.extend(fusion_warnings);
+        if matches!(origin, Origin::Fused(_)) {
+            sources.fusion = Some(filter.clone());
+        }
+        sources.sensors.push(s);
+        sources.tracks.push(track);
+        sources.origins.push(origin);
     }
     warnings.extend(unmapped_sensors(take, |id| {
         mapping.sensors.iter().any(|m| m.sensor == id)
     }));
-    if sensors.is_empty() {
+    if sources.sensors.is_empty() {
         return Err(no_sensors(
             take,
             mapping.sensors.iter().map(|s| s.sensor.as_str()),
         ));
     }
-    Ok(Sources { sensors, tracks })
+    Ok(sources)
 }
 
 /// A warning for each sensor of the take that the mapping does not use.
@@ -109,8 +210,16 @@ mod tests {
             .resolve(&rig, std::path::Path::new("m.json"))
             .unwrap();
         let mut warnings = Vec::new();
-        let sources =
-            orientations(&take, &rig, &mapping, resolved, World::Enu, &mut warnings).unwrap();
+        let sources = orientations(
+            &take,
+            &rig,
+            &mapping,
+            resolved,
+            World::Enu,
+            None,
+            &mut warnings,
+        )
+        .unwrap();
         assert_eq!(sources.sensors.len(), 1);
         let q = sources.tracks[0].values()[0];
         let (x, z) = (nalgebra::Vector3::x(), nalgebra::Vector3::z());

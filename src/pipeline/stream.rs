@@ -271,7 +271,7 @@ impl PoseStream {
     /// Stages 3 and 4 for one sample, into the resampler.
     fn feed(&mut self, sensor: usize, t: f64, q_rig: UnitQuaternion<f64>) {
         let calibration = self.calibration.result().expect("solved");
-        let bone = calibration.heading * q_rig * calibration.mounts[sensor].inverse();
+        let bone = calibration.bone_world(sensor, &q_rig);
         self.smoothed.clear();
         self.smoothers[sensor].push(t, bone, &mut self.smoothed);
         for &(ts, qs) in &self.smoothed {

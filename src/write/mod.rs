@@ -5,6 +5,7 @@
 pub mod bvh;
 pub mod error_report;
 pub mod gltf;
+pub mod orientation_csv;
 pub mod report;
 pub mod sidecar;
 

@@ -47,7 +47,8 @@ pub struct RigRecord {
 
 #[derive(Debug, Clone, Serialize)]
 pub struct PipelineRecord {
-    pub fusion: Option<String>,
+    /// `null` when no sensor was fused.
+    pub fusion: Option<FusionRecord>,
     pub smoothing: Option<serde_json::Value>,
     pub root: &'static str,
     pub heading: &'static str,
@@ -63,6 +64,18 @@ pub struct PipelineRecord {
     /// Causal mode: the take ran through the stream's stages.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub causal: bool,
+}
+
+/// How raw readings were fused: the filter with every parameter (`method`, then its own keys, and
+/// `six_d` when the magnetometer was left out), whether it was asked for (`--fusion`, the config)
+/// or the default for sensors with raw readings only, and per fused sensor what it came to.
+#[derive(Debug, Clone, Serialize)]
+pub struct FusionRecord {
+    #[serde(flatten)]
+    pub fusion: crate::fusion::Fusion,
+    /// `settings` (`--fusion`, the config's `fusion`) or `default`.
+    pub chosen_by: &'static str,
+    pub sensors: std::collections::BTreeMap<String, crate::fusion::FusionStats>,
 }
 
 #[derive(Debug, Clone, Serialize)]

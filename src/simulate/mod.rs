@@ -14,6 +14,8 @@
 //! but consistent with a declared `forward` axis), sampled at its own instants (offset and
 //! jitter; timestamps are the true instants at the output's precision), with optional dropouts.
 
+pub mod raw;
+
 use crate::bvh::Bvh;
 use crate::mapping::{Mapping, Mount};
 use crate::rig::{LengthUnit, Rig};
@@ -56,6 +58,9 @@ pub struct SimulateOptions {
     /// Target bone → source joint names where they differ (others match by name, `mixamorig:`
     /// ignored).
     pub bone_map: Vec<(String, String)>,
+    /// Write raw readings (gyroscope, accelerometer, magnetometer) instead of orientations
+    /// ([`raw`]); imubake CSV only.
+    pub raw: Option<raw::RawOptions>,
 }
 
 impl Default for SimulateOptions {
@@ -73,6 +78,7 @@ impl Default for SimulateOptions {
             blend_s: 1.0,
             format: CaptureFormat::Csv,
             bone_map: Vec::new(),
+            raw: None,
         }
     }
 }
@@ -88,6 +94,18 @@ pub struct Truth {
     pub last_frame: usize,
     pub source_frame_time_s: f64,
     pub sensors: Vec<SensorTruth>,
+    /// For raw readings: the field, and where the sensors sit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub raw: Option<RawTruth>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RawTruth {
+    pub field_enu_ut: [f64; 3],
+    /// Metres per unit of the source BVH (from its rest height).
+    pub metres_per_source_unit: f64,
+    /// Where each sensor sits on its bone.
+    pub sensor_position: &'static str,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -98,6 +116,9 @@ pub struct SensorTruth {
     /// q_bone_sensor [w, x, y, z].
     pub mount: [f64; 4],
     pub samples: usize,
+    /// For raw readings: the gyro's constant bias, °/s (sensor frame).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gyro_bias_dps: Option<[f64; 3]>,
 }
 
 #[derive(Debug, Clone)]
@@ -168,6 +189,9 @@ impl Rng {
 struct Source {
     /// Local rotations of every frame in range, `[frame][joint]` (frames before `first` empty).
     locals: Vec<Vec<UnitQuaternion<f64>>>,
+    /// Each joint's translation from its parent (the root's: its position) per frame in range,
+    /// source units (empty unless raw readings are simulated).
+    translations: Vec<Vec<Vector3<f64>>>,
     rig: Rig,
     first: usize,
     last: usize,
@@ -202,6 +226,230 @@ impl Source {
         } else {
             self.chain(joint, |j| a[j])
         }
+    }
+}
+
+/// A simulated sensor: its bone, the source joint that moves it, its bone's orientation in the
+/// calibration pose and its mount.
+struct Sim {
+    sensor: String,
+    bone: String,
+    joint: usize,
+    pose: UnitQuaternion<f64>,
+    mount: UnitQuaternion<f64>,
+}
+
+/// What raw readings are made from ([`raw`] states the model).
+struct RawInputs<'a> {
+    bvh: &'a Bvh,
+    source: &'a Source,
+    sims: &'a [Sim],
+    times: &'a [Vec<f64>],
+    heading: UnitQuaternion<f64>,
+    /// `q_enu_rig`.
+    from_rig: UnitQuaternion<f64>,
+    hold_s: f64,
+    motion_start: f64,
+    frame_time: f64,
+    end_s: f64,
+    /// The sensors' sample period, seconds.
+    period_s: f64,
+}
+
+impl RawInputs<'_> {
+    /// Every joint's local rotation and translation at take time `t` (source units), on the
+    /// timeline [`simulate`] plays: rest during the hold, blended into the first frame, then the
+    /// frames (rotations slerped, translations interpolated linearly).
+    fn locals_at(&self, t: f64, blend_s: f64) -> (Vec<UnitQuaternion<f64>>, Vec<Vector3<f64>>) {
+        let src = self.source;
+        let first = src.first;
+        let n = src.rig.len();
+        if t < self.motion_start {
+            let x = ((t - self.hold_s) / blend_s).clamp(0.0, 1.0);
+            let u = x * x * (3.0 - 2.0 * x);
+            let locals = src.locals[first]
+                .iter()
+                .map(|q| slerp_shortest(&UnitQuaternion::identity(), q, u))
+                .collect();
+            // The root starts moving as the rotations blend in: its speed ramps up from rest to
+            // the first frame's (smoothstep), so position and velocity are continuous — no jolt
+            // where the motion starts. Behind the first frame's position by
+            // v₀ · blend · ∫ₓ¹ smoothstep = v₀ · blend · (½ − x³ + x⁴/2).
+            let mut translations = src.translations[first].clone();
+            let v0 = if first < src.last {
+                (src.translations[first + 1][0] - src.translations[first][0]) / self.frame_time
+            } else {
+                Vector3::zeros()
+            };
+            translations[0] -= v0 * blend_s * (0.5 - x.powi(3) + x.powi(4) / 2.0);
+            return (locals, translations);
+        }
+        let f = (first as f64 + (t - self.motion_start) / self.frame_time)
+            .clamp(first as f64, src.last as f64);
+        let k = (f.floor() as usize).min(src.last);
+        let u = f - k as f64;
+        if u > 0.0 && k < src.last {
+            let (a, b) = (&src.locals[k], &src.locals[k + 1]);
+            let (ta, tb) = (&src.translations[k], &src.translations[k + 1]);
+            (
+                (0..n).map(|j| slerp_shortest(&a[j], &b[j], u)).collect(),
+                (0..n).map(|j| ta[j] * (1.0 - u) + tb[j] * u).collect(),
+            )
+        } else {
+            (src.locals[k].clone(), src.translations[k].clone())
+        }
+    }
+
+    /// The midpoint of each joint's bone (to its first child, or its end site) for locals and
+    /// translations, source units.
+    fn bone_midpoints(
+        &self,
+        locals: &[UnitQuaternion<f64>],
+        translations: &[Vector3<f64>],
+    ) -> Vec<Vector3<f64>> {
+        let joints = self.bvh.joints();
+        let mut world: Vec<UnitQuaternion<f64>> = Vec::with_capacity(joints.len());
+        let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(joints.len());
+        for (i, j) in joints.iter().enumerate() {
+            match j.parent {
+                Some(p) => {
+                    pos.push(pos[p] + world[p] * translations[i]);
+                    world.push(world[p] * locals[i]);
+                }
+                None => {
+                    pos.push(translations[i]);
+                    world.push(locals[i]);
+                }
+            }
+        }
+        (0..joints.len())
+            .map(|i| {
+                let end = match joints.iter().position(|c| c.parent == Some(i)) {
+                    Some(c) => pos[c],
+                    None => pos[i] + world[i] * joints[i].end_site.unwrap_or_else(Vector3::zeros),
+                };
+                (pos[i] + end) / 2.0
+            })
+            .collect()
+    }
+
+    /// The source's rest-pose height (joints and end sites), source units.
+    fn rest_height(&self) -> f64 {
+        let joints = self.bvh.joints();
+        let n = joints.len();
+        let identity = vec![UnitQuaternion::identity(); n];
+        let offsets: Vec<Vector3<f64>> = joints
+            .iter()
+            .enumerate()
+            .map(|(i, j)| if i == 0 { Vector3::zeros() } else { j.offset })
+            .collect();
+        let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(n);
+        for (i, j) in joints.iter().enumerate() {
+            let p = match j.parent {
+                Some(p) => pos[p] + identity[p] * offsets[i],
+                None => Vector3::zeros(),
+            };
+            pos.push(p);
+        }
+        let ys = joints
+            .iter()
+            .enumerate()
+            .flat_map(|(i, j)| std::iter::once(pos[i].y).chain(j.end_site.map(|e| pos[i].y + e.y)));
+        let (lo, hi) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), y| {
+            (lo.min(y), hi.max(y))
+        });
+        hi - lo
+    }
+
+    /// The readings as CSV rows (after the header line), each sensor's gyro bias (°/s) and what
+    /// the truth says of the field and the sensors' positions.
+    fn capture(
+        &self,
+        options: &raw::RawOptions,
+        rng: &mut Rng,
+        world_at: impl Fn(usize, f64) -> UnitQuaternion<f64>,
+    ) -> (String, Vec<[f64; 3]>, RawTruth) {
+        let blend_s = self.motion_start - self.hold_s;
+        let scale = match options.source_scale {
+            raw::SourceScale::MetresPerUnit(m) => m,
+            raw::SourceScale::RestHeight(h) => {
+                let height = self.rest_height();
+                if height > 0.0 { h / height } else { 1.0 }
+            }
+        };
+        // Sensor positions (rig world, metres) on a grid, and their accelerations.
+        let step = self.frame_time.min(0.005);
+        let steps = (self.end_s / step).ceil() as usize + 1;
+        let mut positions: Vec<Vec<Vector3<f64>>> =
+            vec![Vec::with_capacity(steps); self.sims.len()];
+        for g in 0..steps {
+            let (locals, translations) = self.locals_at(g as f64 * step, blend_s);
+            let mid = self.bone_midpoints(&locals, &translations);
+            for (k, s) in self.sims.iter().enumerate() {
+                positions[k].push(self.heading * (mid[s.joint] * scale));
+            }
+        }
+        let accelerations: Vec<Vec<Vector3<f64>>> = positions
+            .iter()
+            .map(|p| raw::accelerations(p, step))
+            .collect();
+        let field = raw::earth_field_enu(options);
+        let east = Vector3::x();
+        let up_rig = Vector3::y() * raw::G;
+        let gyro_sigma = options.gyro_noise_dps.to_radians();
+        let mut rows: Vec<(f64, usize, [f64; 9])> = Vec::new();
+        let mut biases = Vec::with_capacity(self.sims.len());
+        for (i, s) in self.sims.iter().enumerate() {
+            let direction = Vector3::new(rng.normal(), rng.normal(), rng.normal())
+                .try_normalize(1e-12)
+                .unwrap_or_else(Vector3::x);
+            let bias = direction * (rng.uniform() * options.gyro_bias_dps).to_radians();
+            biases.push([bias.x, bias.y, bias.z].map(f64::to_degrees));
+            let q_rig = |t: f64| self.heading * world_at(s.joint, t) * s.pose * s.mount;
+            for &t in &self.times[i] {
+                let q = q_rig(t);
+                let noise = |rng: &mut Rng, sigma: f64| {
+                    Vector3::new(rng.normal(), rng.normal(), rng.normal()) * sigma
+                };
+                let gyr =
+                    raw::mean_body_rate(q_rig, t, self.period_s) + bias + noise(rng, gyro_sigma);
+                let specific_force = raw::on_grid_at(&accelerations[i], step, t) + up_rig;
+                let acc = q.inverse() * specific_force + noise(rng, options.accel_noise);
+                let disturbance = options.disturbance.map_or(0.0, |d| d.strength_at(t));
+                let q_enu = self.from_rig * q;
+                let mag = q_enu.inverse() * (field + east * disturbance)
+                    + noise(rng, options.mag_noise_ut);
+                rows.push((
+                    t,
+                    i,
+                    [
+                        gyr.x, gyr.y, gyr.z, acc.x, acc.y, acc.z, mag.x, mag.y, mag.z,
+                    ],
+                ));
+            }
+        }
+        rows.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut out = String::with_capacity(rows.len() * 120);
+        out.push_str("# gyro rad/s, specific force m/s² and field µT in each sensor's frame\n");
+        if options.magnetometer {
+            out.push_str("time_s,sensor,gx,gy,gz,ax,ay,az,mx,my,mz\n");
+        } else {
+            out.push_str("time_s,sensor,gx,gy,gz,ax,ay,az\n");
+        }
+        let columns = if options.magnetometer { 9 } else { 6 };
+        for (t, i, v) in &rows {
+            let _ = write!(out, "{t:.6},{}", self.sims[*i].sensor);
+            for x in &v[..columns] {
+                let _ = write!(out, ",{x:.7}");
+            }
+            out.push('\n');
+        }
+        let truth = RawTruth {
+            field_enu_ut: [field.x, field.y, field.z],
+            metres_per_source_unit: scale,
+            sensor_position: "the midpoint of the source bone (joint to first child or end site)",
+        };
+        (out, biases, truth)
     }
 }
 
@@ -246,6 +494,19 @@ pub fn simulate(
                 }
             })
             .collect(),
+        translations: if options.raw.is_some() {
+            (0..=last)
+                .map(|f| {
+                    if f < options.first_frame {
+                        Vec::new()
+                    } else {
+                        bvh.joint_translations(f)
+                    }
+                })
+                .collect()
+        } else {
+            Vec::new()
+        },
         rig: bvh
             .to_rig("source", LengthUnit::Centimetres)
             .map_err(|e| SimulateError::Invalid(format!("the BVH is not a valid rig: {e}")))?,
@@ -253,9 +514,16 @@ pub fn simulate(
         last,
     };
     let mut rng = Rng(options.seed);
-    let world = match options.format {
-        CaptureFormat::Sou => World::Ned,
-        CaptureFormat::Csv => mapping.world.unwrap_or(World::Enu),
+    let world = match (options.format, &options.raw) {
+        (CaptureFormat::Sou, Some(_)) => {
+            return Err(SimulateError::Invalid(
+                "raw readings are written as imubake CSV only (not --as sou)".into(),
+            ));
+        }
+        (CaptureFormat::Sou, None) => World::Ned,
+        // Raw readings: the field is given in ENU.
+        (CaptureFormat::Csv, Some(_)) => World::Enu,
+        (CaptureFormat::Csv, None) => mapping.world.unwrap_or(World::Enu),
     };
     let heading_deg = options
         .heading_deg
@@ -270,13 +538,6 @@ pub fn simulate(
     let pose_world = rig.world_rotations(&pose.local);
 
     // Sensors: bone, source joint, mount.
-    struct Sim {
-        sensor: String,
-        bone: String,
-        joint: usize,
-        pose: UnitQuaternion<f64>,
-        mount: UnitQuaternion<f64>,
-    }
     let mut sims = Vec::new();
     for s in &mapping.sensors {
         let bone = rig
@@ -387,6 +648,52 @@ pub fn simulate(
         times.push(t);
     }
 
+    if let Some(raw_options) = &options.raw {
+        let raw = RawInputs {
+            bvh,
+            source: &source,
+            sims: &sims,
+            times: &times,
+            heading,
+            from_rig,
+            hold_s: options.hold_s,
+            motion_start,
+            frame_time,
+            end_s,
+            period_s: 1.0 / options.rate_hz,
+        };
+        let (text, biases, raw_truth) = raw.capture(raw_options, &mut rng, world_at);
+        let header = format!(
+            "# imubake simulate --raw: frames {}..={} of the BVH, heading {heading_deg:.3} deg, seed {}\n",
+            options.first_frame, last, options.seed
+        );
+        let truth = Truth {
+            world,
+            heading_deg,
+            motion_start_s: motion_start,
+            first_frame: options.first_frame,
+            last_frame: last,
+            source_frame_time_s: frame_time,
+            sensors: sims
+                .iter()
+                .enumerate()
+                .map(|(i, s)| SensorTruth {
+                    sensor: s.sensor.clone(),
+                    bone: s.bone.clone(),
+                    source_joint: source.rig.joints()[s.joint].name.clone(),
+                    mount: [s.mount.w, s.mount.i, s.mount.j, s.mount.k],
+                    samples: times[i].len(),
+                    gyro_bias_dps: Some(biases[i]),
+                })
+                .collect(),
+            raw: Some(raw_truth),
+        };
+        return Ok(Simulated {
+            text: header + &text,
+            truth,
+        });
+    }
+
     // Orientations.
     let noise_sigma = options.noise_deg.to_radians() / 3f64.sqrt();
     let mut rows: Vec<(f64, usize, UnitQuaternion<f64>)> = Vec::new();
@@ -444,8 +751,10 @@ pub fn simulate(
                 source_joint: source.rig.joints()[s.joint].name.clone(),
                 mount: [s.mount.w, s.mount.i, s.mount.j, s.mount.k],
                 samples: times[i].len(),
+                gyro_bias_dps: None,
             })
             .collect(),
+        raw: None,
     };
     Ok(Simulated { text, truth })
 }
