@@ -611,6 +611,12 @@ fn write_take(
             sensors: &sensor_summaries,
             warnings: &warnings,
             dropped_lines: dropped_lines.len(),
+            fusion: conversion
+                .pipeline
+                .fusion
+                .as_ref()
+                .map(|f| f.sensors.iter().map(|(id, s)| (id.as_str(), s)).collect())
+                .unwrap_or_default(),
         }),
     };
     let mut outputs = Vec::new();

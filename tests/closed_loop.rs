@@ -35,6 +35,8 @@ struct Loop {
     /// Angle between the hips' forward direction during calibration and +Z, degrees.
     facing_error_deg: f64,
     heading_deg: f64,
+    /// The conversion's sidecar.
+    sidecar: Value,
 }
 
 fn closed_loop(
@@ -222,6 +224,14 @@ fn closed_loop_args(
         mean_deg,
         facing_error_deg: forward.x.atan2(forward.z).to_degrees().abs(),
         heading_deg: truth["heading_deg"].as_f64().unwrap(),
+        sidecar: serde_json::from_slice(
+            &std::fs::read(out_dir.join(format!(
+                "{}.imubake.json",
+                capture.file_stem().unwrap().to_string_lossy()
+            )))
+            .unwrap(),
+        )
+        .unwrap(),
     })
 }
 
@@ -608,5 +618,78 @@ fn raw_readings_through_the_default_fusion() {
     assert!(
         mean <= 2.6,
         "pymo walk: mean per-bone error {mean:.3}° over four seeds"
+    );
+}
+
+/// A 6D body (raw readings without a magnetometer): each sensor's heading is its own, so
+/// calibration aligns each one — here by a second pose (`npose`, then `skiing`), the feet (which
+/// stay flat in it) and the pelvis by their declared forward axes. The same capture calibrated
+/// with the first pose alone cannot be aligned: a warning names the sensors, and the bones turn
+/// about wrong axes.
+#[test]
+fn a_6d_body_is_aligned_by_a_second_pose() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut results = Vec::new();
+    for mapping in [
+        "tests/fixtures/mappings/paper000_16imu_6d_two_poses.json",
+        "tests/fixtures/mappings/paper000_16imu_6d_one_pose.json",
+    ] {
+        let Some(result) = closed_loop_args(
+            &root.join(mapping),
+            false,
+            "bvh/cmu_01_01.bvh",
+            Some("1:"),
+            "Spine2=Spine1",
+            0.0,
+            31,
+            None,
+            &["--raw", "--no-magnetometer"],
+        ) else {
+            return;
+        };
+        let mean =
+            result.mean_deg.iter().map(|(_, e)| e).sum::<f64>() / result.mean_deg.len() as f64;
+        eprintln!(
+            "{mapping}: mean {mean:.3}°, per bone {:.2?}",
+            result.mean_deg
+        );
+        results.push((mean, result));
+    }
+    let (aligned, unaligned) = (&results[0], &results[1]);
+    let aligned_by: Vec<&str> = aligned.1.sidecar["mapping"]["sensors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["heading_aligned_by"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        aligned_by.iter().filter(|a| **a == "second-pose").count(),
+        13,
+        "{aligned_by:?}"
+    );
+    assert_eq!(
+        aligned_by.iter().filter(|a| **a == "forward").count(),
+        3,
+        "{aligned_by:?}"
+    );
+    assert_eq!(aligned.1.sidecar["pipeline"]["heading"], "per-sensor");
+    assert!(
+        aligned.0 <= 3.0,
+        "aligned 6D body: mean per-bone error {:.3}°",
+        aligned.0
+    );
+    assert!(
+        aligned.1.facing_error_deg < 2.0,
+        "faces {:.2}° off",
+        aligned.1.facing_error_deg
+    );
+    // Without the second pose, 13 sensors are left as they were: much worse, and said so.
+    let warnings = unaligned.1.sidecar["warnings"].to_string();
+    assert!(warnings.contains("could not be aligned"), "{warnings}");
+    assert!(
+        unaligned.0 > 3.0 * aligned.0,
+        "{:.3}° vs {:.3}°",
+        unaligned.0,
+        aligned.0
     );
 }

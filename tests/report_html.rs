@@ -143,6 +143,7 @@ fn report_shows_the_data_and_escapes_text() {
         sensors: &sensors,
         warnings: &warnings,
         dropped_lines: 7,
+        fusion: Vec::new(),
     };
     let html = render_report(&input);
     assert_eq!(html, render_report(&input), "deterministic");
@@ -324,6 +325,7 @@ fn long_take_stays_small() {
         sensors: &sensors,
         warnings: &warnings,
         dropped_lines: 0,
+        fusion: Vec::new(),
     };
     let html = render_report(&input);
     eprintln!("60-minute 22-bone report: {} bytes", html.len());

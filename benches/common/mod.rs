@@ -71,3 +71,30 @@ pub fn minutes_from_env() -> usize {
         .and_then(|m| m.parse().ok())
         .unwrap_or(60)
 }
+
+/// The raw twin of [`write_log`]: the same sensors, instants and motion (each sensor turning at
+/// 1 rad/s about (0.6, 0, 0.8)), as the readings an IMU would give — gyro (rad/s), specific force
+/// (m/s²) and field (µT), each in the sensor frame, 6 decimals. Returns the file size in bytes.
+pub fn write_raw_log(path: &Path, minutes: usize, sensors: &[&str]) -> std::io::Result<u64> {
+    use nalgebra::{UnitQuaternion, Vector3};
+    let mut out = BufWriter::with_capacity(1 << 20, std::fs::File::create(path)?);
+    writeln!(out, "time_s,sensor,gx,gy,gz,ax,ay,az,mx,my,mz")?;
+    let frames = minutes * 60 * RATE_HZ;
+    let axis = nalgebra::Unit::new_normalize(Vector3::new(0.6, 0.0, 0.8));
+    let gyro = axis.into_inner() * (0.01 * RATE_HZ as f64);
+    let (up, field) = (Vector3::new(0.0, 0.0, 9.81), Vector3::new(0.0, 20.0, -40.0));
+    for i in 0..frames {
+        for (s, name) in sensors.iter().enumerate() {
+            let t = i as f64 / RATE_HZ as f64 + s as f64 * 0.0003;
+            let q = UnitQuaternion::from_axis_angle(&axis, 0.01 * i as f64 + s as f64);
+            let (a, m) = (q.inverse() * up, q.inverse() * field);
+            writeln!(
+                out,
+                "{t:.4},{name},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6}",
+                gyro.x, gyro.y, gyro.z, a.x, a.y, a.z, m.x, m.y, m.z
+            )?;
+        }
+    }
+    out.flush()?;
+    Ok(std::fs::metadata(path)?.len())
+}

@@ -8,7 +8,12 @@
 //! every bone's rotation since the calibration pose is the source joint's rotation since rest.
 //!
 //! Timeline: the calibration pose held for `hold_s`, a blend over `blend_s` from rest into the
-//! first source frame, then the source frames. A sensor reads
+//! first source frame, then the source frames. When the mapping names a second calibration pose
+//! (`calibration.second`), each bone also turns in the world by `S_b(t)`, from the first pose into
+//! the second over the second before its window, held through it, and back over the second after
+//! (`B_b = S_b ⊗ W_J ⊗ P_b`); the hold lasts until half a second after that. The sensors' positions
+//! (for raw readings) do not follow those turns: the subject is taken to move between the poses
+//! slowly enough for gravity alone to be felt. A sensor reads
 //! `q_world_sensor = C⁻¹ ⊗ H ⊗ B_b(t) ⊗ q_bone_sensor ⊗ noise`, with `C` the world → rig rotation,
 //! `H` a heading about +Y, `q_bone_sensor` the mount (random where the mapping says `calibrate`,
 //! but consistent with a declared `forward` axis), sampled at its own instants (offset and
@@ -237,6 +242,35 @@ struct Sim {
     joint: usize,
     pose: UnitQuaternion<f64>,
     mount: UnitQuaternion<f64>,
+    /// The bone's world-frame turn from the calibration pose into the second pose (identity
+    /// without one).
+    second: UnitQuaternion<f64>,
+}
+
+/// The second calibration pose on the timeline: the turn into it over [`POSE_TURN_S`] seconds
+/// before `start_s`, held to `end_s`, and back over as long after.
+#[derive(Clone, Copy)]
+struct SecondPoseTimes {
+    start_s: f64,
+    end_s: f64,
+}
+
+/// How long the subject takes to move between calibration poses, seconds.
+const POSE_TURN_S: f64 = 1.0;
+
+impl SecondPoseTimes {
+    /// How far into the second pose the subject is at `t`, 0 to 1 (smoothstep).
+    fn weight(&self, t: f64) -> f64 {
+        let x = if t < self.start_s {
+            1.0 - (self.start_s - t) / POSE_TURN_S
+        } else if t <= self.end_s {
+            1.0
+        } else {
+            1.0 - (t - self.end_s) / POSE_TURN_S
+        };
+        let x = x.clamp(0.0, 1.0);
+        x * x * (3.0 - 2.0 * x)
+    }
 }
 
 /// What raw readings are made from ([`raw`] states the model).
@@ -367,7 +401,7 @@ impl RawInputs<'_> {
         &self,
         options: &raw::RawOptions,
         rng: &mut Rng,
-        world_at: impl Fn(usize, f64) -> UnitQuaternion<f64>,
+        world_at: impl Fn(&Sim, f64) -> UnitQuaternion<f64>,
     ) -> (String, Vec<[f64; 3]>, RawTruth) {
         let blend_s = self.motion_start - self.hold_s;
         let scale = match options.source_scale {
@@ -405,7 +439,7 @@ impl RawInputs<'_> {
                 .unwrap_or_else(Vector3::x);
             let bias = direction * (rng.uniform() * options.gyro_bias_dps).to_radians();
             biases.push([bias.x, bias.y, bias.z].map(f64::to_degrees));
-            let q_rig = |t: f64| self.heading * world_at(s.joint, t) * s.pose * s.mount;
+            let q_rig = |t: f64| self.heading * world_at(s, t) * s.pose * s.mount;
             for &t in &self.times[i] {
                 let q = q_rig(t);
                 let noise = |rng: &mut Rng, sigma: f64| {
@@ -582,19 +616,48 @@ pub fn simulate(
             joint,
             pose: p,
             mount,
+            second: UnitQuaternion::identity(),
         });
     }
+    // A second calibration pose: held where the mapping says, the motion after it.
+    let second = match mapping.calibration.as_ref().and_then(|c| c.second.as_ref()) {
+        Some(second) => {
+            let label = second.pose.label();
+            let pose2 = rig.pose(&label).ok_or(SimulateError::Pose(label))?;
+            let pose2_world = rig.world_rotations(&pose2.local);
+            for s in &mut sims {
+                let bone = rig.joint_index(&s.bone).expect("resolved above");
+                s.second = pose2_world[bone] * s.pose.inverse();
+            }
+            Some(SecondPoseTimes {
+                start_s: second.start_s,
+                end_s: second.start_s + second.duration_s,
+            })
+        }
+        None => None,
+    };
+    let hold_s = match second {
+        Some(p) => options.hold_s.max(p.end_s + POSE_TURN_S + 0.5),
+        None => options.hold_s,
+    };
+    // Bone `b`'s world-frame turn into the second pose at `t`.
+    let second_turn = |s: &Sim, t: f64| -> UnitQuaternion<f64> {
+        match second {
+            Some(p) => slerp_shortest(&UnitQuaternion::identity(), &s.second, p.weight(t)),
+            None => UnitQuaternion::identity(),
+        }
+    };
 
     let frame_time = bvh.frame_time_s();
-    let motion_start = options.hold_s + options.blend_s;
+    let motion_start = hold_s + options.blend_s;
     let end_s = motion_start + (last - options.first_frame) as f64 * frame_time;
     let first_local = &source.locals[options.first_frame];
     // World rotation of a source joint at take time t.
     let world_at = |joint: usize, t: f64| -> UnitQuaternion<f64> {
-        if t < options.hold_s {
+        if t < hold_s {
             UnitQuaternion::identity()
         } else if t < motion_start {
-            let u = (t - options.hold_s) / options.blend_s;
+            let u = (t - hold_s) / options.blend_s;
             let u = u * u * (3.0 - 2.0 * u); // smoothstep: no jerk at either end
             source.chain(joint, |j| {
                 slerp_shortest(&UnitQuaternion::identity(), &first_local[j], u)
@@ -656,13 +719,15 @@ pub fn simulate(
             times: &times,
             heading,
             from_rig,
-            hold_s: options.hold_s,
+            hold_s,
             motion_start,
             frame_time,
             end_s,
             period_s: 1.0 / options.rate_hz,
         };
-        let (text, biases, raw_truth) = raw.capture(raw_options, &mut rng, world_at);
+        let (text, biases, raw_truth) = raw.capture(raw_options, &mut rng, |s: &Sim, t: f64| {
+            second_turn(s, t) * world_at(s.joint, t)
+        });
         let header = format!(
             "# imubake simulate --raw: frames {}..={} of the BVH, heading {heading_deg:.3} deg, seed {}\n",
             options.first_frame, last, options.seed
@@ -699,7 +764,7 @@ pub fn simulate(
     let mut rows: Vec<(f64, usize, UnitQuaternion<f64>)> = Vec::new();
     for (i, s) in sims.iter().enumerate() {
         for &t in &times[i] {
-            let w = world_at(s.joint, t);
+            let w = second_turn(s, t) * world_at(s.joint, t);
             let body = w * s.pose;
             let mut q = from_rig * heading * body * s.mount;
             if noise_sigma > 0.0 {

@@ -101,6 +101,8 @@ pub struct ReportInput<'a> {
     pub sensors: &'a SensorSummaries,
     pub warnings: &'a [String],
     pub dropped_lines: usize,
+    /// Each fused sensor's id and what fusion came to (empty when nothing was fused).
+    pub fusion: Vec<(&'a str, &'a crate::fusion::FusionStats)>,
 }
 
 /// Each animated bone's Euler angles (degrees, `[joint][frame]` in each joint's order) before
@@ -188,6 +190,9 @@ pub fn render_report(input: &ReportInput) -> String {
 
     // Sensors.
     sensor_table(&mut out, input.sensors);
+    if !input.fusion.is_empty() {
+        fusion_section(&mut out, &input.fusion);
+    }
 
     // Bones.
     out.push_str(
@@ -361,6 +366,127 @@ fn sensor_table(out: &mut String, sensors: &SensorSummaries) {
         );
     }
     out.push_str("</tbody>\n</table>\n</section>\n");
+}
+
+/// Per fused sensor a chart of the filter's gyro bias estimate (°/s) over time, with the spans in
+/// which it set the magnetometer (red) or the accelerometer (orange) aside shaded behind it. Each
+/// `<figure class="fusion">` carries `data-sensor`, `data-magnetic-rejected` and
+/// `data-acceleration-rejected` (the shares of samples).
+fn fusion_section(out: &mut String, fusion: &[(&str, &crate::fusion::FusionStats)]) {
+    let _ = writeln!(
+        out,
+        "<section id=\"fusion\">\n<h2>Fusion ({} sensors)</h2>\n<p class=\"note\">Each chart shows \
+         the filter's gyro bias estimate (°/s, blue) over time; shaded behind it, red where the \
+         magnetometer was set aside as disturbed, orange where the accelerometer was.</p>",
+        fusion.len()
+    );
+    for (sensor, stats) in fusion {
+        let name = escape(sensor);
+        let _ = writeln!(
+            out,
+            "<figure class=\"fusion\" data-sensor=\"{name}\" data-magnetic-rejected=\"{:.4}\" \
+             data-acceleration-rejected=\"{:.4}\">\n<figcaption><h3>{name}</h3><p>{}, \
+             magnetometer set aside in {:.1} % of the samples, accelerometer in {:.1} %{}.</p>\
+             </figcaption>",
+            stats.magnetic_rejected,
+            stats.acceleration_rejected,
+            stats.variant,
+            100.0 * stats.magnetic_rejected,
+            100.0 * stats.acceleration_rejected,
+            stats.gyro_bias_dps.map_or(String::new(), |b| format!(
+                "; final gyro bias ({:.3}, {:.3}, {:.3}) °/s",
+                b[0], b[1], b[2]
+            )),
+        );
+        let mut svg = String::new();
+        let drawn = {
+            let root =
+                SVGBackend::with_string(&mut svg, (CHART_WIDTH_PX, CHART_HEIGHT_PX / 2 + 60))
+                    .into_drawing_area();
+            let r = draw_fusion(&root, &stats.series);
+            root.present().map_err(|e| e.to_string()).and(r)
+        };
+        match drawn {
+            Ok(()) => out.push_str(&svg),
+            Err(e) => {
+                let _ = writeln!(
+                    out,
+                    "<p class=\"error\">The chart could not be drawn: {}</p>",
+                    escape(&e)
+                );
+            }
+        }
+        out.push_str("</figure>\n");
+    }
+    out.push_str("</section>\n");
+}
+
+fn draw_fusion(
+    root: &DrawingArea<SVGBackend, Shift>,
+    series: &[(f64, f64, bool, bool)],
+) -> Result<(), String> {
+    let err = |e: DrawingAreaErrorKind<std::io::Error>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let (t0, t1) = match (series.first(), series.last()) {
+        (Some(a), Some(b)) if b.0 > a.0 => (a.0, b.0),
+        (Some(a), _) => (a.0, a.0 + 1.0),
+        _ => (0.0, 1.0),
+    };
+    let top = series
+        .iter()
+        .map(|s| s.1)
+        .filter(|b| b.is_finite())
+        .fold(0.0f64, f64::max)
+        .max(0.1)
+        * 1.1;
+    let label_style = (FONT, FONT_SIZE).into_font().color(&BLACK.mix(0.8));
+    let mut chart = ChartBuilder::on(root)
+        .margin(MARGIN_PX)
+        .x_label_area_size(X_LABEL_AREA_PX)
+        .y_label_area_size(Y_LABEL_AREA_PX)
+        .build_cartesian_2d(t0..t1, 0.0..top)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_labels(10)
+        .y_labels(4)
+        .x_desc("time (s)")
+        .y_desc("gyro bias (°/s)")
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .label_style(label_style.clone())
+        .axis_desc_style(label_style)
+        .bold_line_style(BLACK.mix(0.12))
+        .max_light_lines(1)
+        .light_line_style(BLACK.mix(0.05))
+        .draw()
+        .map_err(err)?;
+    // Rejection spans: from a series point where it was set aside to the next point.
+    for (band, colour, which) in [
+        (0.5, RGBColor(0xD6, 0x27, 0x28), 2),
+        (0.0, RGBColor(0xFF, 0x7F, 0x0E), 3),
+    ] {
+        let spans = series.windows(2).filter_map(|w| {
+            let on = if which == 2 { w[0].2 } else { w[0].3 };
+            on.then(|| {
+                Rectangle::new(
+                    [(w[0].0, top * band), (w[1].0, top * (band + 0.5))],
+                    colour.mix(0.2).filled(),
+                )
+            })
+        });
+        chart.draw_series(spans).map_err(err)?;
+    }
+    let columns = chart.plotting_area().get_pixel_range().0.len();
+    let times: Vec<f64> = series.iter().map(|s| s.0).collect();
+    let bias: Vec<f64> = series.iter().map(|s| s.1).collect();
+    chart
+        .draw_series(LineSeries::new(
+            decimate_min_max(&times, &bias, columns),
+            AXIS_RGB[2].stroke_width(2),
+        ))
+        .map_err(err)?;
+    Ok(())
 }
 
 /// The axis letter (`X`, `Y`, `Z`) of an axis index.
@@ -670,7 +796,43 @@ mod tests {
             sensors,
             warnings: &[],
             dropped_lines: 3,
+            fusion: Vec::new(),
         }
+    }
+
+    #[test]
+    fn fused_sensors_get_a_chart_with_their_rejection_spans() {
+        let sensors = SensorSummaries(Default::default());
+        // Bias settling to 0.3 °/s; the magnetometer set aside from 2 s to 3 s.
+        let series: Vec<(f64, f64, bool, bool)> = (0..50)
+            .map(|i| {
+                let t = i as f64 * 0.1;
+                (t, 0.3 * (1.0 - (-t).exp()), (2.0..3.0).contains(&t), false)
+            })
+            .collect();
+        let stats = crate::fusion::FusionStats {
+            variant: "9d",
+            filled_samples: 0,
+            gyro_bias_dps: Some([0.1, -0.2, 0.2]),
+            magnetic_rejected: 0.2,
+            acceleration_rejected: 0.0,
+            series,
+        };
+        let mut input = small_input(&sensors);
+        input.fusion = vec![("thigh <L>", &stats)];
+        let html = render_report(&input);
+        assert!(html.contains("<section id=\"fusion\">"));
+        assert!(html.contains(
+            "data-sensor=\"thigh &lt;L&gt;\" data-magnetic-rejected=\"0.2000\" data-acceleration-rejected=\"0.0000\""
+        ));
+        assert!(html.contains("magnetometer set aside in 20.0 % of the samples"));
+        let figure = &html[html.find("class=\"fusion\"").unwrap()..];
+        let svg = &figure[..figure.find("</svg>").unwrap()];
+        // Ten 0.1 s spans shaded (2.0 … 2.9 s), over the mesh's own rectangles.
+        let shaded = svg.matches("opacity=\"0.2\" fill=\"#D62728\"").count();
+        assert_eq!(shaded, 10, "{svg}");
+        // Without fused sensors there is no such section.
+        assert!(!render_report(&small_input(&sensors)).contains("id=\"fusion\""));
     }
 
     #[test]
