@@ -377,4 +377,26 @@ mod tests {
         let s = settings(Config::default(), None).unwrap();
         assert_eq!(s, ConvertSettings::default());
     }
+
+    #[test]
+    fn fusion_is_a_setting_with_its_parameters() {
+        let c = Config::parse("fusion: madgwick:beta=0.05,6d\n").unwrap();
+        let s = c.to_settings(WorldFrom::Config);
+        let f = s.pipeline.fusion.unwrap();
+        assert_eq!(f.to_string(), "madgwick:beta=0.05,6d");
+        let e = Config::parse("fusion: kalman\n").unwrap_err();
+        assert!(
+            e.contains("`fusion`") && e.contains("unknown fusion `kalman`"),
+            "{e}"
+        );
+        // The flag's layer wins over the file's.
+        let flags = Config {
+            fusion: Some("vqf".parse().unwrap()),
+            ..Config::default()
+        };
+        assert_eq!(
+            flags.over(c).fusion.unwrap().to_string(),
+            "vqf:tau_acc=3,tau_mag=9"
+        );
+    }
 }

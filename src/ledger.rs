@@ -597,6 +597,13 @@ mod tests {
             settings_fingerprint(&other),
             settings_fingerprint(&settings)
         );
+        // Fusion asked for, and each of its parameters, change the outputs.
+        let mut fused = settings.clone();
+        fused.pipeline.fusion = Some("vqf".parse().unwrap());
+        let mut tuned = settings.clone();
+        tuned.pipeline.fusion = Some("vqf:tau_acc=2".parse().unwrap());
+        let fps = [&settings, &fused, &tuned].map(settings_fingerprint);
+        assert!(fps[0] != fps[1] && fps[1] != fps[2] && fps[0] != fps[2]);
         // Fingerprints written before schemas were bare SHA-256s.
         assert_eq!(fingerprint_schema(&"ab".repeat(32)), 0);
     }

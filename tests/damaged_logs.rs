@@ -368,3 +368,33 @@ fn messages_say_what_is_wrong_once() {
     let err = stderr(&o);
     assert_eq!(err.matches("No such file or directory").count(), 1, "{err}");
 }
+
+/// Raw readings that cannot be right are errors naming the sensor and what is wrong, never a
+/// silent wrong animation: an accelerometer without a gyro, °/s labelled rad/s, g labelled m/s².
+#[test]
+fn raw_readings_that_cannot_be_right_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let cases = [
+        (
+            "time_s,sensor,ax,ay,az\n0,Hips,0,0,9.8\n0.01,Hips,0,0,9.8\n",
+            "missing column(s) gx,gy,gz",
+        ),
+        (
+            "time_s,sensor,gx,gy,gz,ax,ay,az\n0,Hips,0,0,0,0,0,9.8\n0.01,Hips,250,0,0,0,0,9.8\n",
+            "sensor `Hips`: gyroscope rates reach 250 rad/s",
+        ),
+        (
+            "time_s,sensor,gx,gy,gz,ax,ay,az\n0,Hips,0,0,0,0,0,1\n0.01,Hips,0,0,0,0,0.01,1\n",
+            "sensor `Hips`: the accelerometer reads 1.00 at rest, not 9.81 m/s². Hint: the readings are probably in g",
+        ),
+    ];
+    for (i, (csv, expected)) in cases.iter().enumerate() {
+        let input = dir.path().join(format!("raw{i}.csv"));
+        fs::write(&input, csv).unwrap();
+        let o = run(&["convert", s(&input), "--out", s(&out)]);
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        assert!(stderr(&o).contains(expected), "{}", stderr(&o));
+        assert!(!out.join(format!("raw{i}.bvh")).exists());
+    }
+}

@@ -573,6 +573,40 @@ mod tests {
     }
 
     #[test]
+    fn a_saturated_gyro_and_a_dead_magnetometer_are_warnings() {
+        // 20 samples, the gyro's x pinned at 2000 °/s on eight of them.
+        let limit = 2000f64.to_radians();
+        let samples: Vec<ImuSample> = (0..20)
+            .map(|i| ImuSample {
+                gyro_rad_s: Vector3::new(
+                    if (5..13).contains(&i) {
+                        limit
+                    } else {
+                        0.1 * i as f64
+                    },
+                    0.0,
+                    0.0,
+                ),
+                accel_m_s2: Vector3::new(0.0, 0.0, G),
+            })
+            .collect();
+        let times: Vec<f64> = (0..20).map(|i| i as f64 * 0.01).collect();
+        let inertial = Track::new(times.clone(), samples).unwrap();
+        let dead = Track::new(times, vec![Vector3::zeros(); 20]).unwrap();
+        let fused = fuse("wrist", &inertial, Some(&dead), &Fusion::default()).unwrap();
+        assert_eq!(fused.stats.variant, "6d");
+        let text = fused.warnings.join("\n");
+        assert!(
+            text.contains("sensor `wrist`: the gyroscope's x axis sits at 2000 °/s on 8 samples"),
+            "{text}"
+        );
+        assert!(
+            text.contains("sensor `wrist`: the magnetometer reads nothing"),
+            "{text}"
+        );
+    }
+
+    #[test]
     fn readings_in_the_wrong_units_are_errors() {
         let track = |gyr: f64, acc: f64| {
             Track::new(
