@@ -309,8 +309,21 @@ impl Bvh {
     ///
     /// Panics if `frame >= frame_count()`.
     pub fn world_positions(&self, frame: usize) -> Vec<Vector3<f64>> {
-        let local = self.local_rotations(frame);
-        let translation = self.joint_translations(frame);
+        self.forward_kinematics(
+            &self.local_rotations(frame),
+            &self.joint_translations(frame),
+        )
+        .0
+    }
+
+    /// Every joint's world position and world rotation for local rotations and translations
+    /// from the parent (one per joint, in [`Bvh::joints`] order; the root's translation is its
+    /// position), in the file's unit.
+    pub fn forward_kinematics(
+        &self,
+        local: &[UnitQuaternion<f64>],
+        translation: &[Vector3<f64>],
+    ) -> (Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>) {
         let mut world_rot: Vec<UnitQuaternion<f64>> = Vec::with_capacity(self.joints.len());
         let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(self.joints.len());
         for (i, j) in self.joints.iter().enumerate() {
@@ -325,7 +338,7 @@ impl Bvh {
                 }
             }
         }
-        pos
+        (pos, world_rot)
     }
 }
 

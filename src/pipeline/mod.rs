@@ -244,24 +244,10 @@ pub fn run(
     }
     let file = mapping_file.display().to_string();
     let mut warnings = Vec::new();
-    let world = options
-        .world
-        .or(mapping.world)
-        .unwrap_or(take.source().world);
-    let resolved = mapping.resolve(rig, mapping_file)?;
-
-    // 1. Sources.
-    let sources = sources::orientations(
-        take,
-        rig,
-        mapping,
-        resolved,
-        world,
-        options.fusion.as_ref(),
-        &mut warnings,
-    )?;
+    // 1. Sources, and the calibration window they call for.
+    let (world, sources, window) =
+        sources_and_window(take, rig, mapping, mapping_file, options, &mut warnings)?;
     // 2. Calibration.
-    let window = calibrate::window(mapping, &sources.sensors, &mut warnings);
     let calibration = calibrate::calibrate(
         rig,
         &sources,
@@ -344,18 +330,16 @@ pub fn run(
     })
 }
 
-/// Causal mode: the whole take through the stream's incremental cores ([`stream::PoseStream`]),
-/// its samples in time order as a live capture would deliver them, the poses collected into the
-/// animation (then cut by `--trim`).
-fn run_causal(
+/// Stage 1 for both modes: the devices' world (the settings', else the mapping's, else the
+/// take's), the mapped sensors' tracks, and the calibration window.
+fn sources_and_window(
     take: &Take,
     rig: &Rig,
     mapping: &Mapping,
     mapping_file: &Path,
     options: &PipelineOptions,
-) -> Result<Converted, PipelineError> {
-    let file = mapping_file.display().to_string();
-    let mut warnings = Vec::new();
+    warnings: &mut Vec<String>,
+) -> Result<(World, Sources, Option<CalibrationWindow>), PipelineError> {
     let world = options
         .world
         .or(mapping.world)
@@ -368,9 +352,26 @@ fn run_causal(
         resolved,
         world,
         options.fusion.as_ref(),
-        &mut warnings,
+        warnings,
     )?;
-    let window = calibrate::window(mapping, &sources.sensors, &mut warnings);
+    let window = calibrate::window(mapping, &sources.sensors, warnings);
+    Ok((world, sources, window))
+}
+
+/// Causal mode: the whole take through the stream's incremental cores ([`stream::PoseStream`]),
+/// its samples in time order as a live capture would deliver them, the poses collected into the
+/// animation (then cut by `--trim`).
+fn run_causal(
+    take: &Take,
+    rig: &Rig,
+    mapping: &Mapping,
+    mapping_file: &Path,
+    options: &PipelineOptions,
+) -> Result<Converted, PipelineError> {
+    let file = mapping_file.display().to_string();
+    let mut warnings = Vec::new();
+    let (world, sources, window) =
+        sources_and_window(take, rig, mapping, mapping_file, options, &mut warnings)?;
     let t_last = sources
         .tracks
         .iter()

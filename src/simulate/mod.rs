@@ -342,20 +342,7 @@ impl RawInputs<'_> {
         translations: &[Vector3<f64>],
     ) -> Vec<Vector3<f64>> {
         let joints = self.bvh.joints();
-        let mut world: Vec<UnitQuaternion<f64>> = Vec::with_capacity(joints.len());
-        let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(joints.len());
-        for (i, j) in joints.iter().enumerate() {
-            match j.parent {
-                Some(p) => {
-                    pos.push(pos[p] + world[p] * translations[i]);
-                    world.push(world[p] * locals[i]);
-                }
-                None => {
-                    pos.push(translations[i]);
-                    world.push(locals[i]);
-                }
-            }
-        }
+        let (pos, world) = self.bvh.forward_kinematics(locals, translations);
         (0..joints.len())
             .map(|i| {
                 let end = match joints.iter().position(|c| c.parent == Some(i)) {
@@ -370,21 +357,13 @@ impl RawInputs<'_> {
     /// The source's rest-pose height (joints and end sites), source units.
     fn rest_height(&self) -> f64 {
         let joints = self.bvh.joints();
-        let n = joints.len();
-        let identity = vec![UnitQuaternion::identity(); n];
+        let identity = vec![UnitQuaternion::identity(); joints.len()];
         let offsets: Vec<Vector3<f64>> = joints
             .iter()
             .enumerate()
             .map(|(i, j)| if i == 0 { Vector3::zeros() } else { j.offset })
             .collect();
-        let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(n);
-        for (i, j) in joints.iter().enumerate() {
-            let p = match j.parent {
-                Some(p) => pos[p] + identity[p] * offsets[i],
-                None => Vector3::zeros(),
-            };
-            pos.push(p);
-        }
+        let (pos, _) = self.bvh.forward_kinematics(&identity, &offsets);
         let ys = joints
             .iter()
             .enumerate()
@@ -711,6 +690,28 @@ pub fn simulate(
         times.push(t);
     }
 
+    // What was simulated (with the gyro biases and the field for raw readings).
+    let truth = |biases: Option<&[[f64; 3]]>, raw: Option<RawTruth>| Truth {
+        world,
+        heading_deg,
+        motion_start_s: motion_start,
+        first_frame: options.first_frame,
+        last_frame: last,
+        source_frame_time_s: frame_time,
+        sensors: sims
+            .iter()
+            .enumerate()
+            .map(|(i, s)| SensorTruth {
+                sensor: s.sensor.clone(),
+                bone: s.bone.clone(),
+                source_joint: source.rig.joints()[s.joint].name.clone(),
+                mount: [s.mount.w, s.mount.i, s.mount.j, s.mount.k],
+                samples: times[i].len(),
+                gyro_bias_dps: biases.map(|b| b[i]),
+            })
+            .collect(),
+        raw,
+    };
     if let Some(raw_options) = &options.raw {
         let raw = RawInputs {
             bvh,
@@ -732,30 +733,9 @@ pub fn simulate(
             "# imubake simulate --raw: frames {}..={} of the BVH, heading {heading_deg:.3} deg, seed {}\n",
             options.first_frame, last, options.seed
         );
-        let truth = Truth {
-            world,
-            heading_deg,
-            motion_start_s: motion_start,
-            first_frame: options.first_frame,
-            last_frame: last,
-            source_frame_time_s: frame_time,
-            sensors: sims
-                .iter()
-                .enumerate()
-                .map(|(i, s)| SensorTruth {
-                    sensor: s.sensor.clone(),
-                    bone: s.bone.clone(),
-                    source_joint: source.rig.joints()[s.joint].name.clone(),
-                    mount: [s.mount.w, s.mount.i, s.mount.j, s.mount.k],
-                    samples: times[i].len(),
-                    gyro_bias_dps: Some(biases[i]),
-                })
-                .collect(),
-            raw: Some(raw_truth),
-        };
         return Ok(Simulated {
             text: header + &text,
-            truth,
+            truth: truth(Some(&biases), Some(raw_truth)),
         });
     }
 
@@ -800,28 +780,10 @@ pub fn simulate(
             &rows,
         )?,
     };
-    let truth = Truth {
-        world,
-        heading_deg,
-        motion_start_s: motion_start,
-        first_frame: options.first_frame,
-        last_frame: last,
-        source_frame_time_s: frame_time,
-        sensors: sims
-            .iter()
-            .enumerate()
-            .map(|(i, s)| SensorTruth {
-                sensor: s.sensor.clone(),
-                bone: s.bone.clone(),
-                source_joint: source.rig.joints()[s.joint].name.clone(),
-                mount: [s.mount.w, s.mount.i, s.mount.j, s.mount.k],
-                samples: times[i].len(),
-                gyro_bias_dps: None,
-            })
-            .collect(),
-        raw: None,
-    };
-    Ok(Simulated { text, truth })
+    Ok(Simulated {
+        text,
+        truth: truth(None, None),
+    })
 }
 
 /// A SOU log: debug text, then `ms,SOU,yaw1,pitch1,roll1,yaw2,pitch2,roll2` per instant.

@@ -421,6 +421,33 @@ fn fusion_section(out: &mut String, fusion: &[(&str, &crate::fusion::FusionStats
     out.push_str("</section>\n");
 }
 
+type Chart2d<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// The grid, ticks and axis descriptions every chart of the report has: time in seconds along x,
+/// `y_desc` with about `y_labels` ticks up y.
+fn draw_mesh(chart: &mut Chart2d<'_, '_>, y_desc: &str, y_labels: usize) -> Result<(), String> {
+    let label_style = (FONT, FONT_SIZE).into_font().color(&BLACK.mix(0.8));
+    chart
+        .configure_mesh()
+        .x_labels(10)
+        .y_labels(y_labels)
+        .x_desc("time (s)")
+        .y_desc(y_desc)
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .label_style(label_style.clone())
+        .axis_desc_style(label_style)
+        .bold_line_style(BLACK.mix(0.12))
+        .max_light_lines(1)
+        .light_line_style(BLACK.mix(0.05))
+        .draw()
+        .map_err(|e| e.to_string())
+}
+
 fn draw_fusion(
     root: &DrawingArea<SVGBackend, Shift>,
     series: &[(f64, f64, bool, bool)],
@@ -439,28 +466,13 @@ fn draw_fusion(
         .fold(0.0f64, f64::max)
         .max(0.1)
         * 1.1;
-    let label_style = (FONT, FONT_SIZE).into_font().color(&BLACK.mix(0.8));
     let mut chart = ChartBuilder::on(root)
         .margin(MARGIN_PX)
         .x_label_area_size(X_LABEL_AREA_PX)
         .y_label_area_size(Y_LABEL_AREA_PX)
         .build_cartesian_2d(t0..t1, 0.0..top)
         .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_labels(10)
-        .y_labels(4)
-        .x_desc("time (s)")
-        .y_desc("gyro bias (°/s)")
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
-        .label_style(label_style.clone())
-        .axis_desc_style(label_style)
-        .bold_line_style(BLACK.mix(0.12))
-        .max_light_lines(1)
-        .light_line_style(BLACK.mix(0.05))
-        .draw()
-        .map_err(err)?;
+    draw_mesh(&mut chart, "gyro bias (°/s)", 4)?;
     // Rejection spans: from a series point where it was set aside to the next point.
     for (band, colour, which) in [
         (0.5, RGBColor(0xD6, 0x27, 0x28), 2),
@@ -636,21 +648,7 @@ fn draw_on(
         .y_label_area_size(Y_LABEL_AREA_PX)
         .build_cartesian_2d(t0..t1, lo..hi)
         .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_labels(10)
-        .y_labels(7)
-        .x_desc("time (s)")
-        .y_desc("angle (degrees)")
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
-        .label_style(label_style.clone())
-        .axis_desc_style(label_style.clone())
-        .bold_line_style(BLACK.mix(0.12))
-        .max_light_lines(1)
-        .light_line_style(BLACK.mix(0.05))
-        .draw()
-        .map_err(err)?;
+    draw_mesh(&mut chart, "angle (degrees)", 7)?;
 
     let columns = chart.plotting_area().get_pixel_range().0.len();
     let axes = bone.order.axes();
