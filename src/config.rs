@@ -19,7 +19,7 @@
 //! world: ned             # override the format's world
 //! causal: false          # run the take as a live stream would (causal smoothing, no look-ahead)
 //! sensor_rate_hz: 100    # the sensors' rate, for causal smoothing (else from their first samples)
-//! fusion: vqf            # fuse raw readings even where the device gave orientations; or
+//! fusion: offline        # fuse raw readings even where the device gave orientations; or
 //!                        # madgwick:beta=0.1, mahony, trust, gyro, vqf:6d (no magnetometer)
 //! smoothing: butterworth:order=4,cutoff=14   # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
 //! # or with per-bone overrides:

@@ -74,9 +74,10 @@ pub struct SettingsArgs {
     #[arg(long, value_name = "HZ", value_parser = parse_rate)]
     sensor_rate: Option<f64>,
     /// Fuse raw gyroscope, accelerometer (and magnetometer) readings with this filter, even where
-    /// the device gave an orientation: vqf[:tau_acc=3,tau_mag=9], madgwick[:beta=0.12],
+    /// the device gave an orientation: offline[:tau_acc=10,rest=2,motion=20,drift=0.02] (the
+    /// whole take at once), vqf[:tau_acc=3,tau_mag=9], madgwick[:beta=0.12],
     /// mahony[:kp=0.74,ki=0.0012], trust[:range=2000], gyro; add `6d` to leave the magnetometer
-    /// out [default: vqf, for sensors with raw readings only]
+    /// out [default: offline (vqf with --causal), for sensors with raw readings only]
     #[arg(long, value_name = "NAME[:key=value,...]")]
     fusion: Option<imubake::fusion::Fusion>,
     #[command(flatten)]

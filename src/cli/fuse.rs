@@ -19,8 +19,9 @@ pub struct FuseArgs {
     /// The CSV to write (time_s,sensor,qw,qx,qy,qz in the ENU world).
     #[arg(long, short)]
     output: PathBuf,
-    /// The filter: vqf[:tau_acc=3,tau_mag=9], madgwick[:beta=0.12], mahony[:kp=0.74,ki=0.0012],
-    /// trust[:range=2000], gyro; add `6d` to leave the magnetometer out [default: vqf]
+    /// The filter: offline[:tau_acc=10,rest=2,motion=20,drift=0.02], vqf[:tau_acc=3,tau_mag=9],
+    /// madgwick[:beta=0.12], mahony[:kp=0.74,ki=0.0012], trust[:range=2000], gyro; add `6d` to
+    /// leave the magnetometer out [default: offline]
     #[arg(long, value_name = "NAME[:key=value,...]")]
     fusion: Option<Fusion>,
     /// Print what each sensor's fusion came to (the sidecar's `pipeline.fusion`) as JSON.

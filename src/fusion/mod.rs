@@ -4,7 +4,9 @@
 //!
 //! Each filter is an incremental core with x-io Fusion's shape, [`Ahrs::update`]`(gyr, acc, mag,
 //! dt)`; [`fuse`] runs one over a sensor's whole track. Filters:
-//! - [`vqf`] (the default): VQF, through `vqf-rs`;
+//! - [`offline`] (the default for a whole take): VQF's passes both ways, a two-sided inclination
+//!   average and a smoothed heading;
+//! - [`vqf`] (the default for streams): VQF, through `vqf-rs`;
 //! - [`madgwick`] (β), [`mahony`] (k_P, k_I), [`trust`] (paper 000's blend), [`gyro`] (paper 004's
 //!   integration only).
 //!
@@ -15,6 +17,7 @@ pub mod gyro;
 pub mod init;
 pub mod madgwick;
 pub mod mahony;
+pub mod offline;
 pub mod trust;
 pub mod vqf;
 
@@ -80,6 +83,29 @@ pub enum Filter {
         range_dps: f64,
     },
     Gyro,
+    /// The whole take at once ([`offline`]); a stream runs online VQF instead.
+    Offline {
+        /// The two-sided inclination average's time constant, s.
+        tau_acc: f64,
+        /// The magnetometer's heading error at rest and in motion, degrees.
+        rest_deg: f64,
+        motion_deg: f64,
+        /// How fast the heading offset may wander, °/√s.
+        drift: f64,
+    },
+}
+
+impl Filter {
+    /// The offline filter with its default parameters.
+    pub fn offline() -> Filter {
+        let p = offline::OfflineParams::default();
+        Filter::Offline {
+            tau_acc: p.tau_acc,
+            rest_deg: p.rest_deg,
+            motion_deg: p.motion_deg,
+            drift: p.drift,
+        }
+    }
 }
 
 /// The fusion settings: a filter, and whether to leave the magnetometer out (6D).
@@ -93,7 +119,18 @@ pub struct Fusion {
 }
 
 impl Default for Fusion {
+    /// The default for a whole take: the offline fusion ([`offline`]).
     fn default() -> Self {
+        Fusion {
+            filter: Filter::offline(),
+            six_d: false,
+        }
+    }
+}
+
+impl Fusion {
+    /// The default when samples come one at a time (streams, `--causal`): online VQF.
+    pub fn online_default() -> Self {
         let p = vqf::VqfParams::default();
         Fusion {
             filter: Filter::Vqf {
@@ -115,6 +152,15 @@ impl fmt::Display for Fusion {
             Filter::Mahony { kp, ki } => write!(f, "mahony:kp={kp},ki={ki}")?,
             Filter::Trust { range_dps } => write!(f, "trust:range={range_dps}")?,
             Filter::Gyro => write!(f, "gyro")?,
+            Filter::Offline {
+                tau_acc,
+                rest_deg,
+                motion_deg,
+                drift,
+            } => write!(
+                f,
+                "offline:tau_acc={tau_acc},rest={rest_deg},motion={motion_deg},drift={drift}"
+            )?,
         }
         if self.six_d {
             f.write_str(if matches!(self.filter, Filter::Gyro) {
@@ -196,9 +242,23 @@ impl FromStr for Fusion {
                 take(&[], &mut [])?;
                 Filter::Gyro
             }
+            "offline" => {
+                let d = offline::OfflineParams::default();
+                let mut v = [d.tau_acc, d.rest_deg, d.motion_deg, d.drift];
+                take(&["tau_acc", "rest", "motion", "drift"], &mut v)?;
+                if v[0] <= 0.0 || v[1] <= 0.0 || v[2] <= 0.0 {
+                    return Err(format!("`{s}`: tau_acc, rest and motion must be above 0"));
+                }
+                Filter::Offline {
+                    tau_acc: v[0],
+                    rest_deg: v[1],
+                    motion_deg: v[2],
+                    drift: v[3],
+                }
+            }
             _ => {
                 return Err(format!(
-                    "unknown fusion `{name}`; expected vqf, madgwick, mahony, trust or gyro"
+                    "unknown fusion `{name}`; expected offline, vqf, madgwick, mahony, trust or gyro"
                 ));
             }
         };
@@ -215,6 +275,22 @@ pub const DEFAULT_MAHONY_KI: f64 = 0.0012;
 pub const DEFAULT_GYRO_RANGE_DPS: f64 = 2000.0;
 
 impl Fusion {
+    /// Whether the filter needs the whole take (a stream runs [`Fusion::core`] instead).
+    pub fn is_offline(&self) -> bool {
+        matches!(self.filter, Filter::Offline { .. })
+    }
+
+    /// The online setting a stream runs for this one (offline → VQF).
+    pub fn online(&self) -> Fusion {
+        match self.filter {
+            Filter::Offline { .. } => Fusion {
+                six_d: self.six_d,
+                ..Fusion::online_default()
+            },
+            _ => self.clone(),
+        }
+    }
+
     /// The filter's core, starting from the first readings' attitude (VQF starts itself).
     pub fn core(
         &self,
@@ -236,6 +312,12 @@ impl Fusion {
             Filter::Mahony { kp, ki } => Box::new(mahony::Mahony::new(kp, ki, q0)),
             Filter::Trust { range_dps } => Box::new(trust::Trust::new(range_dps.to_radians(), q0)),
             Filter::Gyro => Box::new(gyro::GyroIntegration::new(q0)),
+            // Sample by sample there is no future: online VQF with the passes' parameters.
+            Filter::Offline { .. } => Box::new(vqf::Vqf::new(
+                &vqf::VqfParams::default(),
+                sample_time_s,
+                nine_d,
+            )),
         }
     }
 }
@@ -280,6 +362,23 @@ pub struct FusionStats {
     pub series: Vec<(f64, f64, bool, bool)>,
 }
 
+/// A filter's outputs at each step.
+struct Run {
+    orientation: Vec<UnitQuaternion<f64>>,
+    bias: Vec<Option<Vector3<f64>>>,
+    rejected: Vec<Rejected>,
+}
+
+impl Run {
+    fn with_capacity(n: usize) -> Run {
+        Run {
+            orientation: Vec::with_capacity(n),
+            bias: Vec::with_capacity(n),
+            rejected: Vec::with_capacity(n),
+        }
+    }
+}
+
 /// A sensor's fused orientation track and what it came to.
 #[derive(Debug, Clone)]
 pub struct Fused {
@@ -289,15 +388,15 @@ pub struct Fused {
     pub warnings: Vec<String>,
 }
 
-/// The median of a few values (sorted copy).
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+/// The median (the upper one of an even count), in linear time.
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Checks that readings are in the units the columns say: gyro rates no body reaches (°/s read
-/// as rad/s) and an accelerometer whose typical norm is not gravity's (g read as m/s², or another
-/// scale) are errors; a gyro that sits at its limit is a warning.
+/// as rad/s) and an accelerometer whose norm when nearly still is not gravity's (g read as m/s²,
+/// or another scale) are errors; a gyro that sits at its limit is a warning.
 fn check_units(sensor: &str, inertial: &Track<ImuSample>) -> Result<Vec<String>, FusionError> {
     let mut warnings = Vec::new();
     let max_rate = inertial
@@ -311,13 +410,18 @@ fn check_units(sensor: &str, inertial: &Track<ImuSample>) -> Result<Vec<String>,
             max: max_rate,
         });
     }
-    let norms: Vec<f64> = inertial
+    // The accelerometer's norm when the sensor is nearly still: among (up to 2000 spread)
+    // samples, the tenth that turn slowest, whose specific force is mostly gravity's — a foot in
+    // a fast walk reads 1.6 g on its median sample but 1 g in stance.
+    let mut sampled: Vec<(f64, f64)> = inertial
         .values()
         .iter()
         .step_by((inertial.len() / 2000).max(1))
-        .map(|s| s.accel_m_s2.norm())
+        .map(|s| (s.gyro_rad_s.norm(), s.accel_m_s2.norm()))
         .collect();
-    let norm = median(norms);
+    sampled.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let stillest = sampled.len().div_ceil(10);
+    let norm = median(sampled[..stillest].iter().map(|s| s.1).collect());
     if !(6.0..=14.0).contains(&norm) {
         let hint = if (0.6..=1.4).contains(&norm) {
             "Hint: the readings are probably in g: name the columns ax_g, ay_g, az_g"
@@ -402,57 +506,115 @@ pub fn fuse(
         }
         (mt[*index] <= t || *index == 0).then(|| m.values()[*index])
     };
-    let first = &inertial.values()[0];
-    let first_mag = mag_at(times[0], &mut mag_index);
-    let q0 = init::attitude(&first.accel_m_s2, first_mag.as_ref()).ok_or_else(|| {
-        FusionError::NoStart {
-            sensor: sensor.to_string(),
-        }
-    })?;
-    let mut core = fusion.core(q0, nominal_dt, nine_d);
-    let mut out = Vec::with_capacity(inertial.len());
-    let (mut mag_rejected, mut acc_rejected) = (0usize, 0usize);
-    let mut series = Vec::new();
-    let mut next_series_t = f64::NEG_INFINITY;
+    // The steps the filter takes: each inertial sample, after the filled-in samples of a short
+    // gap before it. `real[k]`: step k is a sample of the track.
+    let mut steps: Vec<offline::Step> = Vec::with_capacity(inertial.len());
+    let mut real: Vec<bool> = Vec::with_capacity(inertial.len());
     let mut filled = 0usize;
     for (i, (t, s)) in inertial.iter().enumerate() {
         let m = mag_at(t, &mut mag_index);
+        let step = |gyr, acc, dt| offline::Step {
+            gyr,
+            acc,
+            mag: m,
+            dt,
+        };
         let dt = if i == 0 { nominal_dt } else { t - times[i - 1] };
-        let steps = (dt / nominal_dt).round();
-        if i > 0 && steps >= 2.0 {
+        let count = (dt / nominal_dt).round();
+        if i > 0 && count >= 2.0 {
             let prev = &inertial.values()[i - 1];
-            if steps <= MAX_FILLED_STEPS as f64 + 1.0 {
+            if count <= MAX_FILLED_STEPS as f64 + 1.0 {
                 // Missing samples: readings interpolated at the nominal rate, so the rotation
                 // over the gap follows the rates at both ends and the filters' low-pass stages
                 // keep their steady rate.
-                let steps = steps as usize;
-                let step_dt = dt / steps as f64;
-                for j in 1..steps {
-                    let u = j as f64 / steps as f64;
-                    let gyr = prev.gyro_rad_s.lerp(&s.gyro_rad_s, u);
-                    let acc = prev.accel_m_s2.lerp(&s.accel_m_s2, u);
-                    core.update(&gyr, &acc, m.as_ref(), step_dt);
+                let count = count as usize;
+                let step_dt = dt / count as f64;
+                for j in 1..count {
+                    let u = j as f64 / count as f64;
+                    steps.push(step(
+                        prev.gyro_rad_s.lerp(&s.gyro_rad_s, u),
+                        prev.accel_m_s2.lerp(&s.accel_m_s2, u),
+                        step_dt,
+                    ));
+                    real.push(false);
                 }
-                filled += steps - 1;
-                core.update(&s.gyro_rad_s, &s.accel_m_s2, m.as_ref(), step_dt);
+                filled += count - 1;
+                steps.push(step(s.gyro_rad_s, s.accel_m_s2, step_dt));
             } else {
                 // A long gap: the rotation in it is unknown; carry on from where it stopped.
-                core.update(&s.gyro_rad_s, &s.accel_m_s2, m.as_ref(), nominal_dt);
+                steps.push(step(s.gyro_rad_s, s.accel_m_s2, nominal_dt));
                 warnings.push(format!(
                     "sensor `{sensor}`: no reading for {dt:.2} s before {t:.3} s; fusion carried on \
                      from the orientation before the gap"
                 ));
             }
         } else {
-            core.update(&s.gyro_rad_s, &s.accel_m_s2, m.as_ref(), dt);
+            steps.push(step(s.gyro_rad_s, s.accel_m_s2, dt));
         }
-        out.push(core.orientation());
-        let rejected = core.rejected();
+        real.push(true);
+    }
+    let run = match &fusion.filter {
+        Filter::Offline {
+            tau_acc,
+            rest_deg,
+            motion_deg,
+            drift,
+        } => {
+            let params = offline::OfflineParams {
+                tau_acc: *tau_acc,
+                rest_deg: *rest_deg,
+                motion_deg: *motion_deg,
+                drift: *drift,
+                ..offline::OfflineParams::default()
+            };
+            let r = offline::fuse_offline(&steps, nominal_dt, nine_d, &params);
+            Run {
+                orientation: r.orientation,
+                bias: r.bias.into_iter().map(Some).collect(),
+                rejected: r
+                    .magnetic_disturbance
+                    .into_iter()
+                    .map(|magnetic| Rejected {
+                        magnetic,
+                        acceleration: false,
+                    })
+                    .collect(),
+            }
+        }
+        _ => {
+            let first = &inertial.values()[0];
+            let q0 = init::attitude(&first.accel_m_s2, steps[0].mag.as_ref()).ok_or_else(|| {
+                FusionError::NoStart {
+                    sensor: sensor.to_string(),
+                }
+            })?;
+            let mut core = fusion.core(q0, nominal_dt, nine_d);
+            let mut run = Run::with_capacity(steps.len());
+            for s in &steps {
+                core.update(&s.gyr, &s.acc, s.mag.as_ref(), s.dt);
+                run.orientation.push(core.orientation());
+                run.bias.push(core.gyro_bias());
+                run.rejected.push(core.rejected());
+            }
+            run
+        }
+    };
+    // What the track's own samples came to.
+    let mut out = Vec::with_capacity(inertial.len());
+    let (mut mag_rejected, mut acc_rejected) = (0usize, 0usize);
+    let mut series = Vec::new();
+    let mut next_series_t = f64::NEG_INFINITY;
+    let mut last_bias = None;
+    let kept = (0..steps.len()).filter(|k| real[*k]);
+    for ((k, t), _) in kept.zip(times).zip(0..) {
+        out.push(run.orientation[k]);
+        let rejected = run.rejected[k];
         mag_rejected += usize::from(rejected.magnetic);
         acc_rejected += usize::from(rejected.acceleration);
-        if t >= next_series_t {
-            let bias = core.gyro_bias().map_or(0.0, |b| b.norm().to_degrees());
-            series.push((t, bias, rejected.magnetic, rejected.acceleration));
+        last_bias = run.bias[k];
+        if *t >= next_series_t {
+            let bias = run.bias[k].map_or(0.0, |b| b.norm().to_degrees());
+            series.push((*t, bias, rejected.magnetic, rejected.acceleration));
             next_series_t = t + 0.1;
         }
     }
@@ -460,9 +622,7 @@ pub fn fuse(
     let stats = FusionStats {
         variant: if nine_d { "9d" } else { "6d" },
         filled_samples: filled,
-        gyro_bias_dps: core
-            .gyro_bias()
-            .map(|b| [b.x.to_degrees(), b.y.to_degrees(), b.z.to_degrees()]),
+        gyro_bias_dps: last_bias.map(|b| [b.x.to_degrees(), b.y.to_degrees(), b.z.to_degrees()]),
         magnetic_rejected: mag_rejected as f64 / n,
         acceleration_rejected: acc_rejected as f64 / n,
         series,
@@ -519,7 +679,9 @@ mod tests {
         assert_eq!(f.filter, Filter::Madgwick { beta: 0.05 });
         assert!(f.six_d);
         assert_eq!(f.to_string(), "madgwick:beta=0.05,6d");
-        assert_eq!("vqf".parse::<Fusion>().unwrap(), Fusion::default());
+        assert_eq!("vqf".parse::<Fusion>().unwrap(), Fusion::online_default());
+        assert_eq!("offline".parse::<Fusion>().unwrap(), Fusion::default());
+        assert_eq!(Fusion::default().online(), Fusion::online_default());
         assert!(
             "vqf:beta=1"
                 .parse::<Fusion>()

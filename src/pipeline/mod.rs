@@ -345,15 +345,7 @@ fn sources_and_window(
         .or(mapping.world)
         .unwrap_or(take.source().world);
     let resolved = mapping.resolve(rig, mapping_file)?;
-    let sources = sources::orientations(
-        take,
-        rig,
-        mapping,
-        resolved,
-        world,
-        options.fusion.as_ref(),
-        warnings,
-    )?;
+    let sources = sources::orientations(take, rig, mapping, resolved, world, options, warnings)?;
     let window = calibrate::window(mapping, &sources.sensors, warnings);
     Ok((world, sources, window))
 }

@@ -78,18 +78,35 @@ fn plan<'a>(sensor: Option<&'a Sensor>, fusion_asked: bool) -> Plan<'a> {
 /// take, or without readings that give an orientation, is a warning (its bone keeps its rest
 /// rotation), and so is a sensor of the take the mapping does not use; no usable sensor at all is
 /// an error, and so are raw readings that cannot be right ([`fusion::FusionError`]). `world` is
-/// the device orientations' world; `fusion` the filter asked for (`None`: device orientations
-/// where there are some, the default filter elsewhere).
+/// the device orientations' world; `options.fusion` the filter asked for (`None`: device
+/// orientations where there are some, the default filter elsewhere: offline, or online VQF in
+/// causal mode).
 pub fn orientations(
     take: &Take,
     rig: &Rig,
     mapping: &Mapping,
     resolved: Vec<ResolvedSensor>,
     world: World,
-    fusion: Option<&Fusion>,
+    options: &super::PipelineOptions,
     warnings: &mut Vec<String>,
 ) -> Result<Sources, PipelineError> {
-    let filter = fusion.cloned().unwrap_or_default();
+    let (fusion, causal) = (options.fusion.as_ref(), options.causal);
+    // A whole take gets the offline fusion by default; causal mode (a stream's view) cannot look
+    // ahead, so it runs the online counterpart of whatever was asked for.
+    let filter = match (fusion, causal) {
+        (None, false) => Fusion::default(),
+        (None, true) => Fusion::online_default(),
+        (Some(f), false) => f.clone(),
+        (Some(f), true) => {
+            if f.is_offline() {
+                warnings.push(format!(
+                    "fusion `{f}` needs the whole take; causal mode fuses with `{}` instead",
+                    f.online()
+                ));
+            }
+            f.online()
+        }
+    };
     let mut kept = Vec::new();
     for s in resolved {
         let bone = &rig.joints()[s.bone].name;
@@ -216,7 +233,7 @@ mod tests {
             &mapping,
             resolved,
             World::Enu,
-            None,
+            &crate::pipeline::PipelineOptions::default(),
             &mut warnings,
         )
         .unwrap();

@@ -1,0 +1,623 @@
+//! Offline fusion: a whole take at once, so each orientation uses the samples after it as well as
+//! those before (as Xsens' "HD reprocessing" does). Built on VQF's offline idea (Laidig & Seel
+//! 2023) and changed where the measurements said so:
+//!
+//! 1. **Gyro bias from rest.** Where the take holds rest (VQF's detector: gyro and accelerometer
+//!    steady for 1.5 s), each stretch's mean gyro is the bias there, and between stretches the
+//!    two nearest are carried forward and backward with an uncertainty that grows with time and
+//!    merged by inverse variance ([`bias_from_rest`]). VQF's online estimate in motion leans on the
+//!    accelerometer, which a body that keeps accelerating misleads (the final estimates on a
+//!    simulated walk: 0.03–0.13 °/s off with it, 0.01–0.10 from rest). A take without rest gets
+//!    VQF's own estimate, run forward and backward and merged by covariance ([`vqf_passes`]).
+//! 2. **Strapdown.** The bias-corrected gyro is integrated, `q₃ᵢ = q₃ᵢ₋₁ ⊗ exp((ωᵢ − bᵢ) Δtᵢ)`: an
+//!    almost inertial frame that only drifts by the bias left over.
+//! 3. **Inclination from a long two-sided average.** The specific force is taken into that frame,
+//!    `aᴵ = q₃ ⊗ a`, and low-passed forward and backward (second-order Butterworth, time constant
+//!    `tau_acc`, default 10 s; VQF's online 3 s). In an inertial frame the mean of a body's
+//!    acceleration over a window is its change of velocity over the window's length, so over a
+//!    long symmetric window only gravity is left: a person walking a loop at 1.7 m/s has ~1.5 m/s²
+//!    of centripetal acceleration for seconds, which a 3 s one-sided filter takes for ~3° of tilt.
+//!    Each sample is then turned so its averaged specific force points up (`q₆`).
+//! 4. **Heading, smoothed.** The field's heading in that frame, `zᵢ = atan2(mᴱₓ, mᴱᵧ)`, measures
+//!    the heading offset `δ` up to the magnetometer's own errors, which are small at rest and
+//!    large in motion (calibration that depends on orientation, fields that are not uniform) and
+//!    unbounded in a disturbance — found with hindsight: a field whose norm or dip is off the
+//!    take's median by more than 10 % or 10° ([`DISTURBED_NORM`], [`DISTURBED_DIP_DEG`]) is left
+//!    out, however long. `δ` is a random walk (what bias is left drives it, `drift` °/√s) seen
+//!    through those measurements — σ = `rest_deg` at rest, `motion_deg` in motion — and estimated
+//!    by a Kalman filter forward and a Rauch–Tung–Striebel pass backward: the heading leans on the
+//!    field where the field is trustworthy and on the gyro between. `q₉ = R_z(δ) ⊗ q₆`.
+//!
+//! Measured on BROAD and on simulated bodies (docs, "Accuracy"); every step is in this file.
+
+use crate::smooth::butterworth::{design_lowpass_sos, sosfilt_with_state, sosfilt_zi};
+use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
+use vqf_rs::{Params, VQF};
+
+/// One step of the take: readings (sensor frame) and the time since the previous step.
+#[derive(Debug, Clone, Copy)]
+pub struct Step {
+    pub gyr: Vector3<f64>,
+    pub acc: Vector3<f64>,
+    pub mag: Option<Vector3<f64>>,
+    pub dt: f64,
+}
+
+/// The offline fusion's settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OfflineParams {
+    /// Time constant of the two-sided inclination average, seconds.
+    pub tau_acc: f64,
+    /// VQF's own accelerometer time constant in the bias passes, seconds.
+    pub pass_tau_acc: f64,
+    /// VQF's heading time constant in the bias passes, seconds.
+    pub tau_mag: f64,
+    /// The magnetometer's heading error at rest, degrees (σ).
+    pub rest_deg: f64,
+    /// Its heading error in motion, degrees (σ).
+    pub motion_deg: f64,
+    /// How fast the heading offset may wander, °/√s.
+    pub drift: f64,
+}
+
+impl Default for OfflineParams {
+    fn default() -> Self {
+        OfflineParams {
+            tau_acc: 10.0,
+            pass_tau_acc: 3.0,
+            tau_mag: 9.0,
+            rest_deg: 2.0,
+            motion_deg: 20.0,
+            drift: 0.02,
+        }
+    }
+}
+
+/// What the offline fusion gives, one entry per step.
+#[derive(Debug, Clone)]
+pub struct OfflineResult {
+    /// `q_enu_sensor` (9D), or with an arbitrary heading (6D).
+    pub orientation: Vec<UnitQuaternion<f64>>,
+    /// The merged gyro bias, rad/s.
+    pub bias: Vec<Vector3<f64>>,
+    pub rest: Vec<bool>,
+    pub magnetic_disturbance: Vec<bool>,
+}
+
+/// A VQF for the bias passes.
+fn vqf(params: &OfflineParams, ts: f64) -> VQF {
+    let p = Params {
+        tau_acc: params.pass_tau_acc,
+        tau_mag: params.tau_mag,
+        ..Params::default()
+    };
+    VQF::new(ts, None, None, Some(p))
+}
+
+/// Rest as VQF detects it (its thresholds): the gyro and the accelerometer within 2 °/s and
+/// 0.5 m/s² of their own low-passed values (first order, τ = 0.5 s), the low-passed gyro under
+/// 2 °/s on every axis, for at least 1.5 s. The stretches of rest, as step ranges.
+pub fn rest_segments(steps: &[Step]) -> Vec<std::ops::Range<usize>> {
+    const TAU_S: f64 = 0.5;
+    const MIN_S: f64 = 1.5;
+    let (gyr_th, acc_th) = (2f64.to_radians(), 0.5);
+    let Some(first) = steps.first() else {
+        return Vec::new();
+    };
+    let (mut gyr_lp, mut acc_lp) = (first.gyr, first.acc);
+    let mut segments = Vec::new();
+    let (mut start, mut still_s) = (0, 0.0);
+    for (i, s) in steps.iter().enumerate() {
+        let alpha = s.dt / (TAU_S + s.dt);
+        gyr_lp += (s.gyr - gyr_lp) * alpha;
+        acc_lp += (s.acc - acc_lp) * alpha;
+        let still = (s.gyr - gyr_lp).norm() < gyr_th
+            && (s.acc - acc_lp).norm() < acc_th
+            && gyr_lp.amax() < gyr_th;
+        if still {
+            if still_s == 0.0 {
+                start = i;
+            }
+            still_s += s.dt;
+        } else {
+            if still_s >= MIN_S {
+                segments.push(start..i);
+            }
+            still_s = 0.0;
+        }
+    }
+    if still_s >= MIN_S {
+        segments.push(start..steps.len());
+    }
+    segments
+}
+
+/// How fast the bias may wander away from what rest showed: its uncertainty grows to 0.05 °/s
+/// in 100 s (VQF's bias forgetting time), as a variance per second, (rad/s)²/s.
+const BIAS_WANDER: f64 =
+    0.05 * 0.05 * (std::f64::consts::PI / 180.0) * (std::f64::consts::PI / 180.0) / 100.0;
+/// The smallest uncertainty of a stretch's mean gyro, rad/s.
+const BIAS_FLOOR: f64 = 0.005 * std::f64::consts::PI / 180.0;
+
+/// The gyro bias at every step from the stretches of rest: each stretch's mean gyro (its variance
+/// that of a mean, at least [`BIAS_FLOOR`]²), carried forward and backward with a variance that
+/// grows by [`BIAS_WANDER`] per second, the two merged by their inverse variances; inside a
+/// stretch, its mean.
+pub fn bias_from_rest(steps: &[Step], segments: &[std::ops::Range<usize>]) -> Vec<Vector3<f64>> {
+    let n = steps.len();
+    let mut time = Vec::with_capacity(n);
+    let mut t = 0.0;
+    for s in steps {
+        t += s.dt;
+        time.push(t);
+    }
+    let stats: Vec<(Vector3<f64>, f64)> = segments
+        .iter()
+        .map(|r| {
+            let count = r.len() as f64;
+            let mean = steps[r.clone()].iter().map(|s| s.gyr).sum::<Vector3<f64>>() / count;
+            let var = steps[r.clone()]
+                .iter()
+                .map(|s| (s.gyr - mean).norm_squared() / 3.0)
+                .sum::<f64>()
+                / count.max(2.0);
+            (mean, (var / count).max(BIAS_FLOOR * BIAS_FLOOR))
+        })
+        .collect();
+    let mut bias = vec![Vector3::zeros(); n];
+    let mut next = 0; // the first segment that ends after step i
+    for i in 0..n {
+        while next < segments.len() && segments[next].end <= i {
+            next += 1;
+        }
+        if next < segments.len() && segments[next].contains(&i) {
+            bias[i] = stats[next].0;
+            continue;
+        }
+        let before = next.checked_sub(1).map(|k| {
+            let end = time[segments[k].end - 1];
+            (stats[k].0, stats[k].1 + BIAS_WANDER * (time[i] - end))
+        });
+        let after = (next < segments.len()).then(|| {
+            let start = time[segments[next].start];
+            (
+                stats[next].0,
+                stats[next].1 + BIAS_WANDER * (start - time[i]),
+            )
+        });
+        bias[i] = match (before, after) {
+            (Some((b1, v1)), Some((b2, v2))) => (b1 / v1 + b2 / v2) / (1.0 / v1 + 1.0 / v2),
+            (Some((b, _)), None) | (None, Some((b, _))) => b,
+            (None, None) => Vector3::zeros(),
+        };
+    }
+    bias
+}
+
+fn matrix(m: &vqf_rs::Matrix<3, 3>) -> Matrix3<f64> {
+    Matrix3::from_fn(|r, c| m.0[r][c])
+}
+
+/// The bias for a take without rest: VQF forward and backward (time reversed, gyro negated), its
+/// estimates at rest and in motion merged at each step by their covariances,
+/// `b = (P₁⁻¹ + P₂⁻¹)⁻¹ (P₁⁻¹ b₁ − P₂⁻¹ b₂)` (the backward pass sees `−b`); rest where either pass
+/// found it. The passes leave the magnetometer out (the bias comes from the gyro and the
+/// accelerometer), and run on blocks of steps averaged down to about 50 Hz: the bias changes over
+/// minutes, and the passes are most of the offline fusion's cost.
+fn vqf_passes(steps: &[Step], ts: f64, params: &OfflineParams) -> (Vec<Vector3<f64>>, Vec<bool>) {
+    let k = ((PASS_PERIOD_S / ts).round() as usize).max(1);
+    let blocks: Vec<Step> = steps
+        .chunks(k)
+        .map(|c| {
+            let m = c.len() as f64;
+            Step {
+                gyr: c.iter().map(|s| s.gyr).sum::<Vector3<f64>>() / m,
+                acc: c.iter().map(|s| s.acc).sum::<Vector3<f64>>() / m,
+                mag: None,
+                dt: c.iter().map(|s| s.dt).sum(),
+            }
+        })
+        .collect();
+    let n = blocks.len();
+    let ts = ts * k as f64;
+    let arr = |v: &Vector3<f64>| [v.x, v.y, v.z];
+    let mut filter = vqf(params, ts);
+    let mut info_bias = Vec::with_capacity(n);
+    let mut info = Vec::with_capacity(n);
+    let mut rest = Vec::with_capacity(n);
+    for s in &blocks {
+        filter.update_gyr_with_ts(arr(&s.gyr), s.dt);
+        filter.update_acc(arr(&s.acc));
+        let p_inv = matrix(&filter.state().bias_p)
+            .try_inverse()
+            .unwrap_or_else(Matrix3::zeros);
+        info_bias.push(p_inv * Vector3::from(filter.state().bias));
+        info.push(p_inv);
+        rest.push(filter.rest_detected());
+    }
+    let mut filter = vqf(params, ts);
+    let mut bias = vec![Vector3::zeros(); n];
+    for i in (0..n).rev() {
+        let s = &blocks[i];
+        // Backward, the step from block i + 1 to block i spans the later block's interval.
+        let dt = blocks.get(i + 1).map_or(s.dt, |next| next.dt);
+        filter.update_gyr_with_ts(arr(&-s.gyr), dt);
+        filter.update_acc(arr(&s.acc));
+        let p_inv = matrix(&filter.state().bias_p)
+            .try_inverse()
+            .unwrap_or_else(Matrix3::zeros);
+        let b = Vector3::from(filter.state().bias);
+        bias[i] = (info[i] + p_inv)
+            .try_inverse()
+            .map_or(Vector3::zeros(), |t| t * (info_bias[i] - p_inv * b));
+        rest[i] |= filter.rest_detected();
+    }
+    // Back to one value per step.
+    let per_step = |v: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
+        v.iter()
+            .flat_map(|b| std::iter::repeat_n(*b, k))
+            .take(steps.len())
+            .collect()
+    };
+    let rest = rest
+        .iter()
+        .flat_map(|r| std::iter::repeat_n(*r, k))
+        .take(steps.len())
+        .collect();
+    (per_step(&bias), rest)
+}
+
+/// The bias passes' sampling period, seconds (about 50 Hz).
+const PASS_PERIOD_S: f64 = 0.02;
+
+/// Fuses `steps` (sampled every `ts` seconds nominally) offline; `nine_d` uses the magnetometer.
+pub fn fuse_offline(
+    steps: &[Step],
+    ts: f64,
+    nine_d: bool,
+    params: &OfflineParams,
+) -> OfflineResult {
+    let n = steps.len();
+    // 1. The gyro bias: from the stretches of rest where there are some; else from VQF's passes.
+    let segments = rest_segments(steps);
+    let (bias, rest) = if segments.is_empty() {
+        vqf_passes(steps, ts, params)
+    } else {
+        let mut rest = vec![false; n];
+        for r in &segments {
+            rest[r.clone()].fill(true);
+        }
+        (bias_from_rest(steps, &segments), rest)
+    };
+
+    // 2. Strapdown integration.
+    let mut q3 = Vec::with_capacity(n);
+    let mut q = UnitQuaternion::identity();
+    for (s, b) in steps.iter().zip(&bias) {
+        q *= UnitQuaternion::from_scaled_axis((s.gyr - b) * s.dt);
+        q3.push(q);
+    }
+
+    // 3. Inclination: the specific force in that frame, averaged both ways.
+    let acc_inertial: Vec<Vector3<f64>> = q3.iter().zip(steps).map(|(q, s)| q * s.acc).collect();
+    let averaged = lowpass_both_ways(&acc_inertial, params.tau_acc, ts);
+    let mut correction = UnitQuaternion::identity();
+    let q6: Vec<UnitQuaternion<f64>> = q3
+        .iter()
+        .zip(&averaged)
+        .map(|(q, a)| {
+            let up = (correction * a)
+                .try_normalize(1e-12)
+                .unwrap_or_else(Vector3::z);
+            // The smallest turn taking `up` to +z.
+            let w = ((up.z + 1.0) / 2.0).max(0.0).sqrt();
+            let step = if w > 1e-6 {
+                UnitQuaternion::new_normalize(Quaternion::new(
+                    w,
+                    0.5 * up.y / w,
+                    -0.5 * up.x / w,
+                    0.0,
+                ))
+            } else {
+                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+            };
+            correction = step * correction;
+            correction * q
+        })
+        .collect();
+    if !nine_d {
+        return OfflineResult {
+            orientation: q6,
+            bias,
+            rest,
+            magnetic_disturbance: vec![false; n],
+        };
+    }
+
+    // 4. Heading offset, filtered forward and smoothed backward, from the samples whose field
+    // is the take's own (disturbances found with hindsight).
+    let field: Vec<Option<Vector3<f64>>> = steps
+        .iter()
+        .zip(&q6)
+        .map(|(s, q)| s.mag.map(|m| q * m).filter(|m| m.x != 0.0 || m.y != 0.0))
+        .collect();
+    let disturbed = disturbances(&field);
+    let measurements: Vec<Option<(f64, f64)>> = field
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let m = (*m)?;
+            if disturbed[i] {
+                return None;
+            }
+            let sigma = if rest[i] {
+                params.rest_deg
+            } else {
+                params.motion_deg
+            };
+            Some((m.x.atan2(m.y), sigma.to_radians().powi(2)))
+        })
+        .collect();
+    let drift = params.drift.to_radians().powi(2);
+    let delta = smooth_heading(&measurements, steps, drift);
+    let orientation = q6
+        .iter()
+        .zip(&delta)
+        .map(|(q, d)| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), *d) * q)
+        .collect();
+    OfflineResult {
+        orientation,
+        bias,
+        rest,
+        magnetic_disturbance: disturbed,
+    }
+}
+
+/// The relative change of the field's norm, and the change of its dip, beyond which a sample's
+/// field is not the take's own (VQF's thresholds for the same test).
+pub const DISTURBED_NORM: f64 = 0.1;
+pub const DISTURBED_DIP_DEG: f64 = 10.0;
+
+/// The samples whose field (inclination-corrected frame) is not the take's own: norm or dip off
+/// the take's median by more than [`DISTURBED_NORM`] or [`DISTURBED_DIP_DEG`]. Seen over the
+/// whole take, a disturbance is bounded from both ends, and no reference has to be accepted
+/// first (VQF online holds every field for disturbed until it has turned for about 5 s).
+fn disturbances(field: &[Option<Vector3<f64>>]) -> Vec<bool> {
+    // Norm and dip of each field, once.
+    let measured: Vec<Option<(f64, f64)>> = field
+        .iter()
+        .map(|m| m.map(|m| (m.norm(), (m.z / m.norm()).asin())))
+        .collect();
+    let norms: Vec<f64> = measured.iter().flatten().map(|m| m.0).collect();
+    if norms.is_empty() {
+        return vec![false; field.len()];
+    }
+    let norm = super::median(norms);
+    let dip = super::median(measured.iter().flatten().map(|m| m.1).collect());
+    measured
+        .iter()
+        .map(|m| {
+            m.is_some_and(|(n, d)| {
+                (n - norm).abs() > DISTURBED_NORM * norm
+                    || (d - dip).abs() > DISTURBED_DIP_DEG.to_radians()
+            })
+        })
+        .collect()
+}
+
+/// Each component low-passed forward and backward (second-order Butterworth with VQF's relation
+/// between time constant and cutoff, `f_c = √2 / (2π τ)`). Each pass starts in the steady state
+/// of the mean of its first `τ` seconds — not of one sample, which for a filter this slow would
+/// stand in for the first seconds of the take (VQF's offline filter does the same). A take too
+/// short for the filter is averaged whole.
+fn lowpass_both_ways(x: &[Vector3<f64>], tau: f64, ts: f64) -> Vec<Vector3<f64>> {
+    let fs = 1.0 / ts;
+    let cutoff = std::f64::consts::SQRT_2 / (2.0 * std::f64::consts::PI * tau);
+    let window = ((tau / ts).round() as usize).clamp(1, x.len().max(1));
+    let sos = design_lowpass_sos(2, cutoff.min(0.45 * fs), fs).ok();
+    let zi = sos.as_ref().and_then(|sos| sosfilt_zi(sos).ok());
+    let (Some(sos), Some(zi)) = (sos, zi) else {
+        let mean = x.iter().sum::<Vector3<f64>>() / x.len().max(1) as f64;
+        return vec![mean; x.len()];
+    };
+    let pass = |series: &[f64]| -> Vec<f64> {
+        let start = series[..window].iter().sum::<f64>() / window as f64;
+        let mut state: Vec<[f64; 2]> = zi.iter().map(|z| [z[0] * start, z[1] * start]).collect();
+        sosfilt_with_state(&sos, series, &mut state)
+    };
+    let axis = |k: usize| -> Vec<f64> {
+        let series: Vec<f64> = x.iter().map(|v| v[k]).collect();
+        let mut forward = pass(&series);
+        forward.reverse();
+        let mut both = pass(&forward);
+        both.reverse();
+        both
+    };
+    let (a, b, c) = (axis(0), axis(1), axis(2));
+    (0..x.len())
+        .map(|i| Vector3::new(a[i], b[i], c[i]))
+        .collect()
+}
+
+/// The angle `a` wrapped into (−π, π].
+fn wrap(a: f64) -> f64 {
+    let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if w == -std::f64::consts::PI {
+        std::f64::consts::PI
+    } else {
+        w
+    }
+}
+
+/// A scalar random walk `δ` (process noise `drift · Δt`) seen through angle measurements with
+/// variances: a Kalman filter forward, a Rauch–Tung–Striebel pass backward; innovations wrapped.
+/// Before the first measurement the estimate is its value; without any, 0.
+fn smooth_heading(measurements: &[Option<(f64, f64)>], steps: &[Step], drift: f64) -> Vec<f64> {
+    let n = measurements.len();
+    let Some(first) = measurements.iter().flatten().next() else {
+        return vec![0.0; n];
+    };
+    let (mut x, mut p) = (first.0, first.1);
+    let mut filtered = Vec::with_capacity(n);
+    let mut predicted_p = Vec::with_capacity(n);
+    for (i, m) in measurements.iter().enumerate() {
+        if i > 0 {
+            p += drift * steps[i].dt;
+        }
+        predicted_p.push(p);
+        if let Some((z, r)) = m {
+            let k = p / (p + r);
+            x = wrap(x + k * wrap(z - x));
+            p *= 1.0 - k;
+        }
+        filtered.push((x, p));
+    }
+    let mut smoothed = vec![0.0; n];
+    smoothed[n - 1] = filtered[n - 1].0;
+    for i in (0..n - 1).rev() {
+        let (x, p) = filtered[i];
+        // The prediction for i + 1 is x itself (a random walk).
+        let c = p / predicted_p[i + 1];
+        smoothed[i] = wrap(x + c * wrap(smoothed[i + 1] - x));
+    }
+    smoothed
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_smoother_follows_the_trustworthy_measurements() {
+        // δ is 0.3 rad throughout; the measurements are exact at rest (first and last 100
+        // steps) and off by ±0.5 rad in motion: the smoothed heading stays near 0.3.
+        let steps = vec![
+            Step {
+                gyr: Vector3::zeros(),
+                acc: Vector3::z(),
+                mag: None,
+                dt: 0.01
+            };
+            1000
+        ];
+        let m: Vec<Option<(f64, f64)>> = (0..1000)
+            .map(|i| {
+                if !(100..900).contains(&i) {
+                    Some((0.3, 2f64.to_radians().powi(2)))
+                } else {
+                    let off = if i % 2 == 0 { 0.5 } else { -0.5 };
+                    Some((0.3 + off, 20f64.to_radians().powi(2)))
+                }
+            })
+            .collect();
+        let d = smooth_heading(&m, &steps, 0.02f64.to_radians().powi(2));
+        assert!(
+            d.iter().all(|x| (x - 0.3).abs() < 0.01),
+            "{:?}",
+            &d[495..505]
+        );
+        // Angles wrap: measurements either side of ±π give a heading near π.
+        let m: Vec<Option<(f64, f64)>> = (0..1000)
+            .map(|i| Some((if i % 2 == 0 { 3.1 } else { -3.1 }, 0.01)))
+            .collect();
+        let d = smooth_heading(&m, &steps, 1e-6);
+        assert!(d.iter().all(|x| x.abs() > 3.0), "{:?}", &d[..4]);
+    }
+
+    #[test]
+    fn rest_is_found_in_stretches_and_pins_the_bias_between_them() {
+        // A gyro with a bias of 0.01 rad/s on x, then 0.02 (it warmed up): 2 s still, 3 s of
+        // turning about z at 1 rad/s, 4 s still, 1 s turning, 0.5 s still at the end (too
+        // short to count).
+        let step = |bias: f64, turning: bool| Step {
+            gyr: Vector3::new(bias, 0.0, if turning { 1.0 } else { 0.0 }),
+            acc: Vector3::new(0.0, 0.0, 9.80665),
+            mag: None,
+            dt: 0.01,
+        };
+        let steps: Vec<Step> = [
+            (200, 0.01, false),
+            (300, 0.015, true),
+            (400, 0.02, false),
+            (100, 0.02, true),
+            (50, 0.02, false),
+        ]
+        .iter()
+        .flat_map(|&(n, b, turning)| std::iter::repeat_n(step(b, turning), n))
+        .collect();
+        let segments = rest_segments(&steps);
+        assert_eq!(segments.len(), 2, "{segments:?}");
+        // The first stretch is still from its first sample; after turning, the detector's
+        // low-pass takes ~1.7 s to settle. Each ends where the turning starts.
+        assert_eq!((segments[0].start, segments[0].end), (0, 200));
+        assert!(
+            segments[1].start > 600 && segments[1].start < 720 && segments[1].end == 900,
+            "{segments:?}"
+        );
+        let bias = bias_from_rest(&steps, &segments);
+        assert!((bias[100].x - 0.01).abs() < 1e-9);
+        // Between two stretches the estimate lies between their biases, nearer the nearer one.
+        assert!(bias[300].x > 0.01 && bias[300].x < 0.015, "{}", bias[300].x);
+        assert!(bias[480].x > 0.015 && bias[480].x < 0.02, "{}", bias[480].x);
+        // After the last stretch, its bias is carried on.
+        assert!((bias[960].x - 0.02).abs() < 1e-9, "{}", bias[960].x);
+    }
+
+    #[test]
+    fn a_disturbance_is_found_with_hindsight_and_left_out() {
+        // A still sensor facing north; from 4 s to 6 s a magnet adds 40 µT along east: the field's
+        // norm changes by a quarter, and online VQF has not accepted a reference field yet.
+        let field = Vector3::new(0.0, 20.0, -40.0);
+        let steps: Vec<Step> = (0..1000)
+            .map(|i| {
+                let t = i as f64 * 0.01;
+                let extra = if (4.0..6.0).contains(&t) {
+                    Vector3::new(40.0, 0.0, 0.0)
+                } else {
+                    Vector3::zeros()
+                };
+                Step {
+                    gyr: Vector3::zeros(),
+                    acc: Vector3::new(0.0, 0.0, 9.81),
+                    mag: Some(field + extra),
+                    dt: 0.01,
+                }
+            })
+            .collect();
+        let out = fuse_offline(&steps, 0.01, true, &OfflineParams::default());
+        assert!(out.magnetic_disturbance[500] && !out.magnetic_disturbance[300]);
+        let worst = out
+            .orientation
+            .iter()
+            .map(|q| q.angle().to_degrees())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.01, "heading pulled by {worst:.3}°");
+    }
+
+    #[test]
+    fn a_still_tilted_sensor_comes_out_tilted_and_facing_its_field() {
+        // A sensor turned 30° about x then 50° about the vertical, still for 20 s at 100 Hz.
+        let truth = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 50f64.to_radians())
+            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 30f64.to_radians());
+        let acc = truth.inverse() * Vector3::new(0.0, 0.0, 9.81);
+        let mag = truth.inverse() * Vector3::new(0.0, 20.0, -40.0);
+        let steps = vec![
+            Step {
+                gyr: Vector3::zeros(),
+                acc,
+                mag: Some(mag),
+                dt: 0.01
+            };
+            2000
+        ];
+        let out = fuse_offline(&steps, 0.01, true, &OfflineParams::default());
+        for q in [out.orientation[0], out.orientation[1999]] {
+            assert!(
+                q.angle_to(&truth).to_degrees() < 0.01,
+                "{}",
+                q.angle_to(&truth).to_degrees()
+            );
+        }
+        assert!(out.rest[1000]);
+    }
+}
