@@ -8,9 +8,9 @@ use std::path::Path;
 
 /// Top-level modules by layer, lowest first (ARCHITECTURE.md, "Layers").
 const LAYERS: [&[&str]; 11] = [
-    &["fps", "world", "rotation", "diagnostic"],
+    &["fps", "world", "rotation", "diagnostic", "smooth"],
     &["take"],
-    &["read", "bvh", "smooth", "inspect", "fusion"],
+    &["read", "bvh", "inspect", "fusion"],
     &["rig"],
     &["mapping", "anim"],
     &["pipeline"],
