@@ -9,11 +9,17 @@ mod common;
 fn main() {
     let mut args = std::env::args().skip(1);
     let Some(out) = args.next() else {
-        eprintln!("usage: long_log <out.csv> [MINUTES]");
+        eprintln!("usage: long_log <out.csv> [MINUTES] [raw]");
         std::process::exit(2);
     };
     let minutes: usize = args.next().and_then(|m| m.parse().ok()).unwrap_or(60);
-    match common::write_log(
+    // `raw` as a third argument: the raw readings' twin of the same log.
+    let write = if args.next().as_deref() == Some("raw") {
+        common::write_raw_log
+    } else {
+        common::write_log
+    };
+    match write(
         std::path::Path::new(&out),
         minutes,
         &common::PAPER000_SENSORS,

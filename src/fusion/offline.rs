@@ -30,7 +30,7 @@
 //!
 //! Measured on BROAD and on simulated bodies (docs, "Accuracy"); every step is in this file.
 
-use crate::smooth::butterworth::{design_lowpass_sos, sosfilt_with_state, sosfilt_zi};
+use crate::smooth::butterworth::{design_lowpass_sos, sosfilt_step, sosfilt_zi};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use vqf_rs::{Params, VQF};
 
@@ -300,12 +300,19 @@ pub fn fuse_offline(
 
     // 3. Inclination: the specific force in that frame, averaged both ways.
     let acc_inertial: Vec<Vector3<f64>> = q3.iter().zip(steps).map(|(q, s)| q * s.acc).collect();
-    let averaged = lowpass_both_ways(&acc_inertial, params.tau_acc, ts);
+    // A take that starts (ends) at rest starts (ends) the average at gravity as rest showed it.
+    let rest_mean = |r: &std::ops::Range<usize>| {
+        acc_inertial[r.clone()].iter().sum::<Vector3<f64>>() / r.len() as f64
+    };
+    let at_start = segments.first().filter(|r| r.start == 0).map(rest_mean);
+    let at_end = segments.last().filter(|r| r.end == n).map(rest_mean);
+    let mut averaged = acc_inertial;
+    lowpass_both_ways(&mut averaged, params.tau_acc, ts, at_start, at_end);
     let mut correction = UnitQuaternion::identity();
-    let q6: Vec<UnitQuaternion<f64>> = q3
-        .iter()
-        .zip(&averaged)
-        .map(|(q, a)| {
+    // q₆ in place of q₃.
+    let mut q6 = q3;
+    for (q, a) in q6.iter_mut().zip(&averaged) {
+        *q = {
             let up = (correction * a)
                 .try_normalize(1e-12)
                 .unwrap_or_else(Vector3::z);
@@ -322,9 +329,10 @@ pub fn fuse_offline(
                 UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
             };
             correction = step * correction;
-            correction * q
-        })
-        .collect();
+            correction * *q
+        };
+    }
+    drop(averaged);
     if !nine_d {
         return OfflineResult {
             orientation: q6,
@@ -358,13 +366,15 @@ pub fn fuse_offline(
             Some((m.x.atan2(m.y), sigma.to_radians().powi(2)))
         })
         .collect();
+    drop(field);
     let drift = params.drift.to_radians().powi(2);
     let delta = smooth_heading(&measurements, steps, drift);
-    let orientation = q6
-        .iter()
-        .zip(&delta)
-        .map(|(q, d)| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), *d) * q)
-        .collect();
+    drop(measurements);
+    // q₉ in place of q₆.
+    let mut orientation = q6;
+    for (q, d) in orientation.iter_mut().zip(&delta) {
+        *q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), *d) * *q;
+    }
     OfflineResult {
         orientation,
         bias,
@@ -406,37 +416,45 @@ fn disturbances(field: &[Option<Vector3<f64>>]) -> Vec<bool> {
 }
 
 /// Each component low-passed forward and backward (second-order Butterworth with VQF's relation
-/// between time constant and cutoff, `f_c = √2 / (2π τ)`). Each pass starts in the steady state
-/// of the mean of its first `τ` seconds — not of one sample, which for a filter this slow would
-/// stand in for the first seconds of the take (VQF's offline filter does the same). A take too
-/// short for the filter is averaged whole.
-fn lowpass_both_ways(x: &[Vector3<f64>], tau: f64, ts: f64) -> Vec<Vector3<f64>> {
+/// between time constant and cutoff, `f_c = √2 / (2π τ)`). A slow filter's start matters for
+/// seconds: each pass starts in the steady state of `start` / `end` when the take begins / ends at
+/// rest (the mean specific force over that stretch: gravity), else of the mean of its first `τ`
+/// seconds — never of one sample, which in motion is anything (VQF's offline filter averages its
+/// first samples too). A take too short for the filter is averaged whole.
+fn lowpass_both_ways(
+    x: &mut [Vector3<f64>],
+    tau: f64,
+    ts: f64,
+    start: Option<Vector3<f64>>,
+    end: Option<Vector3<f64>>,
+) {
     let fs = 1.0 / ts;
     let cutoff = std::f64::consts::SQRT_2 / (2.0 * std::f64::consts::PI * tau);
-    let window = ((tau / ts).round() as usize).clamp(1, x.len().max(1));
     let sos = design_lowpass_sos(2, cutoff.min(0.45 * fs), fs).ok();
     let zi = sos.as_ref().and_then(|sos| sosfilt_zi(sos).ok());
     let (Some(sos), Some(zi)) = (sos, zi) else {
         let mean = x.iter().sum::<Vector3<f64>>() / x.len().max(1) as f64;
-        return vec![mean; x.len()];
+        x.fill(mean);
+        return;
     };
-    let pass = |series: &[f64]| -> Vec<f64> {
-        let start = series[..window].iter().sum::<f64>() / window as f64;
-        let mut state: Vec<[f64; 2]> = zi.iter().map(|z| [z[0] * start, z[1] * start]).collect();
-        sosfilt_with_state(&sos, series, &mut state)
-    };
-    let axis = |k: usize| -> Vec<f64> {
-        let series: Vec<f64> = x.iter().map(|v| v[k]).collect();
-        let mut forward = pass(&series);
-        forward.reverse();
-        let mut both = pass(&forward);
-        both.reverse();
-        both
-    };
-    let (a, b, c) = (axis(0), axis(1), axis(2));
-    (0..x.len())
-        .map(|i| Vector3::new(a[i], b[i], c[i]))
-        .collect()
+    let n = x.len();
+    let window = ((tau / ts).round() as usize).clamp(1, n.max(1));
+    // In place, one axis at a time: the take's arrays are large, and fresh ones cost page faults.
+    for k in 0..3 {
+        let mean = |range: std::ops::Range<usize>, x: &[Vector3<f64>]| {
+            x[range.clone()].iter().map(|v| v[k]).sum::<f64>() / range.len() as f64
+        };
+        let first = start.map_or_else(|| mean(0..window, x), |v| v[k]);
+        let mut state: Vec<[f64; 2]> = zi.iter().map(|z| [z[0] * first, z[1] * first]).collect();
+        for v in x.iter_mut() {
+            v[k] = sosfilt_step(&sos, v[k], &mut state);
+        }
+        let last = end.map_or_else(|| mean(n - window..n, x), |v| v[k]);
+        let mut state: Vec<[f64; 2]> = zi.iter().map(|z| [z[0] * last, z[1] * last]).collect();
+        for v in x.iter_mut().rev() {
+            v[k] = sosfilt_step(&sos, v[k], &mut state);
+        }
+    }
 }
 
 /// The angle `a` wrapped into (−π, π].
