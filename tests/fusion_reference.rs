@@ -15,35 +15,32 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde_json::Value;
 use std::process::Command;
 
-fn vectors(v: &Value) -> Vec<Vector3<f64>> {
+/// A JSON array of number arrays.
+fn rows(v: &Value) -> Vec<Vec<f64>> {
     v.as_array()
         .unwrap()
         .iter()
         .map(|r| {
-            let r: Vec<f64> = r
-                .as_array()
+            r.as_array()
                 .unwrap()
                 .iter()
                 .map(|x| x.as_f64().unwrap())
-                .collect();
-            Vector3::new(r[0], r[1], r[2])
+                .collect()
         })
         .collect()
 }
 
-fn quats(v: &Value) -> Vec<Quaternion<f64>> {
-    v.as_array()
-        .unwrap()
+fn vectors(v: &Value) -> Vec<Vector3<f64>> {
+    rows(v)
         .iter()
-        .map(|r| {
-            let r: Vec<f64> = r
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap())
-                .collect();
-            Quaternion::new(r[0], r[1], r[2], r[3])
-        })
+        .map(|r| Vector3::new(r[0], r[1], r[2]))
+        .collect()
+}
+
+fn quats(v: &Value) -> Vec<Quaternion<f64>> {
+    rows(v)
+        .iter()
+        .map(|r| Quaternion::new(r[0], r[1], r[2], r[3]))
         .collect()
 }
 
