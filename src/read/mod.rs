@@ -7,6 +7,7 @@ pub mod lines;
 pub mod opensense_sto;
 pub mod sou;
 pub mod stream;
+pub mod xio_fusion_csv;
 pub mod xio_session;
 pub mod xsens_dot;
 pub mod xsens_mtw;
@@ -180,8 +181,8 @@ fn unknown_format(path: &Path) -> ReadError {
     ReadError::format(
         path,
         "unknown capture format; expected a SOU log (`timestamp_ms,SOU_ID,yaw1,...`), an imubake CSV \
-         (header with time_s|time_ms|time_us and sensor), an OpenSense .sto, a Movella DOT CSV or an \
-         Xsens MTw .txt. Hint: name the format with --input-format",
+         (header with time_s|time_ms|time_us and sensor), an OpenSense .sto, a Movella DOT CSV, an \
+         Xsens MTw .txt or an x-io Fusion CSV. Hint: name the format with --input-format",
     )
 }
 
@@ -193,6 +194,8 @@ pub fn detect_bytes(head: &[u8]) -> Option<InputFormat> {
         Some(InputFormat::XsensMtw)
     } else if xsens_dot::looks_like(head) {
         Some(InputFormat::XsensDot)
+    } else if xio_fusion_csv::looks_like(head) {
+        Some(InputFormat::XioFusionCsv)
     } else if imubake_csv::looks_like(head) {
         Some(InputFormat::ImubakeCsv)
     } else if sou::looks_like(head) {
@@ -517,6 +520,7 @@ pub fn read_take_from_bytes(
         InputFormat::OpensenseSto => opensense_sto::read_from(bytes, path, options),
         InputFormat::XsensDot => xsens_dot::read_from(bytes, path, options),
         InputFormat::XsensMtw => xsens_mtw::read_from(bytes, path, options),
+        InputFormat::XioFusionCsv => xio_fusion_csv::read_from(bytes, path, options),
         InputFormat::XioSession => Err(ReadError::format(
             path,
             "an x-IMU3 session is a folder; a stream cannot hold one. Hint: pass the session folder",
@@ -540,6 +544,7 @@ pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> 
         InputFormat::XsensDot => xsens_dot::read(path, options),
         InputFormat::XsensMtw => xsens_mtw::read(path, options),
         InputFormat::XioSession => xio_session::read(path, options),
+        InputFormat::XioFusionCsv => xio_fusion_csv::read(path, options),
     }
 }
 

@@ -21,16 +21,19 @@ pub enum InputFormat {
     XsensMtw,
     /// x-io x-IMU3 session folder, one sub-folder per device.
     XioSession,
+    /// x-io Fusion's raw-readings CSV (`Time (s),Gyroscope X (deg/s),…`): one sensor.
+    XioFusionCsv,
 }
 
 impl InputFormat {
-    pub const ALL: [InputFormat; 6] = [
+    pub const ALL: [InputFormat; 7] = [
         InputFormat::Sou,
         InputFormat::ImubakeCsv,
         InputFormat::OpensenseSto,
         InputFormat::XsensDot,
         InputFormat::XsensMtw,
         InputFormat::XioSession,
+        InputFormat::XioFusionCsv,
     ];
 
     pub fn name(self) -> &'static str {
@@ -41,6 +44,7 @@ impl InputFormat {
             InputFormat::XsensDot => "xsens-dot",
             InputFormat::XsensMtw => "xsens-mtw",
             InputFormat::XioSession => "xio-session",
+            InputFormat::XioFusionCsv => "xio-fusion-csv",
         }
     }
 
@@ -53,6 +57,7 @@ impl InputFormat {
             InputFormat::XsensDot => "Movella/Xsens DOT CSV export",
             InputFormat::XsensMtw => "Xsens MTw .txt export",
             InputFormat::XioSession => "x-io x-IMU3 session",
+            InputFormat::XioFusionCsv => "x-io Fusion raw-readings CSV",
         }
     }
 }
