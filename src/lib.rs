@@ -14,6 +14,7 @@ pub mod diagnostic;
 pub mod fps;
 pub mod fusion;
 pub mod inspect;
+pub mod intrinsics;
 pub mod ledger;
 pub mod mapping;
 pub mod pipeline;
