@@ -75,6 +75,8 @@ pub struct Config {
     /// Fusion of raw readings, for every sensor that has them.
     #[serde(default, deserialize_with = "fusion")]
     pub fusion: Option<crate::fusion::Fusion>,
+    /// A sensor calibration file (`imubake calibrate-sensors`) applied before fusion.
+    pub sensor_calibration: Option<PathBuf>,
 }
 
 fn fusion<'de, D: Deserializer<'de>>(d: D) -> Result<Option<crate::fusion::Fusion>, D::Error> {
@@ -187,6 +189,13 @@ impl Config {
         if let Some(m) = config.mapping.as_ref().filter(|m| m.is_relative()) {
             config.mapping = Some(base.join(m));
         }
+        if let Some(c) = config
+            .sensor_calibration
+            .as_ref()
+            .filter(|c| c.is_relative())
+        {
+            config.sensor_calibration = Some(base.join(c));
+        }
         if let Some(r) = &config.rig {
             let p = Path::new(r);
             let is_file = r.ends_with(".yaml")
@@ -230,6 +239,7 @@ impl Config {
             causal: self.causal || below.causal,
             sensor_rate_hz: self.sensor_rate_hz.or(below.sensor_rate_hz),
             fusion: self.fusion.or(below.fusion),
+            sensor_calibration: self.sensor_calibration.or(below.sensor_calibration),
         }
     }
 
@@ -239,6 +249,7 @@ impl Config {
         let mut s = ConvertSettings {
             mapping: self.mapping.clone(),
             rig: self.rig.clone(),
+            sensor_calibration: self.sensor_calibration.clone(),
             ..ConvertSettings::default()
         };
         if let Some(fps) = self.fps {

@@ -39,6 +39,9 @@ pub struct ConvertSettings {
     pub mapping: Option<PathBuf>,
     /// A built-in rig name or a rig file; default: the mapping's `rig`, else `mixamo`.
     pub rig: Option<String>,
+    /// A sensor calibration file (`imubake calibrate-sensors`): corrections of raw readings
+    /// before fusion.
+    pub sensor_calibration: Option<PathBuf>,
     pub pipeline: PipelineOptions,
     pub formats: Vec<OutputFormat>,
     /// Length unit of the BVH output (glTF is always metres).
@@ -71,6 +74,7 @@ impl Default for ConvertSettings {
             read: ReadOptions::default(),
             mapping: None,
             rig: None,
+            sensor_calibration: None,
             pipeline: PipelineOptions::default(),
             formats: vec![OutputFormat::Bvh, OutputFormat::Glb],
             units: LengthUnit::Metres,
@@ -88,6 +92,8 @@ pub enum ConvertError {
     Mapping(#[from] MappingError),
     #[error(transparent)]
     Rig(#[from] RigLoadError),
+    #[error(transparent)]
+    SensorCalibration(#[from] crate::intrinsics::IntrinsicsError),
     #[error("{}: {source}", .input.display())]
     Pipeline {
         input: PathBuf,
@@ -116,6 +122,11 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             // A mapping error's file is the mapping; the report names the take's own file.
             ConvertError::Mapping(_) => None,
             ConvertError::Rig(e) => e.file(),
+            ConvertError::SensorCalibration(crate::intrinsics::IntrinsicsError::File {
+                path,
+                ..
+            }) => Some(path),
+            ConvertError::SensorCalibration(_) => None,
             ConvertError::Pipeline { input, .. } | ConvertError::NoMapping { input, .. } => {
                 Some(input)
             }
@@ -137,6 +148,9 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             ConvertError::Mapping(e) => e.hint(),
             ConvertError::Rig(e) => e.hint(),
             ConvertError::Pipeline { .. } | ConvertError::NoMapping { .. } => None,
+            ConvertError::SensorCalibration(_) => {
+                Some("write the file again with `imubake calibrate-sensors`")
+            }
             ConvertError::Output(_) => Some("check the output folder: free space and permissions"),
         }
     }
@@ -420,6 +434,11 @@ fn quaternion_mode(
     );
     let mut options = settings.pipeline.clone();
     options.keep_unsmoothed |= settings.report;
+    if let Some(path) = &settings.sensor_calibration {
+        options.sensor_calibration = Some(std::sync::Arc::new(
+            crate::intrinsics::SensorCalibration::load(path)?,
+        ));
+    }
     let (world, world_from) = resolve_world(take, settings, mapping.world);
     options.world = Some(world);
     let converted =
@@ -530,6 +549,12 @@ fn fusion_record(
         } else {
             "default"
         },
+        sensor_calibration: settings.sensor_calibration.as_ref().map(|path| {
+            crate::write::sidecar::FileRecord {
+                path: path.display().to_string(),
+                sha256: source_sha256(path).unwrap_or_else(|_| "(unreadable)".into()),
+            }
+        }),
         sensors,
     })
 }

@@ -154,8 +154,9 @@ const RACY_NS: u64 = 2_000_000_000;
 /// reconverted everything); 1 is [`FingerprintInput`]; 2: causal Butterworth smoothing runs on
 /// the stream's core (its grid's rate from each sensor's first samples); 3: raw readings are
 /// fused (takes that failed for want of orientations convert now) and the sidecar records each
-/// sensor's origin and world.
-pub const FINGERPRINT_SCHEMA: u32 = 3;
+/// sensor's origin and world; 4: filters that do not estimate the gyro bias (madgwick, trust,
+/// gyro) get it from the take's opening stillness.
+pub const FINGERPRINT_SCHEMA: u32 = 4;
 
 /// What decides a conversion's outputs besides the capture, in a stable serialisation: field
 /// names and values, not Rust's `Debug` text; the mapping and rig files by content, not by path.
@@ -183,6 +184,9 @@ struct FingerprintInput<'a> {
     /// The fusion asked for, as its settings text (every parameter).
     #[serde(skip_serializing_if = "Option::is_none")]
     fusion: Option<String>,
+    /// SHA-256 of the sensor calibration file's content.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    sensor_calibration: Option<String>,
 }
 
 fn file_sha256(path: &Path) -> String {
@@ -221,6 +225,7 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         causal: p.causal,
         sensor_rate_hz: p.sensor_rate_hz,
         fusion: p.fusion.as_ref().map(|f| f.to_string()),
+        sensor_calibration: settings.sensor_calibration.as_deref().map(file_sha256),
     };
     let json = serde_json::to_vec(&input).expect("the fingerprint input serialises");
     format!("{FINGERPRINT_SCHEMA}:{}", hex(&Sha256::digest(&json)))

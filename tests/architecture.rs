@@ -11,7 +11,7 @@ const LAYERS: [&[&str]; 11] = [
     &["fps", "world", "rotation", "diagnostic", "smooth"],
     &["take"],
     &["read", "bvh", "inspect", "fusion"],
-    &["rig"],
+    &["rig", "intrinsics"],
     &["mapping", "anim"],
     &["pipeline"],
     &["write"],

@@ -80,6 +80,10 @@ pub struct SettingsArgs {
     /// out [default: offline (vqf with --causal), for sensors with raw readings only]
     #[arg(long, value_name = "NAME[:key=value,...]")]
     fusion: Option<imubake::fusion::Fusion>,
+    /// Correct raw readings before fusion with this sensor calibration file (written by
+    /// `imubake calibrate-sensors`): gyro bias and gain, accelerometer, magnetometer, per sensor.
+    #[arg(long, value_name = "FILE.yaml")]
+    sensor_calibration: Option<PathBuf>,
     #[command(flatten)]
     read: ReadArgs,
 }
@@ -136,6 +140,7 @@ impl SettingsArgs {
             causal: self.causal,
             sensor_rate_hz: self.sensor_rate,
             fusion: self.fusion.clone(),
+            sensor_calibration: self.sensor_calibration.clone(),
             ..self.read.layer()
         }
     }

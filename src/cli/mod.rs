@@ -1,6 +1,7 @@
 //! Command-line interface: one module per subcommand.
 
 mod batch;
+mod calibrate_sensors;
 mod convert;
 mod fuse;
 mod inspect;
@@ -31,6 +32,9 @@ pub struct Cli {
 enum Command {
     /// Convert captures into keyframed BVH and glTF on a rig, with a JSON sidecar.
     Convert(convert::ConvertArgs),
+    /// Find each sensor's gyro bias and gain, accelerometer and magnetometer corrections from a
+    /// calibration take, into a file `convert --sensor-calibration` applies.
+    CalibrateSensors(calibrate_sensors::CalibrateSensorsArgs),
     /// Convert many takes in parallel (files, folders, globs), skipping those already current.
     Batch(batch::BatchArgs),
     /// Fuse raw gyroscope, accelerometer (and magnetometer) readings into orientations (CSV).
@@ -114,6 +118,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Convert(args) => convert::run(args),
         Command::Batch(args) => batch::run(args),
+        Command::CalibrateSensors(args) => calibrate_sensors::run(args),
         Command::Fuse(args) => fuse::run(args),
         Command::Inspect(args) => inspect::run(args),
         Command::Simulate(args) => simulate::run(args),

@@ -109,6 +109,12 @@ pub struct SimulateArgs {
         conflicts_with = "subject_height_m"
     )]
     source_units: Option<imubake::simulate::raw::SourceScale>,
+    /// With --raw: give each sensor intrinsic errors to calibrate away (its own draw; the truth
+    /// file lists them): `default` (20 µT hard iron, 5 % soft iron, 3 % gyro gain, 1°
+    /// misalignment, 0.3 m/s² and 3 % on the accelerometer), or some of
+    /// hard_iron=µT,soft_iron=…,gyro_gain=…,misalignment_deg=…,acc_offset=m/s²,acc_gain=…
+    #[arg(long, value_name = "default|key=value,...", requires = "raw")]
+    sensor_errors: Option<imubake::simulate::raw::ErrorSizes>,
     /// With --raw, when the BVH's unit is not given: the rest pose's height, metres.
     #[arg(long, default_value_t = 1.75, requires = "raw")]
     subject_height_m: f64,
@@ -194,6 +200,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
             source_scale: args.source_units.unwrap_or(
                 imubake::simulate::raw::SourceScale::RestHeight(args.subject_height_m),
             ),
+            errors: args.sensor_errors,
         }),
     };
     let simulated = simulate(&motion, &rig, &mapping, &options)?;

@@ -280,6 +280,15 @@ impl Fusion {
         matches!(self.filter, Filter::Offline { .. })
     }
 
+    /// Whether the filter estimates the gyro bias itself (VQF, Mahony's integral term, the
+    /// offline fusion's rest and passes).
+    pub fn estimates_gyro_bias(&self) -> bool {
+        matches!(
+            self.filter,
+            Filter::Vqf { .. } | Filter::Mahony { .. } | Filter::Offline { .. }
+        )
+    }
+
     /// The online setting a stream runs for this one (offline → VQF).
     pub fn online(&self) -> Fusion {
         match self.filter {
@@ -356,6 +365,10 @@ pub struct FusionStats {
     pub magnetic_rejected: f64,
     /// Share of samples in which the accelerometer was set aside.
     pub acceleration_rejected: f64,
+    /// The corrections of the readings before fusion (the sensor calibration file's kinds, and
+    /// where the gyro bias came from).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub corrections: Vec<String>,
     /// Over time (every 0.1 s): (time s, gyro bias magnitude °/s, magnetometer set aside,
     /// accelerometer set aside), for the report.
     #[serde(skip)]
@@ -625,6 +638,7 @@ pub fn fuse(
         gyro_bias_dps: last_bias.map(|b| [b.x.to_degrees(), b.y.to_degrees(), b.z.to_degrees()]),
         magnetic_rejected: mag_rejected as f64 / n,
         acceleration_rejected: acc_rejected as f64 / n,
+        corrections: Vec::new(),
         series,
     };
     let track = Track::new(times.to_vec(), out).expect("the inertial track's times");

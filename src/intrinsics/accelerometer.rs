@@ -42,8 +42,12 @@ fn rms(values: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// The offset and scale from the mean readings of still positions.
-pub fn fit_positions(sensor: &str, means: &[Vector3<f64>]) -> Result<AccCalibration, IntrinsicsError> {
-    const RECORD: &str = "record six positions held still for 3 s each: each axis pointing up, then down";
+pub fn fit_positions(
+    sensor: &str,
+    means: &[Vector3<f64>],
+) -> Result<AccCalibration, IntrinsicsError> {
+    const RECORD: &str =
+        "record six positions held still for 3 s each: each axis pointing up, then down";
     // Each axis up and down: some position within 45° of each.
     let mut missing = Vec::new();
     for (axis, name) in ["x", "y", "z"].iter().enumerate() {
@@ -77,7 +81,10 @@ pub fn fit_positions(sensor: &str, means: &[Vector3<f64>]) -> Result<AccCalibrat
             what: "the positions do not determine the accelerometer's scale".into(),
             record: RECORD,
         })?;
-    let k = 1.0 + (0..3).map(|i| x[i + 3] * x[i + 3] / (4.0 * x[i])).sum::<f64>();
+    let k = 1.0
+        + (0..3)
+            .map(|i| x[i + 3] * x[i + 3] / (4.0 * x[i]))
+            .sum::<f64>();
     let offset = Vector3::from_fn(|i, _| -x[i + 3] / (2.0 * x[i]));
     let scale2 = Vector3::from_fn(|i, _| x[i] * STANDARD_GRAVITY_M_S2.powi(2) / k);
     if scale2.iter().any(|s| !(*s > 0.25 && *s < 4.0)) {
@@ -94,7 +101,9 @@ pub fn fit_positions(sensor: &str, means: &[Vector3<f64>]) -> Result<AccCalibrat
         residual_before_m_s2: rms(means.iter().map(|m| m.norm() - STANDARD_GRAVITY_M_S2)),
         residual_after_m_s2: 0.0,
     };
-    let after = rms(means.iter().map(|m| cal.correct(m).norm() - STANDARD_GRAVITY_M_S2));
+    let after = rms(means
+        .iter()
+        .map(|m| cal.correct(m).norm() - STANDARD_GRAVITY_M_S2));
     Ok(AccCalibration {
         residual_after_m_s2: after,
         ..cal
@@ -137,7 +146,10 @@ mod tests {
         truths.push(Vector3::new(1.0, 1.0, 1.0).normalize() * g);
         let means: Vec<_> = truths.iter().map(|a| a.component_div(&s) + o).collect();
         let cal = fit_positions("s", &means).unwrap();
-        assert!((Vector3::from(cal.offset_m_s2) - o).amax() < 1e-9, "{cal:?}");
+        assert!(
+            (Vector3::from(cal.offset_m_s2) - o).amax() < 1e-9,
+            "{cal:?}"
+        );
         assert!((Vector3::from(cal.scale) - s).amax() < 1e-9, "{cal:?}");
         assert!(cal.residual_after_m_s2 < 1e-9 && cal.residual_before_m_s2 > 0.1);
         // Five positions, z never down.

@@ -122,10 +122,18 @@ mod tests {
             })
             .collect();
         let track = Track::new((0..600).map(|i| i as f64 / 100.0).collect(), samples).unwrap();
-        let g = gyro_bias("s", &track, &BiasWindow::FirstStill(StillOptions::default())).unwrap();
+        let g = gyro_bias(
+            "s",
+            &track,
+            &BiasWindow::FirstStill(StillOptions::default()),
+        )
+        .unwrap();
         // The window's half-width of motion is cut; the square wave averages to 0 over an even
         // count, and the estimate is within 0.1 °/s / √N of b whatever the count.
-        assert!((g.vector() - b).amax() < 0.1f64.to_radians() / 20.0, "{g:?}");
+        assert!(
+            (g.vector() - b).amax() < 0.1f64.to_radians() / 20.0,
+            "{g:?}"
+        );
         assert!((g.noise_dps[0] - 0.1).abs() < 0.01, "{g:?}");
         let given = gyro_bias(
             "s",
@@ -148,6 +156,9 @@ mod tests {
         )
         .unwrap_err()
         .to_string();
-        assert!(moved.contains("sensor `s`") && moved.contains("moved"), "{moved}");
+        assert!(
+            moved.contains("sensor `s`") && moved.contains("moved"),
+            "{moved}"
+        );
     }
 }

@@ -93,7 +93,11 @@ pub fn fit_turns(
     let b = DVector::from_element(rows, 1.0);
     let svd = a.clone().svd(true, true);
     let (s_max, s_min) = (svd.singular_values.max(), svd.singular_values.min());
-    let condition = if s_min > 0.0 { s_max / s_min } else { f64::INFINITY };
+    let condition = if s_min > 0.0 {
+        s_max / s_min
+    } else {
+        f64::INFINITY
+    };
     if condition > MAX_CONDITION {
         return Err(IntrinsicsError::Implausible {
             sensor: sensor.to_string(),
@@ -135,7 +139,8 @@ fn turn_residual_pct(m: &Matrix3<f64>, integrals: &[(Vector3<f64>, u32)]) -> f64
     100.0 * ms.sqrt()
 }
 
-/// Paper 004's calibration from a take of whole-turn rotations between stretches of stillness.
+/// Paper 004's calibration from a take of whole-turn rotations between stretches of stillness
+/// (of at least 1 s, or `still.min_s` when shorter).
 /// `notes` gets a line for each rotation left out.
 pub fn calibrate_gyro_gain(
     sensor: &str,
@@ -145,7 +150,13 @@ pub fn calibrate_gyro_gain(
 ) -> Result<GyroGain, IntrinsicsError> {
     let times = inertial.times_s();
     let values = inertial.values();
-    let stretches: Vec<Still> = still_stretches(inertial, still);
+    // Stillness only separates rotations here: a second of it is enough (a 2 s pause is seen as
+    // 1.5 s, the window's half width cut at each end).
+    let options = StillOptions {
+        min_s: still.min_s.min(1.0),
+        ..*still
+    };
+    let stretches: Vec<Still> = still_stretches(inertial, &options);
     let mean_gyro = |s: &Still| {
         values[s.samples.clone()]
             .iter()

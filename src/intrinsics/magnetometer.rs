@@ -49,7 +49,9 @@ impl std::str::FromStr for MagFit {
         match s {
             "ellipsoid" => Ok(MagFit::Ellipsoid),
             "min-max" => Ok(MagFit::MinMax),
-            _ => Err(format!("unknown magnetometer fit `{s}`; expected ellipsoid or min-max")),
+            _ => Err(format!(
+                "unknown magnetometer fit `{s}`; expected ellipsoid or min-max"
+            )),
         }
     }
 }
@@ -67,6 +69,11 @@ pub struct MagCalibration {
     /// RMS of the field norm's relative deviation before and after correction, %.
     pub residual_before_pct: f64,
     pub residual_after_pct: f64,
+    /// The same over the readings the fit kept (not set aside as disturbed), %.
+    pub kept_residual_before_pct: f64,
+    pub kept_residual_after_pct: f64,
+    /// Share of the readings set aside as disturbed, %.
+    pub set_aside_pct: f64,
     /// Share of the sphere of directions the corrected readings reached ([`coverage`]), %.
     pub coverage_pct: f64,
     pub samples: usize,
@@ -185,7 +192,9 @@ impl EllipsoidFit {
         }
         let v1 = l_inv.transpose() * eig.eigenvectors.column(best);
         let v2 = -s22_inv * s12.transpose() * v1;
-        let q = Matrix3::new(v1[0], v1[5], v1[4], v1[5], v1[1], v1[3], v1[4], v1[3], v1[2]);
+        let q = Matrix3::new(
+            v1[0], v1[5], v1[4], v1[5], v1[1], v1[3], v1[4], v1[3], v1[2],
+        );
         let u = Vector3::new(v2[0], v2[1], v2[2]);
         let d = v2[3];
         let center = -q.try_inverse()? * u;
@@ -207,6 +216,38 @@ impl EllipsoidFit {
             field_norm: 1.0 / (cube * scale),
         })
     }
+}
+
+/// The ellipsoid fit twice more without the readings whose corrected norm is off the median by
+/// more than 3 robust standard deviations (1.4826 · the median absolute deviation, at least
+/// 1 %): a magnet passing by, a steel desk, leave the fit alone.
+fn robust_ellipsoid(xs: &[Vector3<f64>]) -> Option<(Ellipsoid, Vec<bool>)> {
+    let mut fit = EllipsoidFit::new();
+    xs.iter().for_each(|x| fit.push(x));
+    let mut e = fit.solve()?;
+    let mut kept = vec![true; xs.len()];
+    for _ in 0..2 {
+        let k = inliers(xs, &e.center, &e.correction);
+        let mut refit = EllipsoidFit::new();
+        xs.iter()
+            .zip(&k)
+            .filter(|(_, k)| **k)
+            .for_each(|(x, _)| refit.push(x));
+        match refit.solve() {
+            Some(better) => (e, kept) = (better, k),
+            None => break,
+        }
+    }
+    Some((e, kept))
+}
+
+/// The readings whose corrected norm is within 3 robust standard deviations of the median.
+fn inliers(xs: &[Vector3<f64>], center: &Vector3<f64>, w: &Matrix3<f64>) -> Vec<bool> {
+    let norms: Vec<f64> = xs.iter().map(|x| (w * (x - center)).norm()).collect();
+    let median = crate::fusion::median(norms.clone());
+    let mad = crate::fusion::median(norms.iter().map(|n| (n - median).abs()).collect());
+    let limit = (3.0 * 1.4826 * mad).max(0.01 * median);
+    norms.iter().map(|n| (n - median).abs() <= limit).collect()
 }
 
 /// Cell centres spread evenly over the sphere (a Fibonacci lattice).
@@ -249,8 +290,11 @@ fn norm_residual_pct(xs: &[Vector3<f64>]) -> f64 {
 
 /// The smallest coverage an ellipsoid fit needs, %: below it the soft iron is guessed.
 pub const MIN_COVERAGE_ELLIPSOID_PCT: f64 = 30.0;
-/// How far each axis must have pointed along and against the field (the cosine), for either fit.
-const MIN_AXIS_REACH: f64 = 0.7;
+/// How far each axis must have pointed along and against the field (the cosine): within 60° for
+/// the ellipsoid, whose shape carries the rest; within 25° for min-max, whose extremes are only
+/// the ellipsoid's when they were reached.
+const MIN_AXIS_REACH_ELLIPSOID: f64 = 0.5;
+const MIN_AXIS_REACH_MIN_MAX: f64 = 0.9;
 
 /// Calibrates `sensor`'s magnetometer from readings `xs` (a take in which it was turned through
 /// every direction). Errors name the sensor and what to record: too few readings, an axis never
@@ -297,8 +341,11 @@ pub fn calibrate_magnetometer(
         directions.push(d);
     }
     let rough_coverage = coverage(directions.into_iter());
-    if let Some(axis) = (0..3).find(|a| reach[*a][0] < MIN_AXIS_REACH || reach[*a][1] < MIN_AXIS_REACH)
-    {
+    let min_reach = match fit {
+        MagFit::Ellipsoid => MIN_AXIS_REACH_ELLIPSOID,
+        MagFit::MinMax => MIN_AXIS_REACH_MIN_MAX,
+    };
+    if let Some(axis) = (0..3).find(|a| reach[*a][0] < min_reach || reach[*a][1] < min_reach) {
         return Err(IntrinsicsError::NotTurned {
             sensor: sensor.to_string(),
             axis: ["x", "y", "z"][axis],
@@ -320,11 +367,7 @@ pub fn calibrate_magnetometer(
                     record: RECORD,
                 });
             }
-            let mut fit = EllipsoidFit::new();
-            for x in &xs {
-                fit.push(x);
-            }
-            let e = fit.solve().ok_or_else(|| IntrinsicsError::Implausible {
+            let (e, _) = robust_ellipsoid(&xs).ok_or_else(|| IntrinsicsError::Implausible {
                 sensor: sensor.to_string(),
                 what: "the readings do not lie on an ellipsoid".into(),
                 record: RECORD,
@@ -346,6 +389,15 @@ pub fn calibrate_magnetometer(
         }
     };
     let corrected: Vec<Vector3<f64>> = xs.iter().map(|x| w * (x - center)).collect();
+    let kept = inliers(&xs, &center, &w);
+    let only_kept = |v: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
+        v.iter()
+            .zip(&kept)
+            .filter(|(_, k)| **k)
+            .map(|(m, _)| *m)
+            .collect()
+    };
+    let kept_corrected = only_kept(&corrected);
     let coverage_pct = coverage(corrected.iter().map(|m| m.normalize()));
     Ok(MagCalibration {
         fit,
@@ -354,6 +406,9 @@ pub fn calibrate_magnetometer(
         field_norm,
         residual_before_pct: norm_residual_pct(&xs),
         residual_after_pct: norm_residual_pct(&corrected),
+        kept_residual_before_pct: norm_residual_pct(&only_kept(&xs)),
+        kept_residual_after_pct: norm_residual_pct(&kept_corrected),
+        set_aside_pct: 100.0 * (1.0 - kept_corrected.len() as f64 / xs.len() as f64),
         coverage_pct,
         samples: xs.len(),
     })
@@ -380,11 +435,18 @@ mod tests {
         let expected = s_inv / s_inv.determinant().cbrt();
         assert!((cal.matrix() - expected).amax() < 1e-6, "{cal:?}");
         assert!((cal.field_norm - 45.0 * s.determinant().cbrt()).abs() < 1e-6);
-        assert!(cal.residual_after_pct < 1e-6 && cal.residual_before_pct > 3.0, "{cal:?}");
+        assert!(
+            cal.residual_after_pct < 1e-6 && cal.residual_before_pct > 3.0,
+            "{cal:?}"
+        );
         assert!(cal.coverage_pct > 99.0);
         // Min-max finds the centre of a sphere, not of a tilted ellipsoid.
-        let mm = calibrate_magnetometer("s", &readings(&Matrix3::identity(), &h, 45.0, 500), MagFit::MinMax)
-            .unwrap();
+        let mm = calibrate_magnetometer(
+            "s",
+            &readings(&Matrix3::identity(), &h, 45.0, 500),
+            MagFit::MinMax,
+        )
+        .unwrap();
         assert!((Vector3::from(mm.hard_iron) - h).norm() < 0.5, "{mm:?}");
     }
 
@@ -398,8 +460,13 @@ mod tests {
             })
             .collect();
         for fit in [MagFit::Ellipsoid, MagFit::MinMax] {
-            let e = calibrate_magnetometer("wrist", &xs, fit).unwrap_err().to_string();
-            assert!(e.contains("sensor `wrist`") && e.contains("every direction"), "{e}");
+            let e = calibrate_magnetometer("wrist", &xs, fit)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("sensor `wrist`") && e.contains("every direction"),
+                "{e}"
+            );
         }
         let e = calibrate_magnetometer("wrist", &xs[..20], MagFit::Ellipsoid)
             .unwrap_err()

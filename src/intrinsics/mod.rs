@@ -131,8 +131,14 @@ impl SensorIntrinsics {
 
     /// One inertial reading corrected.
     pub fn correct_inertial(&self, s: &ImuSample) -> ImuSample {
-        let bias = self.gyro_bias.as_ref().map_or(Vector3::zeros(), GyroBias::vector);
-        let gain = self.gyro_gain.as_ref().map_or(Matrix3::identity(), GyroGain::matrix);
+        let bias = self
+            .gyro_bias
+            .as_ref()
+            .map_or(Vector3::zeros(), GyroBias::vector);
+        let gain = self
+            .gyro_gain
+            .as_ref()
+            .map_or(Matrix3::identity(), GyroGain::matrix);
         ImuSample {
             gyro_rad_s: gain * (s.gyro_rad_s - bias),
             accel_m_s2: self
@@ -192,7 +198,9 @@ impl SensorCalibration {
 
     pub fn parse(text: &str) -> Result<SensorCalibration, String> {
         let cal: SensorCalibration = serde_yaml::from_str(text).map_err(|e| {
-            format!("{e}; expected a sensor calibration file written by `imubake calibrate-sensors`")
+            format!(
+                "{e}; expected a sensor calibration file written by `imubake calibrate-sensors`"
+            )
         })?;
         if cal.imubake_sensor_calibration != FILE_VERSION {
             return Err(format!(
@@ -206,9 +214,9 @@ impl SensorCalibration {
                 && s.gyro_gain.as_ref().is_none_or(|g| {
                     finite(g.matrix.as_flattened()) && g.matrix().determinant() > 0.0
                 })
-                && s.accelerometer.as_ref().is_none_or(|a| {
-                    finite(&a.offset_m_s2) && a.scale.iter().all(|x| *x > 0.0)
-                })
+                && s.accelerometer
+                    .as_ref()
+                    .is_none_or(|a| finite(&a.offset_m_s2) && a.scale.iter().all(|x| *x > 0.0))
                 && s.magnetometer.as_ref().is_none_or(|m| {
                     finite(&m.hard_iron)
                         && finite(m.soft_iron_correction.as_flattened())
@@ -245,6 +253,210 @@ impl SensorCalibration {
         }
         self
     }
+}
+
+/// A sensor's readings made ready for fusion: the calibration file's corrections for it, then —
+/// when the file gives no gyro bias and the filter does not estimate one itself (VQF, Mahony and
+/// the offline fusion do; correcting twice would fight them) — the bias read over the take's
+/// opening stillness (a stretch starting in its first second). `corrections` says what ran;
+/// `warnings` when a bias was wanted but the take does not open still.
+pub struct Prepared {
+    pub inertial: Track<ImuSample>,
+    pub magnetometer: Option<Track<Vector3<f64>>>,
+    pub corrections: Vec<String>,
+    pub warnings: Vec<String>,
+}
+
+pub fn prepare(
+    sensor: &str,
+    inertial: &Track<ImuSample>,
+    magnetometer: Option<&Track<Vector3<f64>>>,
+    calibration: Option<&SensorIntrinsics>,
+    filter_estimates_bias: bool,
+) -> Prepared {
+    let mut corrections: Vec<String> = calibration
+        .map(|c| {
+            c.kinds()
+                .iter()
+                .map(|k| format!("{k} (calibration file)"))
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut warnings = Vec::new();
+    let mut intrinsics = calibration.cloned().unwrap_or_default();
+    if intrinsics.gyro_bias.is_none() {
+        if filter_estimates_bias {
+            corrections.push("gyro-bias (estimated by the filter)".into());
+        } else {
+            let opening = still::still_stretches(inertial, &still::StillOptions::default())
+                .into_iter()
+                .next()
+                .filter(|s| s.start_s <= inertial.times_s()[0] + 1.0);
+            match opening {
+                Some(s) => {
+                    let b = gyro_bias::bias_over(inertial, s.samples.clone());
+                    corrections.push(format!(
+                        "gyro-bias (opening stillness {:.2}–{:.2} s)",
+                        b.window_s[0], b.window_s[1]
+                    ));
+                    intrinsics.gyro_bias = Some(b);
+                }
+                None => warnings.push(format!(
+                    "sensor `{sensor}`: the take does not open with 2 s of stillness, and the filter does not \
+                     estimate the gyro bias: it is left in (record a still start, or give a calibration file)"
+                )),
+            }
+        }
+    }
+    let (inertial, magnetometer) = intrinsics.apply(inertial, magnetometer);
+    Prepared {
+        inertial,
+        magnetometer,
+        corrections,
+        warnings,
+    }
+}
+
+/// A kind of calibration (`--kind`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Kind {
+    GyroBias,
+    GyroGain,
+    Acc,
+    Mag,
+}
+
+impl Kind {
+    pub const ALL: [Kind; 4] = [Kind::GyroBias, Kind::GyroGain, Kind::Acc, Kind::Mag];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::GyroBias => "gyro-bias",
+            Kind::GyroGain => "gyro-gain",
+            Kind::Acc => "acc",
+            Kind::Mag => "mag",
+        }
+    }
+}
+
+impl std::str::FromStr for Kind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Kind::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| {
+                format!("unknown calibration kind `{s}`; expected gyro-bias, gyro-gain, acc or mag")
+            })
+    }
+}
+
+/// How to calibrate a take.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrateOptions {
+    pub still: still::StillOptions,
+    /// Where the gyro bias is read (default: the first stretch of stillness).
+    pub bias_window: Option<(f64, f64)>,
+    pub mag_fit: magnetometer::MagFit,
+}
+
+impl Default for CalibrateOptions {
+    fn default() -> Self {
+        CalibrateOptions {
+            still: still::StillOptions::default(),
+            bias_window: None,
+            mag_fit: magnetometer::MagFit::Ellipsoid,
+        }
+    }
+}
+
+/// What calibrating a take came to: the corrections found, a note for each rotation left out,
+/// and each (sensor, kind) that failed with why.
+#[derive(Debug, Clone, Default)]
+pub struct Calibrated {
+    pub calibration: SensorCalibration,
+    pub notes: Vec<String>,
+    pub failed: Vec<(String, Kind, IntrinsicsError)>,
+}
+
+/// Runs the solvers of `kinds` on every sensor of `take` that has the readings they need.
+pub fn calibrate_take(
+    take: &crate::take::Take,
+    kinds: &[Kind],
+    options: &CalibrateOptions,
+) -> Calibrated {
+    let mut out = Calibrated {
+        calibration: SensorCalibration::new(),
+        ..Default::default()
+    };
+    let source = take.source().path.display().to_string();
+    for sensor in take.sensors() {
+        let id = sensor.id();
+        let mut found = SensorIntrinsics::default();
+        for &kind in kinds {
+            let result: Result<(), IntrinsicsError> = (|| {
+                let inertial = || {
+                    sensor
+                        .inertial()
+                        .ok_or_else(|| IntrinsicsError::NoReadings {
+                            sensor: id.to_string(),
+                            what: "gyroscope and accelerometer",
+                        })
+                };
+                match kind {
+                    Kind::GyroBias => {
+                        let window = match options.bias_window {
+                            Some((start_s, end_s)) => {
+                                gyro_bias::BiasWindow::Given { start_s, end_s }
+                            }
+                            None => gyro_bias::BiasWindow::FirstStill(options.still),
+                        };
+                        found.gyro_bias = Some(gyro_bias::gyro_bias(id, inertial()?, &window)?);
+                    }
+                    Kind::GyroGain => {
+                        found.gyro_gain = Some(gyro_gain::calibrate_gyro_gain(
+                            id,
+                            inertial()?,
+                            &options.still,
+                            &mut out.notes,
+                        )?);
+                    }
+                    Kind::Acc => {
+                        found.accelerometer = Some(accelerometer::calibrate_accelerometer(
+                            id,
+                            inertial()?,
+                            &options.still,
+                        )?);
+                    }
+                    Kind::Mag => {
+                        let m =
+                            sensor
+                                .magnetometer()
+                                .ok_or_else(|| IntrinsicsError::NoReadings {
+                                    sensor: id.to_string(),
+                                    what: "magnetometer",
+                                })?;
+                        found.magnetometer = Some(magnetometer::calibrate_magnetometer(
+                            id,
+                            m.values(),
+                            options.mag_fit,
+                        )?);
+                    }
+                }
+                out.calibration
+                    .sources
+                    .insert(kind.name().to_string(), source.clone());
+                Ok(())
+            })();
+            if let Err(e) = result {
+                out.failed.push((id.to_string(), kind, e));
+            }
+        }
+        if !found.kinds().is_empty() {
+            out.calibration.sensors.insert(id.to_string(), found);
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -295,9 +507,112 @@ mod tests {
         assert_eq!(c.gyro_rad_s, Vector3::zeros());
         assert!((c.accel_m_s2 - Vector3::new(0.0, 1.01, 0.99)).norm() < 1e-12);
         let bad = text.replace("0.01", ".nan");
-        assert!(SensorCalibration::parse(&bad).unwrap_err().contains("not finite"));
-        assert!(SensorCalibration::parse("imubake_sensor_calibration: 2\nsensors: {}\n")
-            .unwrap_err()
-            .contains("version 2"));
+        assert!(
+            SensorCalibration::parse(&bad)
+                .unwrap_err()
+                .contains("not finite")
+        );
+        assert!(
+            SensorCalibration::parse("imubake_sensor_calibration: 2\nsensors: {}\n")
+                .unwrap_err()
+                .contains("version 2")
+        );
+    }
+
+    /// Filters without a bias estimate of their own get the opening stillness's; the others, and
+    /// a file's bias, are not corrected twice.
+    #[test]
+    fn the_opening_stillness_gives_the_bias_only_where_nothing_else_does() {
+        let b = Vector3::new(0.02, -0.01, 0.03);
+        let samples: Vec<ImuSample> = (0..500)
+            .map(|i| ImuSample {
+                gyro_rad_s: b + if i < 300 {
+                    Vector3::zeros()
+                } else {
+                    Vector3::new(1.0, 0.0, 0.0)
+                },
+                accel_m_s2: Vector3::new(0.0, 0.0, 9.81),
+            })
+            .collect();
+        let track = Track::new((0..500).map(|i| i as f64 / 100.0).collect(), samples).unwrap();
+        let p = prepare("s", &track, None, None, false);
+        assert_eq!(p.corrections.len(), 1);
+        assert!(
+            p.corrections[0].starts_with("gyro-bias (opening stillness 0.00–"),
+            "{:?}",
+            p.corrections
+        );
+        assert!(p.inertial.values()[0].gyro_rad_s.norm() < 1e-12);
+        assert!((p.inertial.values()[400].gyro_rad_s - Vector3::x()).norm() < 1e-12);
+        let p = prepare("s", &track, None, None, true);
+        assert_eq!(p.corrections, ["gyro-bias (estimated by the filter)"]);
+        assert_eq!(p.inertial.values()[0].gyro_rad_s, b);
+        // Turning from the start: nothing to read the bias from, and a warning says so.
+        let moving = track.clone().map_in_place(|s| ImuSample {
+            gyro_rad_s: s.gyro_rad_s + Vector3::new(0.0, 1.0, 0.0),
+            ..*s
+        });
+        let p = prepare("s", &moving, None, None, false);
+        assert!(
+            p.corrections.is_empty() && p.warnings[0].contains("does not open"),
+            "{:?}",
+            p.warnings
+        );
+    }
+
+    proptest::proptest! {
+        /// Any readings (huge, tiny, constant, jumping): every solver returns a calibration or an
+        /// error, never a panic.
+        #[test]
+        fn solvers_never_panic(
+            rows in proptest::collection::vec(
+                (proptest::array::uniform3(-1e6f64..1e6), proptest::array::uniform3(-1e3f64..1e3),
+                 proptest::array::uniform3(-1e4f64..1e4), 0u8..4),
+                1..300),
+        ) {
+            let mut text = String::from("time_s,sensor,gx,gy,gz,ax,ay,az,mx,my,mz\n");
+            for (i, (g, a, m, hold)) in rows.iter().enumerate() {
+                // Runs of repeated rows make stretches of stillness now and then.
+                let (g, a, m) = if *hold == 0 { ([0.0; 3], [0.0, 0.0, 9.8], [20.0, 0.0, -40.0]) } else { (*g, *a, *m) };
+                let g = g.map(|x| x * 1e-5);
+                text.push_str(&format!("{},s,{},{},{},{},{},{},{},{},{}\n", i as f64 * 0.05,
+                    g[0], g[1], g[2], a[0], a[1], a[2], m[0], m[1], m[2]));
+            }
+            let take = crate::read::imubake_csv::read_from(
+                text.as_bytes(), Path::new("p.csv"), &crate::read::ReadOptions::default()).unwrap();
+            let _ = calibrate_take(&take, &Kind::ALL, &CalibrateOptions::default());
+        }
+
+        /// Any text: a calibration or an error, never a panic.
+        #[test]
+        fn parsing_never_panics(text in "\\PC{0,300}") {
+            let _ = SensorCalibration::parse(&text);
+        }
+
+        /// Mutations of a real file's text: the same.
+        #[test]
+        fn mutated_files_never_panic(cut in 0usize..400, insert in "\\PC{0,8}") {
+            let mut cal = SensorCalibration::new();
+            cal.sensors.insert("a".into(), SensorIntrinsics {
+                magnetometer: Some(magnetometer::MagCalibration {
+                    fit: magnetometer::MagFit::Ellipsoid,
+                    hard_iron: [1.0, 2.0, 3.0],
+                    soft_iron_correction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                    field_norm: 40.0,
+                    residual_before_pct: 3.0,
+                    residual_after_pct: 0.5,
+                    kept_residual_before_pct: 3.0,
+                    kept_residual_after_pct: 0.5,
+                    set_aside_pct: 0.0,
+                    coverage_pct: 80.0,
+                    samples: 1000,
+                }),
+                ..Default::default()
+            });
+            let mut text = cal.to_yaml();
+            let at = text.char_indices().map(|(i, _)| i).nth(cut % text.chars().count()).unwrap_or(0);
+            text.insert_str(at, &insert);
+            let _ = SensorCalibration::parse(&text);
+        }
     }
 }

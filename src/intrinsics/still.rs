@@ -59,7 +59,14 @@ pub fn still_stretches(inertial: &Track<ImuSample>, options: &StillOptions) -> V
     let mut sq = vec![[0.0f64; 6]; n + 1];
     for (i, s) in values.iter().enumerate() {
         let g = s.gyro_rad_s.map(f64::to_degrees);
-        let ch = [g.x, g.y, g.z, s.accel_m_s2.x, s.accel_m_s2.y, s.accel_m_s2.z];
+        let ch = [
+            g.x,
+            g.y,
+            g.z,
+            s.accel_m_s2.x,
+            s.accel_m_s2.y,
+            s.accel_m_s2.z,
+        ];
         for c in 0..6 {
             sum[i + 1][c] = sum[i][c] + ch[c];
             sq[i + 1][c] = sq[i][c] + ch[c] * ch[c];
@@ -130,13 +137,19 @@ mod tests {
             .map(|i| {
                 let t = i as f64 / 100.0;
                 let wobble = 0.02 * ((i * 7919) % 13) as f64 / 13.0; // small noise
-                let (gyr, acc) = if t < 3.0 || t >= 7.0 {
+                let (gyr, acc) = if !(3.0..7.0).contains(&t) {
                     (bias, Vector3::new(wobble, 0.0, 9.81))
                 } else if t < 6.0 {
-                    (bias + Vector3::new(0.0, 0.0, 20f64.to_radians()), Vector3::new(0.0, 0.0, 9.81))
+                    (
+                        bias + Vector3::new(0.0, 0.0, 20f64.to_radians()),
+                        Vector3::new(0.0, 0.0, 9.81),
+                    )
                 } else {
                     let s = (t * 40.0).sin();
-                    (bias + Vector3::new(s, 0.0, 0.0), Vector3::new(3.0 * s, 0.0, 9.81))
+                    (
+                        bias + Vector3::new(s, 0.0, 0.0),
+                        Vector3::new(3.0 * s, 0.0, 9.81),
+                    )
                 };
                 ImuSample {
                     gyro_rad_s: gyr,
@@ -149,7 +162,13 @@ mod tests {
         let found = still_stretches(&track, &StillOptions::default());
         assert_eq!(found.len(), 2, "{found:?}");
         // The window reaches 0.25 s into the motion on each side.
-        assert!(found[0].start_s == 0.0 && (found[0].end_s - 2.75).abs() < 0.02, "{found:?}");
-        assert!((found[1].start_s - 7.25).abs() < 0.02 && found[1].end_s == 9.99, "{found:?}");
+        assert!(
+            found[0].start_s == 0.0 && (found[0].end_s - 2.75).abs() < 0.02,
+            "{found:?}"
+        );
+        assert!(
+            (found[1].start_s - 7.25).abs() < 0.02 && found[1].end_s == 9.99,
+            "{found:?}"
+        );
     }
 }

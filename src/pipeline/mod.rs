@@ -105,6 +105,8 @@ pub struct PipelineOptions {
     /// the device gave an orientation. `None`: device orientations where there are some, the
     /// default filter for sensors with raw readings only.
     pub fusion: Option<crate::fusion::Fusion>,
+    /// Corrections of raw readings before fusion, per sensor id (`--sensor-calibration`).
+    pub sensor_calibration: Option<std::sync::Arc<crate::intrinsics::SensorCalibration>>,
 }
 
 impl Default for PipelineOptions {
@@ -120,6 +122,7 @@ impl Default for PipelineOptions {
             causal: false,
             sensor_rate_hz: None,
             fusion: None,
+            sensor_calibration: None,
         }
     }
 }

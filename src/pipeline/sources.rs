@@ -130,20 +130,35 @@ pub fn orientations(
                 Origin::Device { world },
                 Vec::new(),
             )),
-            Plan::Fuse(sensor) => fusion::fuse(
-                sensor.id(),
-                sensor.inertial().expect("planned for raw readings"),
-                sensor.magnetometer(),
-                &filter,
-            )
-            .map(|fused| {
-                let to_rig = World::Enu.to_rig();
-                (
-                    fused.track.map_in_place(|q| to_rig * q),
-                    Origin::Fused(fused.stats),
-                    fused.warnings,
+            Plan::Fuse(sensor) => {
+                let prepared = crate::intrinsics::prepare(
+                    sensor.id(),
+                    sensor.inertial().expect("planned for raw readings"),
+                    sensor.magnetometer(),
+                    options
+                        .sensor_calibration
+                        .as_ref()
+                        .and_then(|c| c.sensors.get(sensor.id())),
+                    filter.estimates_gyro_bias(),
+                );
+                fusion::fuse(
+                    sensor.id(),
+                    &prepared.inertial,
+                    prepared.magnetometer.as_ref(),
+                    &filter,
                 )
-            }),
+                .map(|mut fused| {
+                    let to_rig = World::Enu.to_rig();
+                    fused.stats.corrections = prepared.corrections;
+                    let mut warnings = prepared.warnings;
+                    warnings.extend(fused.warnings);
+                    (
+                        fused.track.map_in_place(|q| to_rig * q),
+                        Origin::Fused(fused.stats),
+                        warnings,
+                    )
+                })
+            }
             Plan::Missing | Plan::Unusable(_) => unreachable!("filtered out above"),
         };
         (s, result)

@@ -144,11 +144,7 @@ mod tests {
     use proptest::prelude::*;
 
     fn read_text(text: &str) -> Result<Take, ReadError> {
-        read_from(
-            text.as_bytes(),
-            Path::new("f.csv"),
-            &ReadOptions::default(),
-        )
+        read_from(text.as_bytes(), Path::new("f.csv"), &ReadOptions::default())
     }
 
     #[test]
@@ -167,10 +163,17 @@ mod tests {
         assert!((first.gyro_rad_s.z + std::f64::consts::PI).abs() < 1e-12);
         assert!((first.accel_m_s2.z - 9.80665).abs() < 1e-12);
         assert!((i.values()[1].accel_m_s2.x - 4.903325).abs() < 1e-12);
-        assert_eq!(s.magnetometer().unwrap().values()[0], Vector3::new(15.0, 0.5, -41.0));
+        assert_eq!(
+            s.magnetometer().unwrap().values()[0],
+            Vector3::new(15.0, 0.5, -41.0)
+        );
         assert_eq!(take.dropped_lines().len(), 1);
         assert_eq!(take.dropped_lines()[0].line, 4);
-        assert!(take.dropped_lines()[0].reason.contains("Gyroscope X (deg/s)"));
+        assert!(
+            take.dropped_lines()[0]
+                .reason
+                .contains("Gyroscope X (deg/s)")
+        );
     }
 
     #[test]
@@ -180,7 +183,10 @@ mod tests {
         assert!(take.sensor(SENSOR_ID).unwrap().magnetometer().is_none());
         assert!(looks_like(text.as_bytes()));
         let e = read_text("Time (s),Gyro\n0,1\n").unwrap_err().to_string();
-        assert!(e.contains("line 1") && e.contains("x-io Fusion header"), "{e}");
+        assert!(
+            e.contains("line 1") && e.contains("x-io Fusion header"),
+            "{e}"
+        );
         assert!(!looks_like(b"time_s,sensor,gx\n"));
     }
 

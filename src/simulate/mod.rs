@@ -124,6 +124,9 @@ pub struct SensorTruth {
     /// For raw readings: the gyro's constant bias, °/s (sensor frame).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gyro_bias_dps: Option<[f64; 3]>,
+    /// For raw readings with `--sensor-errors`: the intrinsic errors drawn for it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub errors: Option<raw::SensorErrors>,
 }
 
 #[derive(Debug, Clone)]
@@ -381,7 +384,12 @@ impl RawInputs<'_> {
         options: &raw::RawOptions,
         rng: &mut Rng,
         world_at: impl Fn(&Sim, f64) -> UnitQuaternion<f64>,
-    ) -> (String, Vec<[f64; 3]>, RawTruth) {
+    ) -> (
+        String,
+        Vec<[f64; 3]>,
+        Vec<Option<raw::SensorErrors>>,
+        RawTruth,
+    ) {
         let blend_s = self.motion_start - self.hold_s;
         let scale = match options.source_scale {
             raw::SourceScale::MetresPerUnit(m) => m,
@@ -412,6 +420,18 @@ impl RawInputs<'_> {
         let gyro_sigma = options.gyro_noise_dps.to_radians();
         let mut rows: Vec<(f64, usize, [f64; 9])> = Vec::new();
         let mut biases = Vec::with_capacity(self.sims.len());
+        // The intrinsic errors come from a generator of their own, so that asking for them
+        // leaves every other draw (and so the rest of the capture) as it was.
+        let mut error_rng = Rng(rng.0 ^ 0x5EED_E770_5EED_E770);
+        let errors: Vec<Option<raw::SensorErrors>> = self
+            .sims
+            .iter()
+            .map(|_| {
+                options
+                    .errors
+                    .map(|sizes| raw::SensorErrors::draw(&sizes, || error_rng.uniform()))
+            })
+            .collect();
         for (i, s) in self.sims.iter().enumerate() {
             let direction = Vector3::new(rng.normal(), rng.normal(), rng.normal())
                 .try_normalize(1e-12)
@@ -424,14 +444,23 @@ impl RawInputs<'_> {
                 let noise = |rng: &mut Rng, sigma: f64| {
                     Vector3::new(rng.normal(), rng.normal(), rng.normal()) * sigma
                 };
-                let gyr =
-                    raw::mean_body_rate(q_rig, t, self.period_s) + bias + noise(rng, gyro_sigma);
-                let specific_force = raw::on_grid_at(&accelerations[i], step, t) + up_rig;
-                let acc = q.inverse() * specific_force + noise(rng, options.accel_noise);
+                let rate = raw::mean_body_rate(q_rig, t, self.period_s);
+                let specific_force =
+                    q.inverse() * (raw::on_grid_at(&accelerations[i], step, t) + up_rig);
                 let disturbance = options.disturbance.map_or(0.0, |d| d.strength_at(t));
                 let q_enu = self.from_rig * q;
-                let mag = q_enu.inverse() * (field + east * disturbance)
-                    + noise(rng, options.mag_noise_ut);
+                let field_sensor = q_enu.inverse() * (field + east * disturbance);
+                let (rate, specific_force, field_sensor) = match &errors[i] {
+                    Some(e) => (
+                        e.gyro(&rate),
+                        e.accelerometer(&specific_force),
+                        e.magnetometer(&field_sensor),
+                    ),
+                    None => (rate, specific_force, field_sensor),
+                };
+                let gyr = rate + bias + noise(rng, gyro_sigma);
+                let acc = specific_force + noise(rng, options.accel_noise);
+                let mag = field_sensor + noise(rng, options.mag_noise_ut);
                 rows.push((
                     t,
                     i,
@@ -462,7 +491,7 @@ impl RawInputs<'_> {
             metres_per_source_unit: scale,
             sensor_position: "the midpoint of the source bone (joint to first child or end site)",
         };
-        (out, biases, truth)
+        (out, biases, errors, truth)
     }
 }
 
@@ -691,7 +720,9 @@ pub fn simulate(
     }
 
     // What was simulated (with the gyro biases and the field for raw readings).
-    let truth = |biases: Option<&[[f64; 3]]>, raw: Option<RawTruth>| Truth {
+    let truth = |biases: Option<&[[f64; 3]]>,
+                 errors: Option<&[Option<raw::SensorErrors>]>,
+                 raw: Option<RawTruth>| Truth {
         world,
         heading_deg,
         motion_start_s: motion_start,
@@ -708,6 +739,7 @@ pub fn simulate(
                 mount: [s.mount.w, s.mount.i, s.mount.j, s.mount.k],
                 samples: times[i].len(),
                 gyro_bias_dps: biases.map(|b| b[i]),
+                errors: errors.and_then(|e| e[i].clone()),
             })
             .collect(),
         raw,
@@ -726,16 +758,17 @@ pub fn simulate(
             end_s,
             period_s: 1.0 / options.rate_hz,
         };
-        let (text, biases, raw_truth) = raw.capture(raw_options, &mut rng, |s: &Sim, t: f64| {
-            second_turn(s, t) * world_at(s.joint, t)
-        });
+        let (text, biases, errors, raw_truth) =
+            raw.capture(raw_options, &mut rng, |s: &Sim, t: f64| {
+                second_turn(s, t) * world_at(s.joint, t)
+            });
         let header = format!(
             "# imubake simulate --raw: frames {}..={} of the BVH, heading {heading_deg:.3} deg, seed {}\n",
             options.first_frame, last, options.seed
         );
         return Ok(Simulated {
             text: header + &text,
-            truth: truth(Some(&biases), Some(raw_truth)),
+            truth: truth(Some(&biases), Some(&errors), Some(raw_truth)),
         });
     }
 
@@ -782,7 +815,7 @@ pub fn simulate(
     };
     Ok(Simulated {
         text,
-        truth: truth(None, None),
+        truth: truth(None, None, None),
     })
 }
 

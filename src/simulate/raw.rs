@@ -22,8 +22,13 @@
 //!   (north and down, a northern-hemisphere field), in the sensor frame; plus, within a
 //!   disturbance window, a field along east ramped in and out over 0.5 s (a magnet brought near);
 //!   plus white noise (σ `mag_noise_ut`).
+//! - **Sensor errors** (`--sensor-errors`, what `calibrate-sensors` takes away), each sensor its
+//!   own draw ([`SensorErrors`]): the gyro reads `M·ω + b` with `M` lower triangular (paper 004's
+//!   eq. 6: gains on the diagonal, misalignment below), the accelerometer `diag(k)·f + o`, the
+//!   magnetometer `S·m + h` (soft iron `S` symmetric, hard iron `h`); noise is added after.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use serde::Serialize;
 
 /// Standard gravity, m/s².
 pub const G: f64 = 9.80665;
@@ -49,6 +54,150 @@ pub struct RawOptions {
     pub disturbance: Option<Disturbance>,
     /// The scale of the source's positions.
     pub source_scale: SourceScale,
+    /// The sensors' intrinsic errors' sizes (each sensor draws its own), or none.
+    pub errors: Option<ErrorSizes>,
+}
+
+/// How large the intrinsic errors drawn for each sensor are (`--sensor-errors`,
+/// `key=value,...`; each drawn uniformly within ± its size, the hard iron's length exactly it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorSizes {
+    /// The hard iron's length, µT.
+    pub hard_iron_ut: f64,
+    /// Each soft-iron element's deviation from the identity's.
+    pub soft_iron: f64,
+    /// Each gyro axis's gain error.
+    pub gyro_gain: f64,
+    /// The gyro axes' misalignment, radians (below-diagonal elements of `M`).
+    pub gyro_misalignment: f64,
+    /// Each accelerometer axis's offset, m/s².
+    pub acc_offset: f64,
+    /// Each accelerometer axis's gain error.
+    pub acc_gain: f64,
+}
+
+impl Default for ErrorSizes {
+    /// A cheap MEMS board's: 20 µT of hard iron, 5 % soft iron, 3 % gyro gain and 1° misalignment,
+    /// 0.3 m/s² and 3 % on the accelerometer.
+    fn default() -> Self {
+        ErrorSizes {
+            hard_iron_ut: 20.0,
+            soft_iron: 0.05,
+            gyro_gain: 0.03,
+            gyro_misalignment: 1f64.to_radians(),
+            acc_offset: 0.3,
+            acc_gain: 0.03,
+        }
+    }
+}
+
+impl std::str::FromStr for ErrorSizes {
+    type Err = String;
+    /// `default`, or `hard_iron=20,soft_iron=0.05,gyro_gain=0.03,misalignment_deg=1,acc_offset=0.3,
+    /// acc_gain=0.03` (any subset; the rest at their defaults, 0 to leave one out).
+    fn from_str(s: &str) -> Result<Self, String> {
+        let mut e = ErrorSizes::default();
+        for part in s
+            .split(',')
+            .map(str::trim)
+            .filter(|p| !p.is_empty() && *p != "default")
+        {
+            let (k, v) = part
+                .split_once('=')
+                .ok_or_else(|| format!("`{part}`: expected key=value"))?;
+            let v: f64 = v
+                .trim()
+                .parse()
+                .ok()
+                .filter(|x: &f64| x.is_finite() && *x >= 0.0)
+                .ok_or_else(|| format!("`{part}`: not a number ≥ 0"))?;
+            match k.trim() {
+                "hard_iron" => e.hard_iron_ut = v,
+                "soft_iron" => e.soft_iron = v,
+                "gyro_gain" => e.gyro_gain = v,
+                "misalignment_deg" => e.gyro_misalignment = v.to_radians(),
+                "acc_offset" => e.acc_offset = v,
+                "acc_gain" => e.acc_gain = v,
+                other => {
+                    return Err(format!(
+                        "unknown sensor error `{other}`; expected hard_iron, soft_iron, gyro_gain, \
+                         misalignment_deg, acc_offset or acc_gain"
+                    ));
+                }
+            }
+        }
+        Ok(e)
+    }
+}
+
+/// One sensor's intrinsic errors (the truth `calibrate-sensors` should find). Matrices by rows.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SensorErrors {
+    /// `M`: the gyro reads `M·ω + bias`.
+    pub gyro_matrix: [[f64; 3]; 3],
+    /// `k`, `o`: the accelerometer reads `diag(k)·f + o`.
+    pub acc_gain: [f64; 3],
+    pub acc_offset_m_s2: [f64; 3],
+    /// `S`, `h`: the magnetometer reads `S·m + h`, µT.
+    pub soft_iron: [[f64; 3]; 3],
+    pub hard_iron_ut: [f64; 3],
+}
+
+fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
+}
+
+impl SensorErrors {
+    /// Draws one sensor's errors: `uniform` gives numbers in [0, 1).
+    pub fn draw(sizes: &ErrorSizes, mut uniform: impl FnMut() -> f64) -> SensorErrors {
+        let mut pm = |size: f64| (2.0 * uniform() - 1.0) * size;
+        let mut m = Matrix3::identity();
+        for r in 0..3 {
+            m[(r, r)] += pm(sizes.gyro_gain);
+            for c in 0..r {
+                m[(r, c)] = pm(sizes.gyro_misalignment);
+            }
+        }
+        let acc_gain = [0; 3].map(|_| 1.0 + pm(sizes.acc_gain));
+        let acc_offset = [0; 3].map(|_| pm(sizes.acc_offset));
+        let mut soft = Matrix3::identity();
+        for r in 0..3 {
+            for c in r..3 {
+                let d = pm(sizes.soft_iron);
+                soft[(r, c)] += d;
+                if c != r {
+                    soft[(c, r)] += d;
+                }
+            }
+        }
+        let dir = Vector3::new(pm(1.0), pm(1.0), pm(1.0))
+            .try_normalize(1e-9)
+            .unwrap_or_else(Vector3::x);
+        SensorErrors {
+            gyro_matrix: rows(&m),
+            acc_gain,
+            acc_offset_m_s2: acc_offset,
+            soft_iron: rows(&soft),
+            hard_iron_ut: (dir * sizes.hard_iron_ut).into(),
+        }
+    }
+
+    fn matrix(m: &[[f64; 3]; 3]) -> Matrix3<f64> {
+        Matrix3::from_fn(|r, c| m[r][c])
+    }
+
+    /// What the gyro reads for the rate `w` (before bias and noise).
+    pub fn gyro(&self, w: &Vector3<f64>) -> Vector3<f64> {
+        Self::matrix(&self.gyro_matrix) * w
+    }
+
+    pub fn accelerometer(&self, f: &Vector3<f64>) -> Vector3<f64> {
+        f.component_mul(&Vector3::from(self.acc_gain)) + Vector3::from(self.acc_offset_m_s2)
+    }
+
+    pub fn magnetometer(&self, m: &Vector3<f64>) -> Vector3<f64> {
+        Self::matrix(&self.soft_iron) * m + Vector3::from(self.hard_iron_ut)
+    }
 }
 
 /// How long a unit of the source BVH is.
@@ -91,6 +240,7 @@ impl Default for RawOptions {
             magnetometer: true,
             disturbance: None,
             source_scale: SourceScale::RestHeight(1.75),
+            errors: None,
         }
     }
 }

@@ -75,7 +75,18 @@ pub struct FusionRecord {
     pub fusion: crate::fusion::Fusion,
     /// `settings` (`--fusion`, the config's `fusion`) or `default`.
     pub chosen_by: &'static str,
+    /// The sensor calibration file applied before fusion (`--sensor-calibration`); each sensor's
+    /// `corrections` say which of its kinds ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensor_calibration: Option<FileRecord>,
     pub sensors: std::collections::BTreeMap<String, crate::fusion::FusionStats>,
+}
+
+/// A file by path and content.
+#[derive(Debug, Clone, Serialize)]
+pub struct FileRecord {
+    pub path: String,
+    pub sha256: String,
 }
 
 #[derive(Debug, Clone, Serialize)]
