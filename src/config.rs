@@ -21,6 +21,7 @@
 //! sensor_rate_hz: 100    # the sensors' rate, for causal smoothing (else from their first samples)
 //! fusion: offline        # fuse raw readings even where the device gave orientations; or
 //!                        # madgwick:beta=0.1, mahony, trust, gyro, vqf:6d (no magnetometer)
+//! sensor_calibration: sensors.yaml   # calibrate-sensors' file; relative to this one
 //! smoothing: butterworth:order=4,cutoff=14   # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
 //! # or with per-bone overrides:
 //! # smoothing: {method: "butterworth:cutoff=4", bones: {LeftHand: none, Head: "gaussian:sigma=0.05"}}
@@ -387,6 +388,27 @@ mod tests {
         assert_eq!(s.world_from, Some(WorldFrom::Config));
         let s = settings(Config::default(), None).unwrap();
         assert_eq!(s, ConvertSettings::default());
+    }
+
+    #[test]
+    fn the_sensor_calibration_is_relative_to_the_config() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("imubake.yaml");
+        std::fs::write(&path, "sensor_calibration: cal/sensors.yaml\n").unwrap();
+        let s = settings(Config::default(), Some(&path)).unwrap();
+        assert_eq!(
+            s.sensor_calibration,
+            Some(dir.path().join("cal/sensors.yaml"))
+        );
+        let flag = Config {
+            sensor_calibration: Some("other.yaml".into()),
+            ..Config::default()
+        };
+        let s = settings(flag, Some(&path)).unwrap();
+        assert_eq!(
+            s.sensor_calibration,
+            Some(std::path::PathBuf::from("other.yaml"))
+        );
     }
 
     #[test]

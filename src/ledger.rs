@@ -609,6 +609,17 @@ mod tests {
         tuned.pipeline.fusion = Some("vqf:tau_acc=2".parse().unwrap());
         let fps = [&settings, &fused, &tuned].map(settings_fingerprint);
         assert!(fps[0] != fps[1] && fps[1] != fps[2] && fps[0] != fps[2]);
+        // A sensor calibration file counts by content.
+        let cal = dir.path().join("sensors.yaml");
+        fs::write(&cal, "a").unwrap();
+        let calibrated = ConvertSettings {
+            sensor_calibration: Some(cal.clone()),
+            ..settings.clone()
+        };
+        let before = settings_fingerprint(&calibrated);
+        assert_ne!(before, settings_fingerprint(&settings));
+        fs::write(&cal, "b").unwrap();
+        assert_ne!(before, settings_fingerprint(&calibrated));
         // Fingerprints written before schemas were bare SHA-256s.
         assert_eq!(fingerprint_schema(&"ab".repeat(32)), 0);
     }

@@ -6,7 +6,15 @@ use std::collections::BTreeSet;
 use std::path::Path;
 use std::process::Command;
 
-const COMMANDS: [&str; 6] = ["convert", "batch", "fuse", "watch", "inspect", "simulate"];
+const COMMANDS: [&str; 7] = [
+    "convert",
+    "batch",
+    "fuse",
+    "calibrate-sensors",
+    "watch",
+    "inspect",
+    "simulate",
+];
 
 fn docs(rel: &str) -> String {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
