@@ -31,6 +31,10 @@ pub struct Pose {
     pub time_s: f64,
     pub local: Vec<UnitQuaternion<f64>>,
     pub root: Vector3<f64>,
+    /// Left and right foot planted (foot-rooted root motion; false otherwise).
+    pub contact: [bool; 2],
+    /// Both feet off the floor (foot-rooted root motion).
+    pub airborne: bool,
 }
 
 /// An [`Animation`] built by collecting [`Pose`]s (frame after frame).

@@ -407,6 +407,8 @@ struct Conversion {
     unsmoothed: Option<Vec<Vec<UnitQuaternion<f64>>>>,
     mapping: MappingRecord,
     pipeline: PipelineRecord,
+    /// The feet's contacts, in `feet` root mode.
+    contacts: Option<pipeline::root::Contacts>,
     /// The sensors' world, and where it came from.
     world: (World, WorldFrom),
     warnings: Vec<String>,
@@ -460,8 +462,10 @@ fn quaternion_mode(
                 heading.heading.scaled_axis().y.to_degrees(),
                 converted.first_frame,
                 "quaternion",
+                converted.root_mode,
             )
         },
+        contacts: converted.contacts,
         world: (converted.world, world_from),
         unsmoothed: converted.unsmoothed,
         warnings: converted.warnings,
@@ -472,7 +476,7 @@ fn quaternion_mode(
 /// Paper 002's pipeline for a Listing-2 mapping ([`pipeline::legacy`]): the signed yaw/pitch/roll
 /// channel copy onto `--rig` (default `mixamo`), parents from Table 1 (the `sou12` rig), every
 /// joint written with BVH channels `Zrotation Yrotation Xrotation` (Blender's `XYZ` mode), the
-/// root fixed at rest. Sidecar: `pipeline.mode = "legacy-euler"`, `pipeline.heading = "none"`,
+/// root fixed at rest (unless `--root` names another mode). Sidecar: `pipeline.mode = "legacy-euler"`, `pipeline.heading = "none"`,
 /// `mapping.legacy` lists each target.
 fn legacy_mode(
     input: &Path,
@@ -518,7 +522,9 @@ fn legacy_mode(
             0.0,
             legacy.first_frame,
             "legacy-euler",
+            legacy.root_mode,
         ),
+        contacts: legacy.contacts,
         world,
         unsmoothed: None,
         warnings: legacy.warnings,
@@ -566,11 +572,12 @@ fn pipeline_record(
     heading_deg: f64,
     first_frame: usize,
     mode: &'static str,
+    root: pipeline::root::RootMode,
 ) -> PipelineRecord {
     PipelineRecord {
         fusion: None,
         smoothing: Some(serde_json::to_value(&settings.pipeline.smoothing).expect("serialisable")),
-        root: settings.pipeline.root.label(),
+        root: root.label(),
         heading: heading.label(),
         heading_sensor: heading.sensor().map(str::to_string),
         heading_deg,
@@ -663,6 +670,7 @@ fn write_take(
         },
         mapping: conversion.mapping,
         pipeline: conversion.pipeline,
+        contacts: conversion.contacts,
         outputs,
         sensors: sensor_summaries,
         dropped_lines,

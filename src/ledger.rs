@@ -155,8 +155,9 @@ const RACY_NS: u64 = 2_000_000_000;
 /// the stream's core (its grid's rate from each sensor's first samples); 3: raw readings are
 /// fused (takes that failed for want of orientations convert now) and the sidecar records each
 /// sensor's origin and world; 4: filters that do not estimate the gyro bias (madgwick, trust,
-/// gyro) get it from the take's opening stillness.
-pub const FINGERPRINT_SCHEMA: u32 = 4;
+/// gyro) get it from the take's opening stillness; 5: the root mode `auto` is the default (the
+/// body walks when both legs are sensed).
+pub const FINGERPRINT_SCHEMA: u32 = 5;
 
 /// What decides a conversion's outputs besides the capture, in a stable serialisation: field
 /// names and values, not Rust's `Debug` text; the mapping and rig files by content, not by path.

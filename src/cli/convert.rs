@@ -80,6 +80,11 @@ pub struct SettingsArgs {
     /// out [default: offline (vqf with --causal), for sensors with raw readings only]
     #[arg(long, value_name = "NAME[:key=value,...]")]
     fusion: Option<imubake::fusion::Fusion>,
+    /// Where the body is: fixed (hips at rest height and place), ground (lowest point on the
+    /// floor), feet (foot-rooted: the planted foot stays, the body walks), auto (feet when both
+    /// legs are sensed down to the feet, ground when the thighs are, else fixed) [default: auto]
+    #[arg(long, value_name = "MODE")]
+    root: Option<imubake::pipeline::root::RootMode>,
     /// Correct raw readings before fusion with this sensor calibration file (written by
     /// `imubake calibrate-sensors`): gyro bias and gain, accelerometer, magnetometer, per sensor.
     #[arg(long, value_name = "FILE.yaml")]
@@ -141,6 +146,7 @@ impl SettingsArgs {
             sensor_rate_hz: self.sensor_rate,
             fusion: self.fusion.clone(),
             sensor_calibration: self.sensor_calibration.clone(),
+            root: self.root,
             ..self.read.layer()
         }
     }

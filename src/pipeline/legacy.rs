@@ -195,6 +195,9 @@ pub struct LegacyAnimation {
     pub targets: Vec<ResolvedTarget>,
     /// Frame of the take's grid that became frame 0 (non-zero after `--trim`).
     pub first_frame: usize,
+    /// The root mode that ran (`auto` resolved), and the contacts in `feet` mode.
+    pub root_mode: super::root::RootMode,
+    pub contacts: Option<super::root::Contacts>,
     pub warnings: Vec<String>,
 }
 
@@ -380,11 +383,18 @@ pub fn run(
             not_smoothed.len()
         ));
     }
-    // Paper 002's mode drives bones by Euler channels, with no world tracks of sensed bones.
-    let roots = super::root::root_positions(&rig, options.root, &local, &vec![None; rig.len()]);
+    // Paper 002's mode keeps its root fixed unless another mode is asked for by name.
+    let root_mode = match options.root {
+        super::root::RootMode::Auto => super::root::RootMode::Fixed,
+        mode => mode,
+    };
+    let (roots, contacts) =
+        super::root::root_positions(&rig, root_mode, &local, options.fps.frame_time_s());
     let animation = Animation::new(rig, options.fps, local, animated, roots)?;
     Ok(LegacyAnimation {
         animation,
+        root_mode,
+        contacts,
         euler_deg,
         targets,
         first_frame: first,

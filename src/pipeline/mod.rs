@@ -114,7 +114,7 @@ impl Default for PipelineOptions {
         PipelineOptions {
             fps: Fps::new(30, 1).expect("30 fps"),
             trim: None,
-            root: RootMode::Fixed,
+            root: RootMode::Auto,
             smoothing: Smoothing::default(),
             keep_unsmoothed: false,
             force: false,
@@ -144,6 +144,9 @@ pub struct Converted {
     pub fusion: Option<crate::fusion::Fusion>,
     /// Frame of the take's grid that became frame 0 (non-zero after `--trim`).
     pub first_frame: usize,
+    /// The root mode that ran (`auto` resolved), and the feet's contacts in `feet` mode.
+    pub root_mode: RootMode,
+    pub contacts: Option<root::Contacts>,
     /// `local[joint][frame]` before smoothing, when asked for (`keep_unsmoothed`).
     pub unsmoothed: Option<Vec<Vec<UnitQuaternion<f64>>>>,
     pub warnings: Vec<String>,
@@ -315,9 +318,11 @@ pub fn run(
     // 6. Local rotations; 7. the root.
     let local = relative::to_local(rig, &world_tracks, grid.frames);
     let unsmoothed = raw_tracks.map(|raw| relative::to_local(rig, &raw, grid.frames));
-    let animated = world_tracks.iter().map(Option::is_some).collect();
-    let roots = root::root_positions(rig, options.root, &local, &world_tracks);
+    let animated: Vec<bool> = world_tracks.iter().map(Option::is_some).collect();
     drop(world_tracks);
+    let root_mode = root::resolve(options.root, rig, &animated);
+    let (roots, contacts) =
+        root::root_positions(rig, root_mode, &local, options.fps.frame_time_s());
     let animation = Animation::new(rig.clone(), options.fps, local, animated, roots)?;
     Ok(Converted {
         animation,
@@ -327,6 +332,8 @@ pub fn run(
         world,
         origins,
         fusion,
+        root_mode,
+        contacts,
         first_frame: grid.first,
         unsmoothed,
         warnings,
@@ -387,7 +394,15 @@ fn run_causal(
         &file,
     )?;
     let mut animation = AnimationBuilder::new(rig.clone(), options.fps);
-    let mut on_pose = |pose: &Pose| animation.push(pose);
+    let mut feet: Vec<root::RootFrame> = Vec::new();
+    let mut on_pose = |pose: &Pose| {
+        animation.push(pose);
+        feet.push(root::RootFrame {
+            position: pose.root,
+            contact: pose.contact,
+            airborne: pose.airborne,
+        });
+    };
     // The sensors' samples merged in time order (ties in mapping order).
     let mut heads: std::collections::BinaryHeap<MergeHead> = sources
         .tracks
@@ -422,7 +437,13 @@ fn run_causal(
         animated[s.bone] = true;
     }
     let calibration = stream.calibration().cloned().expect("solved at the end");
+    let root_mode = stream.root_mode();
+    drop(stream);
     let animation = animation.finish(grid.first, grid.frames, animated)?;
+    let kept = feet
+        .get(grid.first..(grid.first + grid.frames).min(feet.len()))
+        .unwrap_or(&[]);
+    let contacts = (root_mode == RootMode::Feet).then(|| root::Contacts::from_frames(kept));
     Ok(Converted {
         animation,
         sensors: sources.sensors,
@@ -431,6 +452,8 @@ fn run_causal(
         world,
         origins: sources.origins,
         fusion: sources.fusion,
+        root_mode,
+        contacts,
         first_frame: grid.first,
         unsmoothed: None,
         warnings,

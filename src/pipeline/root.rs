@@ -1,5 +1,36 @@
-//! Root position per frame. `fixed`: the root held at its rest position (feet on the ground in
-//! the rest pose); foot-rooted modes come later.
+//! Stage 7, root: where the body is in the scene, frame by frame.
+//!
+//! Modes (`--root`):
+//! - `fixed`: the root held at its rest position.
+//! - `ground` (paper 000 ch. IV): the root at its rest place horizontally, moved vertically so
+//!   that the body's lowest point (joints and end sites) is on the floor — the rest pose's lowest
+//!   point's height.
+//! - `feet` (paper 003): foot-rooted. Each frame the joints' positions relative to the hips come
+//!   from the frame's rotations (forward kinematics, `c_child = c_parent + R_parent · offset`).
+//!   Horizontally a planted foot's contact point stays where it is, so the hips move by minus its
+//!   motion relative to the hips: `H(t) = H(t−1) − Σ_f w_f (p_f(t) − p_f(t−1))`, `p_f` the point
+//!   of foot f's subtree (foot, toes, end sites) that was lowest at `t − 1` (a rolling foot pivots
+//!   on its heel, then its toes). Vertically each foot stands on its surface: `H_y = Σ_f w_f
+//!   (L_f − y_f)`, `y_f` its lowest point relative to the hips, `L_f` the surface's height — the
+//!   other foot's when the weight passes to it, unless the feet are then a step apart
+//!   ([`STEP_H`]; a stair, a kerb: the body climbs, as paper 003's does), so sensor error cannot
+//!   make the floor wander. The contact weights `w_f` score each foot — how much higher it is
+//!   than the other, how fast it moves horizontally relative to the hips (a swinging foot moves
+//!   faster than the planted one, which moves at the body's speed), how fast it rises (a foot
+//!   pushing off rises first) — and blend smoothly between alike feet (double support), so a
+//!   switch never jumps. Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3
+//!   samples), which seldom holds on real walks. When the legs throw the hips up faster than
+//!   [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off) the body is airborne: the hips keep
+//!   their horizontal velocity and fall with gravity until a foot reaches its surface. Nothing
+//!   goes below the planted foot's surface (the clamp).
+//! - `auto` (the default): `feet` when both legs are sensed down to the feet (the thigh and the
+//!   shank of each side: the foot follows the shank when it has no sensor of its own), else
+//!   `ground` when both thighs are, else `fixed`.
+//!
+//! Every threshold is a fraction of the subject's standing height `h` (the rest pose's lowest
+//! point to its highest), since rigs come in metres or in any BVH unit. The stage is an
+//! incremental core ([`RootCore`]): a frame's local rotations in, its root position and foot
+//! contacts out, for a whole take and a stream alike.
 
 use crate::rig::Rig;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -9,30 +40,551 @@ use serde::{Deserialize, Serialize};
 #[serde(rename_all = "kebab-case")]
 pub enum RootMode {
     /// Hips held at rest height and place.
-    #[default]
     Fixed,
+    /// The lowest point on the floor, no horizontal motion.
+    Ground,
+    /// Foot-rooted: the planted foot stays, the body walks.
+    Feet,
+    /// `feet`, `ground` or `fixed`, by what the mapping senses.
+    #[default]
+    Auto,
 }
 
 impl RootMode {
     pub fn label(self) -> &'static str {
         match self {
             RootMode::Fixed => "fixed",
+            RootMode::Ground => "ground",
+            RootMode::Feet => "feet",
+            RootMode::Auto => "auto",
         }
     }
 }
 
-/// Stage 7, root: the root position at every frame (rig units), given every joint's local
-/// rotations (`local[joint][frame]`) and the world rotations of the sensed bones
-/// (`world[joint]`, `None` for joints without a sensor) — what foot-rooted modes will need.
+impl std::str::FromStr for RootMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        [
+            RootMode::Fixed,
+            RootMode::Ground,
+            RootMode::Feet,
+            RootMode::Auto,
+        ]
+        .into_iter()
+        .find(|m| m.label() == s)
+        .ok_or_else(|| format!("unknown root mode `{s}`; expected fixed, ground, feet or auto"))
+    }
+}
+
+/// A foot this much higher than the other scores one unit against carrying the body, × h
+/// (the weights go from one foot to the other over two units).
+pub const BAND_H: f64 = 0.004;
+/// So does this much horizontal speed relative to the hips, × h / s (a swinging foot moves
+/// faster than the planted one, which moves at the body's speed)…
+pub const SPEED_H_S: f64 = 0.1;
+/// … and this much rising relative to the hips, × h / s (a foot pushing off rises first).
+pub const RISE_H_S: f64 = 0.1 / 6.0;
+/// Feet this far apart in height when the weight passes are on different surfaces (a step),
+/// × h; closer, they are on the same one.
+pub const STEP_H: f64 = 0.06;
+/// The planted leg throwing the hips up faster than this is a take-off, × h / s.
+pub const TAKEOFF_H_S: f64 = 0.45;
+/// … for this long, s.
+pub const TAKEOFF_S: f64 = 0.04;
+/// Gravity in standing heights per s² (9.81 m/s² on a 1.75 m body).
+pub const GRAVITY_H_S2: f64 = 9.80665 / 1.75;
+/// Contacts and airborne stretches shorter than this many frames are not reported.
+pub const MIN_FRAMES: usize = 3;
+
+/// A foot: its joint, and the joints of its subtree (toes), each with its end site if any.
+#[derive(Debug, Clone)]
+struct Foot {
+    /// The joints whose positions (and end sites) make the foot's contact points.
+    joints: Vec<usize>,
+}
+
+/// The foot joints of a rig, found by name: `LeftFoot`/`RightFoot` (any prefix such as
+/// `mixamorig:`), `l_foot`, `LeftAnkle`, `lFoot`, … Returns `[left, right]`.
+pub fn foot_joints(rig: &Rig) -> Option<[usize; 2]> {
+    let find = |side: char| {
+        rig.joints().iter().position(|j| {
+            let name = j
+                .name
+                .rsplit(':')
+                .next()
+                .unwrap_or(&j.name)
+                .to_ascii_lowercase();
+            let name = name.replace(['_', ' ', '.'], "");
+            let sided = match side {
+                'l' => name
+                    .strip_prefix("left")
+                    .or_else(|| name.strip_prefix('l'))
+                    .or_else(|| name.strip_suffix('l')),
+                _ => name
+                    .strip_prefix("right")
+                    .or_else(|| name.strip_prefix('r'))
+                    .or_else(|| name.strip_suffix('r')),
+            };
+            matches!(sided, Some("foot" | "ankle"))
+        })
+    };
+    Some([find('l')?, find('r')?])
+}
+
+/// The mode `auto` resolves to for `rig` when the joints `animated` carry sensors.
+pub fn resolve(mode: RootMode, rig: &Rig, animated: &[bool]) -> RootMode {
+    if mode != RootMode::Auto {
+        return mode;
+    }
+    let Some(feet) = foot_joints(rig) else {
+        return RootMode::Fixed;
+    };
+    let parent = |j: usize| rig.joints()[j].parent;
+    let sensed = |j: Option<usize>| j.is_some_and(|j| animated[j]);
+    let shank = |f: usize| parent(f);
+    let thigh = |f: usize| parent(f).and_then(parent);
+    if feet.iter().all(|&f| sensed(shank(f)) && sensed(thigh(f))) {
+        RootMode::Feet
+    } else if feet.iter().all(|&f| sensed(thigh(f))) {
+        RootMode::Ground
+    } else {
+        RootMode::Fixed
+    }
+}
+
+/// One frame's root position and what the feet did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RootFrame {
+    pub position: Vector3<f64>,
+    /// Left, right: planted.
+    pub contact: [bool; 2],
+    pub airborne: bool,
+}
+
+/// The root stage's incremental core.
+#[derive(Debug, Clone)]
+pub struct RootCore {
+    mode: RootMode,
+    rig: Rig,
+    rest_root: Vector3<f64>,
+    /// The rest pose's lowest point's height (the floor), rig units.
+    floor: f64,
+    /// Standing height, rig units.
+    height: f64,
+    dt: f64,
+    feet: Option<[Foot; 2]>,
+    state: Option<FeetState>,
+    // Per-frame buffers (a stream allocates nothing per frame).
+    world: Vec<UnitQuaternion<f64>>,
+    positions: Vec<Vector3<f64>>,
+    now: [Vec<Vector3<f64>>; 2],
+}
+
+#[derive(Debug, Clone)]
+struct FeetState {
+    hips: Vector3<f64>,
+    /// Each foot's contact points relative to the hips at the previous frame.
+    previous: [Vec<Vector3<f64>>; 2],
+    /// The height of the surface each foot stands (or last stood) on.
+    level: [f64; 2],
+    /// Frames the hips have been rising faster than a walk's.
+    rising: usize,
+    /// The foot that carried most weight at the previous frame.
+    dominant: usize,
+    /// The hips' velocity over the last frames (smoothed), rig units per second.
+    velocity: Vector3<f64>,
+    airborne: bool,
+}
+
+/// Points of a foot's subtree (joint positions and end sites) for positions `pos` and world
+/// rotations `world`.
+fn foot_points(
+    rig: &Rig,
+    foot: &Foot,
+    pos: &[Vector3<f64>],
+    world: &[UnitQuaternion<f64>],
+    out: &mut Vec<Vector3<f64>>,
+) {
+    out.clear();
+    for &j in &foot.joints {
+        out.push(pos[j]);
+        if let Some(e) = rig.joints()[j].end_site {
+            out.push(pos[j] + world[j] * e);
+        }
+    }
+}
+
+fn lowest(points: &[Vector3<f64>]) -> (usize, f64) {
+    points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (i, p.y))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((0, 0.0))
+}
+
+/// Smooth step from 0 at `x = −1` to 1 at `x = 1`.
+fn smooth(x: f64) -> f64 {
+    let u = ((x + 1.0) / 2.0).clamp(0.0, 1.0);
+    u * u * (3.0 - 2.0 * u)
+}
+
+impl RootCore {
+    /// A core for `rig` at `fps`, in `mode` (resolved with [`resolve`] first; `auto` acts as
+    /// `feet` here).
+    pub fn new(rig: &Rig, mode: RootMode, frame_time_s: f64) -> RootCore {
+        let rest = rig.rest_positions();
+        let mut low = f64::INFINITY;
+        let mut high = f64::NEG_INFINITY;
+        for (i, j) in rig.joints().iter().enumerate() {
+            for y in std::iter::once(rest[i].y).chain(j.end_site.map(|e| rest[i].y + e.y)) {
+                low = low.min(y);
+                high = high.max(y);
+            }
+        }
+        let mode = if mode == RootMode::Auto {
+            RootMode::Feet
+        } else {
+            mode
+        };
+        let feet = foot_joints(rig).map(|[l, r]| {
+            let subtree = |f: usize| {
+                let mut joints = vec![f];
+                for (i, j) in rig.joints().iter().enumerate() {
+                    if j.parent.is_some_and(|p| joints.contains(&p)) {
+                        joints.push(i);
+                    }
+                }
+                Foot { joints }
+            };
+            [subtree(l), subtree(r)]
+        });
+        let mode = match (mode, &feet) {
+            (RootMode::Feet, None) => RootMode::Ground,
+            (m, _) => m,
+        };
+        RootCore {
+            mode,
+            rig: rig.clone(),
+            rest_root: rig.joints()[0].offset,
+            floor: low,
+            height: (high - low).max(1e-9),
+            dt: frame_time_s,
+            feet,
+            state: None,
+            world: Vec::with_capacity(rig.len()),
+            positions: Vec::with_capacity(rig.len()),
+            now: [Vec::with_capacity(16), Vec::with_capacity(16)],
+        }
+    }
+
+    /// The mode it runs (`feet` falls back to `ground` on a rig without feet).
+    pub fn mode(&self) -> RootMode {
+        self.mode
+    }
+
+    /// The standing height `h`, rig units.
+    pub fn standing_height(&self) -> f64 {
+        self.height
+    }
+
+    /// The next frame, from its local rotations (one per joint).
+    pub fn push(&mut self, local: &[UnitQuaternion<f64>]) -> RootFrame {
+        match self.mode {
+            RootMode::Fixed => RootFrame {
+                position: self.rest_root,
+                contact: [false; 2],
+                airborne: false,
+            },
+            RootMode::Ground => {
+                let low = self.pose_relative_to_hips(local);
+                RootFrame {
+                    position: Vector3::new(self.rest_root.x, self.floor - low, self.rest_root.z),
+                    contact: [false; 2],
+                    airborne: false,
+                }
+            }
+            RootMode::Feet | RootMode::Auto => self.push_feet(local),
+        }
+    }
+
+    /// Forward kinematics with the hips at the origin into the buffers (world rotations,
+    /// positions); the lowest point's height (joints and end sites).
+    fn pose_relative_to_hips(&mut self, local: &[UnitQuaternion<f64>]) -> f64 {
+        self.world.clear();
+        self.positions.clear();
+        let mut low = f64::INFINITY;
+        for (i, j) in self.rig.joints().iter().enumerate() {
+            let (q, p) = match j.parent {
+                Some(parent) => (
+                    self.world[parent] * local[i],
+                    self.positions[parent] + self.world[parent] * j.offset,
+                ),
+                None => (local[i], Vector3::zeros()),
+            };
+            low = low.min(p.y);
+            if let Some(e) = j.end_site {
+                low = low.min(p.y + (q * e).y);
+            }
+            self.world.push(q);
+            self.positions.push(p);
+        }
+        low
+    }
+
+    fn push_feet(&mut self, local: &[UnitQuaternion<f64>]) -> RootFrame {
+        let h = self.height;
+        let body_low = self.pose_relative_to_hips(local);
+        let feet = self.feet.as_ref().expect("feet mode has feet");
+        for (f, foot) in feet.iter().enumerate() {
+            foot_points(
+                &self.rig,
+                foot,
+                &self.positions,
+                &self.world,
+                &mut self.now[f],
+            );
+        }
+        let now = &self.now;
+        let low = [lowest(&now[0]), lowest(&now[1])];
+        let Some(state) = self.state.as_mut() else {
+            // The first frame: the body stands on the floor where the rest pose stood.
+            let hips = Vector3::new(self.rest_root.x, self.floor - body_low, self.rest_root.z);
+            let w_left = smooth((low[1].1 - low[0].1) / (BAND_H * h));
+            self.state = Some(FeetState {
+                hips,
+                previous: now.clone(),
+                level: [self.floor; 2],
+                rising: 0,
+                dominant: usize::from(w_left < 0.5),
+                velocity: Vector3::zeros(),
+                airborne: false,
+            });
+            return RootFrame {
+                position: hips,
+                contact: [w_left > 0.25, w_left < 0.75],
+                airborne: false,
+            };
+        };
+        // How each foot's previously lowest point moved relative to the hips.
+        let mut moved = [Vector3::zeros(); 2];
+        for f in 0..2 {
+            let (k, _) = lowest(&state.previous[f]);
+            moved[f] = now[f].get(k).copied().unwrap_or_default() - state.previous[f][k];
+        }
+        // Contact weights: the foot that is lower, slower relative to the hips and not rising
+        // carries the body; when the two are alike both share it (double support), smoothly.
+        let dt = self.dt;
+        let score = |f: usize| {
+            let relative = moved[f] / dt;
+            (low[f].1 - low[0].1.min(low[1].1)) / (BAND_H * h)
+                + Vector3::new(relative.x, 0.0, relative.z).norm() / (SPEED_H_S * h)
+                + relative.y.max(0.0) / (RISE_H_S * h)
+        };
+        let w_left = smooth(score(1) - score(0));
+        let weights = [w_left, 1.0 - w_left];
+        let before = state.hips;
+        if state.airborne {
+            // Ballistic: the horizontal velocity kept, gravity vertically.
+            state.velocity.y -= GRAVITY_H_S2 * h * dt;
+            state.hips += state.velocity * dt;
+            let f = usize::from(low[1].1 < low[0].1);
+            if state.hips.y + low[f].1 <= state.level[f] {
+                state.airborne = false;
+                state.level[1 - f] = state.level[f];
+                state.dominant = f;
+            }
+        } else {
+            // Horizontally the planted feet stay where they are.
+            let step = weights[0] * moved[0] + weights[1] * moved[1];
+            state.hips.x -= step.x;
+            state.hips.z -= step.z;
+            // When the weight passes to the other foot, it stands on a surface as much higher
+            // than the other's as it is higher relative to the hips — the same one unless that
+            // is a step's height (a stair, a kerb; less is the sensors' error).
+            let dominant = usize::from(weights[1] > weights[0]);
+            if dominant != state.dominant {
+                let rise = low[dominant].1 - low[state.dominant].1;
+                state.level[dominant] = if rise.abs() >= STEP_H * h {
+                    state.level[state.dominant] + rise
+                } else {
+                    state.level[state.dominant]
+                };
+                state.dominant = dominant;
+            }
+            // Vertically each foot on its surface, weighted.
+            state.hips.y =
+                weights[0] * (state.level[0] - low[0].1) + weights[1] * (state.level[1] - low[1].1);
+            // A push-off faster than a walk's rise, for [`TAKEOFF_S`]: airborne.
+            if (state.hips.y - before.y) / dt > TAKEOFF_H_S * h {
+                state.rising += 1;
+            } else {
+                state.rising = 0;
+            }
+            if state.rising as f64 * dt >= TAKEOFF_S {
+                state.airborne = true;
+                state.rising = 0;
+            }
+        }
+        // Nothing below the planted foot's surface.
+        let floor = state.level[state.dominant];
+        let body = state.hips.y + body_low;
+        if body < floor - 1e-12 {
+            state.hips.y += floor - body;
+            if state.airborne && state.velocity.y < 0.0 {
+                state.airborne = false;
+            }
+        }
+        let v = (state.hips - before) / dt;
+        if !state.airborne {
+            // Smoothed over about three frames: the velocity a take-off carries.
+            state.velocity += (v - state.velocity) * (2.0 / 3.0);
+        }
+        for f in 0..2 {
+            state.previous[f].clear();
+            state.previous[f].extend_from_slice(&now[f]);
+        }
+        let airborne = state.airborne;
+        RootFrame {
+            position: state.hips,
+            contact: [
+                !airborne && weights[0] > 0.25,
+                !airborne && weights[1] > 0.25,
+            ],
+            airborne,
+        }
+    }
+}
+
+/// Frame ranges `[start, end]` (inclusive) where `flags` holds for at least [`MIN_FRAMES`].
+pub fn intervals(flags: impl Iterator<Item = bool>) -> Vec<[usize; 2]> {
+    let mut out = Vec::new();
+    let mut start = None;
+    let mut n = 0;
+    for (i, f) in flags.enumerate() {
+        n = i + 1;
+        match (f, start) {
+            (true, None) => start = Some(i),
+            (false, Some(s)) => {
+                if i - s >= MIN_FRAMES {
+                    out.push([s, i - 1]);
+                }
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start
+        && n - s >= MIN_FRAMES
+    {
+        out.push([s, n - 1]);
+    }
+    out
+}
+
+/// Foot contacts and airborne stretches over a take, as frame intervals (inclusive).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Contacts {
+    pub left: Vec<[usize; 2]>,
+    pub right: Vec<[usize; 2]>,
+    pub airborne: Vec<[usize; 2]>,
+    /// Per frame: left and right planted (for the glTF's contact curves).
+    #[serde(skip)]
+    pub per_frame: Vec<[bool; 2]>,
+}
+
+impl Contacts {
+    pub fn from_frames(frames: &[RootFrame]) -> Contacts {
+        Contacts {
+            left: intervals(frames.iter().map(|f| f.contact[0])),
+            right: intervals(frames.iter().map(|f| f.contact[1])),
+            airborne: intervals(frames.iter().map(|f| f.airborne)),
+            per_frame: frames.iter().map(|f| f.contact).collect(),
+        }
+    }
+
+    pub fn airborne_frames(&self) -> usize {
+        self.airborne.iter().map(|[s, e]| e - s + 1).sum()
+    }
+}
+
+/// Stage 7 over a whole take: the root position at every frame (rig units) from every joint's
+/// local rotations (`local[joint][frame]`), and the contacts in `feet` mode. `mode` is resolved
+/// already.
 pub fn root_positions(
     rig: &Rig,
     mode: RootMode,
     local: &[Vec<UnitQuaternion<f64>>],
-    world: &[Option<Vec<UnitQuaternion<f64>>>],
-) -> Vec<Vector3<f64>> {
+    frame_time_s: f64,
+) -> (Vec<Vector3<f64>>, Option<Contacts>) {
     let frames = local.first().map_or(0, Vec::len);
-    let _ = world;
-    match mode {
-        RootMode::Fixed => vec![rig.joints()[0].offset; frames],
+    let mut core = RootCore::new(rig, mode, frame_time_s);
+    if core.mode() == RootMode::Fixed {
+        return (vec![rig.joints()[0].offset; frames], None);
+    }
+    let mut pose = vec![UnitQuaternion::identity(); rig.len()];
+    let mut out = Vec::with_capacity(frames);
+    let mut all = Vec::with_capacity(frames);
+    for n in 0..frames {
+        for (q, track) in pose.iter_mut().zip(local) {
+            *q = track[n];
+        }
+        let f = core.push(&pose);
+        out.push(f.position);
+        all.push(f);
+    }
+    let contacts = (core.mode() == RootMode::Feet).then(|| Contacts::from_frames(&all));
+    (out, contacts)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rig::load_rig;
+
+    #[test]
+    fn feet_are_found_by_name_and_auto_follows_the_sensors() {
+        let rig = load_rig("mixamo").unwrap();
+        let [l, r] = foot_joints(&rig).unwrap();
+        assert_eq!(rig.joints()[l].name, "LeftFoot");
+        assert_eq!(rig.joints()[r].name, "RightFoot");
+        let mut animated = vec![false; rig.len()];
+        assert_eq!(resolve(RootMode::Auto, &rig, &animated), RootMode::Fixed);
+        for name in ["LeftUpLeg", "RightUpLeg"] {
+            animated[rig.joint_index(name).unwrap()] = true;
+        }
+        assert_eq!(resolve(RootMode::Auto, &rig, &animated), RootMode::Ground);
+        for name in ["LeftLeg", "RightLeg"] {
+            animated[rig.joint_index(name).unwrap()] = true;
+        }
+        assert_eq!(resolve(RootMode::Auto, &rig, &animated), RootMode::Feet);
+        assert_eq!(resolve(RootMode::Fixed, &rig, &animated), RootMode::Fixed);
+    }
+
+    #[test]
+    fn intervals_keep_runs_of_at_least_three_frames() {
+        let f = [
+            true, true, false, true, true, true, false, true, true, true, true,
+        ];
+        assert_eq!(intervals(f.into_iter()), vec![[3, 5], [7, 10]]);
+    }
+
+    /// Standing still in the rest pose: every mode keeps the body where the rest pose stands,
+    /// feet on the floor.
+    #[test]
+    fn standing_still_stays_put() {
+        let rig = load_rig("mixamo").unwrap();
+        let rest = vec![UnitQuaternion::identity(); rig.len()];
+        for mode in [RootMode::Fixed, RootMode::Ground, RootMode::Feet] {
+            let mut core = RootCore::new(&rig, mode, 1.0 / 60.0);
+            for _ in 0..30 {
+                let f = core.push(&rest);
+                assert!(
+                    (f.position - rig.joints()[0].offset).norm() < 1e-9,
+                    "{mode:?}: {f:?}"
+                );
+                assert!(!f.airborne);
+            }
+        }
     }
 }

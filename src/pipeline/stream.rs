@@ -22,7 +22,7 @@
 use super::calibrate::{Calibration, CalibrationCore};
 use super::relative::frame_to_local;
 use super::resample::{DEFAULT_STALE_AFTER_S, FrameResampler};
-use super::root::RootMode;
+use super::root::RootCore;
 use super::smoothing::CausalSmoother;
 use super::{PipelineError, PipelineOptions};
 use crate::anim::Pose;
@@ -46,7 +46,7 @@ pub enum StreamStatus {
 pub struct PoseStream {
     rig: Rig,
     fps: Fps,
-    root_mode: RootMode,
+    root: RootCore,
     to_rig: UnitQuaternion<f64>,
     sensors: Vec<ResolvedSensor>,
     calibration: CalibrationCore,
@@ -99,7 +99,17 @@ impl PoseStream {
         Ok(PoseStream {
             rig: rig.clone(),
             fps: options.fps,
-            root_mode: options.root,
+            root: {
+                let mut animated = vec![false; joints];
+                for s in &sensors {
+                    animated[s.bone] = true;
+                }
+                RootCore::new(
+                    rig,
+                    super::root::resolve(options.root, rig, &animated),
+                    options.fps.frame_time_s(),
+                )
+            },
             to_rig: world.to_rig(),
             sensors,
             calibration,
@@ -118,6 +128,8 @@ impl PoseStream {
                 time_s: 0.0,
                 local: vec![UnitQuaternion::identity(); joints],
                 root: Vector3::zeros(),
+                contact: [false; 2],
+                airborne: false,
             },
         })
     }
@@ -268,6 +280,11 @@ impl PoseStream {
         self.emit(None, on_pose);
     }
 
+    /// The root mode the stream runs (`auto` resolved).
+    pub fn root_mode(&self) -> super::root::RootMode {
+        self.root.mode()
+    }
+
     /// Stages 3 and 4 for one sample, into the resampler.
     fn feed(&mut self, sensor: usize, t: f64, q_rig: UnitQuaternion<f64>) {
         let calibration = self.calibration.result().expect("solved");
@@ -284,7 +301,7 @@ impl PoseStream {
         let PoseStream {
             rig,
             fps,
-            root_mode,
+            root,
             sensors,
             resampler,
             values,
@@ -301,9 +318,10 @@ impl PoseStream {
             frame_to_local(rig, |j| bone_world[j], frame_world, &mut pose.local);
             pose.frame = n;
             pose.time_s = fps.frame_time_of(n);
-            pose.root = match root_mode {
-                RootMode::Fixed => rig.joints()[0].offset,
-            };
+            let r = root.push(&pose.local);
+            pose.root = r.position;
+            pose.contact = r.contact;
+            pose.airborne = r.airborne;
             on_pose(pose);
         });
     }

@@ -18,6 +18,9 @@ pub struct Sidecar {
     pub rig: RigRecord,
     pub mapping: MappingRecord,
     pub pipeline: PipelineRecord,
+    /// Foot contacts and airborne stretches as frame intervals `[start, end]` (inclusive), in
+    /// `feet` root mode; `null` otherwise.
+    pub contacts: Option<crate::pipeline::root::Contacts>,
     pub outputs: Vec<OutputRecord>,
     pub sensors: SensorSummaries,
     pub dropped_lines: Vec<LineReport>,

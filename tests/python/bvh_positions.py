@@ -1,0 +1,96 @@
+#!/usr/bin/env python3
+"""Joint positions of a BVH at every frame, computed independently of imubake with numpy and
+scipy: a minimal BVH parser (offsets, End Sites, channels), each joint's rotation channels composed
+as intrinsic Euler angles in channel order, positions down the hierarchy
+(p_child = p_parent + R_parent · offset), a position channel replacing its OFFSET component (the root's channels are its world position).
+
+usage: bvh_positions.py FILE.bvh JOINT[,JOINT...]
+prints JSON {"joints": {joint: [[x, y, z] per frame]}, "lowest": [y per frame] (the lowest joint
+or End Site), "rest_lowest": y, "rest_highest": y (the rest pose, root at its OFFSET),
+"frame_time": s}
+"""
+import json
+import sys
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def parse(path):
+    tokens = open(path).read().split()
+    joints, stack, i = [], [], 0
+    while tokens[i] != "MOTION":
+        t = tokens[i]
+        if t in ("ROOT", "JOINT", "End"):
+            name = tokens[i + 1] if t != "End" else None
+            joints.append({"name": name, "parent": stack[-1] if stack else None, "channels": [], "offset": np.zeros(3)})
+            i += 2
+        elif t == "{":
+            stack.append(len(joints) - 1)
+            i += 1
+        elif t == "}":
+            stack.pop()
+            i += 1
+        elif t == "OFFSET":
+            joints[-1]["offset"] = np.array([float(v) for v in tokens[i + 1:i + 4]])
+            i += 4
+        elif t == "CHANNELS":
+            n = int(tokens[i + 1])
+            joints[-1]["channels"] = tokens[i + 2:i + 2 + n]
+            i += 2 + n
+        else:
+            i += 1
+    frames = int(tokens[i + 2])
+    frame_time = float(tokens[i + 5])
+    values = np.array([float(v) for v in tokens[i + 6:]]).reshape(frames, -1)
+    return joints, values, frame_time
+
+
+def positions(joints, values, channels=True):
+    """Positions per frame. A position channel replaces its OFFSET component (Blender's reading,
+    and conventions.md's rule for the root); `channels=False` keeps the OFFSETs (the rest pose)."""
+    n = len(values)
+    start, world, pos = 0, [], []
+    for j in joints:
+        ch = j["channels"]
+        rot = [c for c in ch if c.endswith("rotation")]
+        if rot:
+            idx = [start + ch.index(c) for c in rot]
+            local = Rotation.from_euler("".join(c[0] for c in rot), values[:, idx], degrees=True)
+        else:
+            local = Rotation.identity(n)
+        translation = np.tile(j["offset"], (n, 1))
+        for axis, name in enumerate(("Xposition", "Yposition", "Zposition")):
+            if channels and name in ch:
+                translation[:, axis] = values[:, start + ch.index(name)]
+        start += len(ch)
+        if j["parent"] is None:
+            world.append(local)
+            pos.append(translation)
+        else:
+            p = j["parent"]
+            world.append(world[p] * local)
+            pos.append(pos[p] + world[p].apply(translation))
+    return pos
+
+
+def main():
+    path, names = sys.argv[1], sys.argv[2].split(",")
+    joints, values, frame_time = parse(path)
+    pos = positions(joints, values)
+    rest = positions(joints, np.zeros((1, values.shape[1])), channels=False)
+    out = {
+        "joints": {},
+        "lowest": np.min(np.stack([p[:, 1] for p in pos]), axis=0).tolist(),
+        "rest_lowest": float(min(p[0, 1] for p in rest)),
+        "rest_highest": float(max(p[0, 1] for p in rest)),
+        "frame_time": frame_time,
+    }
+    for name in names:
+        k = next(i for i, j in enumerate(joints) if j["name"] == name)
+        out["joints"][name] = pos[k].tolist()
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()
