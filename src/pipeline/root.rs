@@ -440,9 +440,9 @@ impl RootCore {
             // Smoothed over about three frames: the velocity a take-off carries.
             state.velocity += (v - state.velocity) * (2.0 / 3.0);
         }
-        for f in 0..2 {
-            state.previous[f].clear();
-            state.previous[f].extend_from_slice(&now[f]);
+        for (previous, now) in state.previous.iter_mut().zip(now) {
+            previous.clear();
+            previous.extend_from_slice(now);
         }
         let airborne = state.airborne;
         RootFrame {

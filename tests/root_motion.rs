@@ -1,0 +1,406 @@
+//! Root motion (issue 16) in closed loop: `simulate` a capture from real BVH motion (16 sensors,
+//! 0.5° of noise), `convert` it onto the source's own skeleton (the BVH as `--rig`), and compare
+//! where the body goes with where the source went — positions of both computed independently with
+//! numpy and scipy (tests/python/bvh_positions.py), every length in standing heights `h`.
+
+mod common;
+
+use common::{imubake_bin, python, repo_file, shared};
+use nalgebra::{Matrix2, Vector2, Vector3};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn run(cmd: &mut Command) -> Vec<u8> {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
+
+/// A BVH's joint positions per frame, its lowest point per frame and its rest pose's extent.
+struct Positions {
+    joints: std::collections::HashMap<String, Vec<Vector3<f64>>>,
+    lowest: Vec<f64>,
+    rest_lowest: f64,
+    height: f64,
+    frame_time: f64,
+}
+
+fn positions(py: &Path, bvh: &Path, joints: &[&str]) -> Positions {
+    let out = run(Command::new(py)
+        .arg(repo_file("tests/python/bvh_positions.py"))
+        .arg(bvh)
+        .arg(joints.join(",")));
+    let v: Value = serde_json::from_slice(&out).unwrap();
+    let f = |x: &Value| x.as_f64().unwrap();
+    Positions {
+        joints: joints
+            .iter()
+            .map(|j| {
+                let track = v["joints"][j]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(common::vec3)
+                    .collect();
+                (j.to_string(), track)
+            })
+            .collect(),
+        lowest: v["lowest"].as_array().unwrap().iter().map(f).collect(),
+        rest_lowest: f(&v["rest_lowest"]),
+        height: f(&v["rest_highest"]) - f(&v["rest_lowest"]),
+        frame_time: f(&v["frame_time"]),
+    }
+}
+
+struct Take {
+    source: Positions,
+    output: Positions,
+    truth: Value,
+    sidecar: Value,
+}
+
+/// Simulates `bvh` (frames `frames`) through `mapping` onto the BVH's own skeleton, converts it
+/// at 60 fps with `convert_args`, and reads both back.
+fn closed_loop(
+    bvh_rel: &str,
+    mapping: &str,
+    frames: Option<&str>,
+    convert_args: &[&str],
+) -> Option<Take> {
+    let (bvh, py) = (shared(bvh_rel)?, python()?);
+    let dir = tempfile::tempdir().unwrap();
+    let (capture, truth) = (dir.path().join("take.csv"), dir.path().join("truth.json"));
+    let mapping = repo_file(mapping);
+    let mut sim = Command::new(imubake_bin());
+    sim.arg("simulate")
+        .arg(&bvh)
+        .arg("--mapping")
+        .arg(&mapping)
+        .arg("--rig")
+        .arg(&bvh)
+        .arg("--output")
+        .arg(&capture)
+        .arg("--truth")
+        .arg(&truth)
+        .args(["--noise-deg", "0.5", "--seed", "3"]);
+    if let Some(f) = frames {
+        sim.args(["--frames", f]);
+    }
+    run(&mut sim);
+    let out = dir.path().join("out");
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&capture)
+        .arg("--mapping")
+        .arg(&mapping)
+        .arg("--rig")
+        .arg(&bvh)
+        .args(["--fps", "60", "--format", "bvh", "--out"])
+        .arg(&out)
+        .args(convert_args));
+    let joints = ["Hips", "LeftFoot", "RightFoot"];
+    Some(Take {
+        source: positions(&py, &bvh, &joints),
+        output: positions(&py, &out.join("take.bvh"), &joints),
+        truth: serde_json::from_slice(&std::fs::read(&truth).unwrap()).unwrap(),
+        sidecar: serde_json::from_slice(&std::fs::read(out.join("take.imubake.json")).unwrap())
+            .unwrap(),
+    })
+}
+
+/// The output frames during the source's motion, each with the source's (fractional) frame.
+fn compared(take: &Take) -> Vec<(usize, f64)> {
+    let t = &take.truth;
+    let start = t["motion_start_s"].as_f64().unwrap();
+    let first = t["first_frame"].as_f64().unwrap();
+    let last = t["last_frame"].as_f64().unwrap();
+    let ft = t["source_frame_time_s"].as_f64().unwrap();
+    (0..take.output.lowest.len())
+        .filter_map(|k| {
+            let time = k as f64 * take.output.frame_time;
+            let f = first + (time - start) / ft;
+            (time >= start && f <= last).then_some((k, f))
+        })
+        .collect()
+}
+
+fn lerp(track: &[Vector3<f64>], f: f64) -> Vector3<f64> {
+    let i = (f.floor() as usize).min(track.len() - 1);
+    let j = (i + 1).min(track.len() - 1);
+    track[i].lerp(&track[j], f - i as f64)
+}
+
+/// A joint's track over the compared frames, source and output, in standing heights.
+fn tracks(take: &Take, joint: &str) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+    let frames = compared(take);
+    let src = &take.source.joints[joint];
+    let out = &take.output.joints[joint];
+    (
+        frames
+            .iter()
+            .map(|(_, f)| lerp(src, *f) / take.source.height)
+            .collect(),
+        frames
+            .iter()
+            .map(|(k, _)| out[*k] / take.output.height)
+            .collect(),
+    )
+}
+
+fn horizontal(v: &Vector3<f64>) -> Vector2<f64> {
+    Vector2::new(v.x, v.z)
+}
+
+/// Foot skate: over the source's stance phases (the foot within 0.02 h of its lowest height and
+/// slower than 0.1 h/s horizontally, for at least 4 frames), how much further the output's foot
+/// travels horizontally than the source's, on average per phase (h).
+fn skate(take: &Take) -> (usize, f64) {
+    let dt = take.output.frame_time;
+    let mut excess = Vec::new();
+    for foot in ["LeftFoot", "RightFoot"] {
+        let (src, out) = tracks(take, foot);
+        let lowest = src.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
+        let stance: Vec<bool> = (0..src.len())
+            .map(|i| {
+                let speed = if i == 0 {
+                    0.0
+                } else {
+                    (horizontal(&src[i]) - horizontal(&src[i - 1])).norm() / dt
+                };
+                src[i].y <= lowest + 0.02 && speed < 0.1
+            })
+            .collect();
+        let mut i = 0;
+        while i < stance.len() {
+            if !stance[i] {
+                i += 1;
+                continue;
+            }
+            let mut j = i;
+            while j < stance.len() && stance[j] {
+                j += 1;
+            }
+            if j - i >= 4 {
+                let travel = |p: &[Vector3<f64>]| {
+                    p.windows(2)
+                        .map(|w| (horizontal(&w[1]) - horizontal(&w[0])).norm())
+                        .sum::<f64>()
+                };
+                excess.push(travel(&out[i..j]) - travel(&src[i..j]));
+            }
+            i = j;
+        }
+    }
+    (
+        excess.len(),
+        excess.iter().sum::<f64>() / excess.len() as f64,
+    )
+}
+
+/// The hips' horizontal path against the source's after one rigid 2-D alignment (Kabsch): RMS
+/// deviation over the distance the source walked.
+fn path_error(take: &Take) -> (f64, f64) {
+    let (src, out) = tracks(take, "Hips");
+    let a: Vec<Vector2<f64>> = src.iter().map(horizontal).collect();
+    let b: Vec<Vector2<f64>> = out.iter().map(horizontal).collect();
+    let n = a.len() as f64;
+    let (ca, cb) = (
+        a.iter().sum::<Vector2<f64>>() / n,
+        b.iter().sum::<Vector2<f64>>() / n,
+    );
+    let mut cov = Matrix2::zeros();
+    for (p, q) in a.iter().zip(&b) {
+        cov += (q - cb) * (p - ca).transpose();
+    }
+    let svd = cov.svd(true, true);
+    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+    let mut d = Matrix2::identity();
+    if (u * vt).determinant() < 0.0 {
+        d[(1, 1)] = -1.0;
+    }
+    let r = (u * d * vt).transpose(); // takes the output's frame onto the source's
+    let rms = (a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (r * (q - cb) - (p - ca)).norm_squared())
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let walked: f64 = a.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    (rms, walked)
+}
+
+/// The output's lowest point above its floor (the rest pose's lowest point), per compared frame, h.
+fn above_floor(take: &Take) -> Vec<f64> {
+    compared(take)
+        .iter()
+        .map(|(k, _)| (take.output.lowest[*k] - take.output.rest_lowest) / take.output.height)
+        .collect()
+}
+
+/// The pymo walk, `--root feet`: no foot skate beyond the source's own (mean excess per stance
+/// phase ≤ 0.006 h), the hips' path within 3 % of the distance walked, the lowest point on the
+/// floor. Measured: skate −0.0017 h, path 0.42 % (9.76 h walked), the floor ±0.
+#[test]
+fn a_walk_walks_without_sliding() {
+    let Some(take) = closed_loop(
+        "bvh/pymo_walk.bvh",
+        "tests/fixtures/mappings/pymo_16imu.json",
+        None,
+        &["--root", "feet"],
+    ) else {
+        return;
+    };
+    let (phases, excess) = skate(&take);
+    let (rms, walked) = path_error(&take);
+    let floor = above_floor(&take);
+    let (lo, hi) = floor
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+            (l.min(*x), h.max(*x))
+        });
+    eprintln!(
+        "pymo walk: {phases} stance phases, skate {excess:.4} h; path RMS {rms:.4} h over {walked:.2} h ({:.2} %); \
+         lowest point {lo:.4}..{hi:.4} h above the floor",
+        100.0 * rms / walked
+    );
+    assert!(phases >= 10, "{phases} stance phases");
+    assert!(excess <= 0.006, "skate {excess:.4} h");
+    assert!(rms <= 0.03 * walked, "path {rms:.4} h over {walked:.2} h");
+    assert!(walked > 5.0, "walked {walked:.2} h");
+    assert!(lo > -0.003 && hi < 0.02, "lowest point {lo:.4}..{hi:.4} h");
+    assert_eq!(take.sidecar["pipeline"]["root"], "feet");
+    let contacts = &take.sidecar["contacts"];
+    for side in ["left", "right"] {
+        assert!(contacts[side].as_array().unwrap().len() >= 5, "{contacts}");
+    }
+    assert_eq!(
+        contacts["airborne"].as_array().unwrap().len(),
+        0,
+        "{contacts}"
+    );
+}
+
+/// `--root ground`: the lowest point on the floor in every frame (±0.003 h), and no horizontal
+/// motion.
+#[test]
+fn ground_keeps_the_lowest_point_on_the_floor() {
+    let Some(take) = closed_loop(
+        "bvh/pymo_walk.bvh",
+        "tests/fixtures/mappings/pymo_16imu.json",
+        None,
+        &["--root", "ground"],
+    ) else {
+        return;
+    };
+    let worst = above_floor(&take)
+        .iter()
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(worst <= 0.003, "lowest point {worst:.4} h off the floor");
+    let (_, out) = tracks(&take, "Hips");
+    let moved = out
+        .iter()
+        .map(|p| (horizontal(p) - horizontal(&out[0])).norm())
+        .fold(0.0, f64::max);
+    assert!(moved < 1e-9, "the hips moved {moved} h horizontally");
+    assert_eq!(take.sidecar["pipeline"]["root"], "ground");
+    assert!(take.sidecar["contacts"].is_null());
+}
+
+/// CMU 01_01 (hops with turns): the path error and airborne frames are reported; the body never
+/// sinks below the floor by more than 0.01 h.
+#[test]
+fn hops_never_sink_below_the_floor() {
+    let Some(take) = closed_loop(
+        "bvh/cmu_01_01.bvh",
+        "tests/fixtures/mappings/cmu_16imu.json",
+        Some("1:"),
+        &[],
+    ) else {
+        return;
+    };
+    let (rms, walked) = path_error(&take);
+    let (phases, excess) = skate(&take);
+    let airborne: u64 = take.sidecar["contacts"]["airborne"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r[1].as_u64().unwrap() - r[0].as_u64().unwrap() + 1)
+        .sum();
+    let lowest = above_floor(&take).into_iter().fold(f64::INFINITY, f64::min);
+    eprintln!(
+        "CMU 01_01: path RMS {rms:.4} h over {walked:.2} h ({:.1} %), skate {excess:.4} h over {phases} phases, \
+         {airborne} airborne frames of {}, lowest point {lowest:.4} h",
+        100.0 * rms / walked,
+        take.sidecar["frames"]
+    );
+    assert_eq!(
+        take.sidecar["pipeline"]["root"], "feet",
+        "auto resolves to feet"
+    );
+    assert!(lowest >= -0.01, "sank {lowest:.4} h below the floor");
+}
+
+/// The real x-IMU3 lower-body take (the devices' own orientations): with `--root feet` the body
+/// stays within 0.02 h of the floor while a foot is planted; its path is reported.
+#[test]
+fn a_real_lower_body_take_stays_on_the_floor() {
+    let (Some(session), Some(py)) = (shared("fullbody/xio_lower_body_7imu"), python()) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&session)
+        .arg("--mapping")
+        .arg(repo_file("mappings/xio_lower_body_7imu_mixamo.json"))
+        .args(["--root", "feet", "--fps", "60", "--format", "bvh", "--out"])
+        .arg(&out));
+    let bvh: PathBuf = out.join("xio_lower_body_7imu.bvh");
+    let p = positions(&py, &bvh, &["Hips"]);
+    let sidecar: Value = serde_json::from_slice(
+        &std::fs::read(out.join("xio_lower_body_7imu.imubake.json")).unwrap(),
+    )
+    .unwrap();
+    let contacts = &sidecar["contacts"];
+    let mut planted = vec![false; p.lowest.len()];
+    for side in ["left", "right"] {
+        for r in contacts[side].as_array().unwrap() {
+            for f in r[0].as_u64().unwrap()..=r[1].as_u64().unwrap() {
+                planted[f as usize] = true;
+            }
+        }
+    }
+    let worst = p
+        .lowest
+        .iter()
+        .zip(&planted)
+        .filter(|(_, planted)| **planted)
+        .map(|(y, _)| ((y - p.rest_lowest) / p.height).abs())
+        .fold(0.0, f64::max);
+    let hips = &p.joints["Hips"];
+    let path: f64 = hips
+        .windows(2)
+        .map(|w| (horizontal(&w[1]) - horizontal(&w[0])).norm())
+        .sum::<f64>()
+        / p.height;
+    let reach = hips
+        .iter()
+        .map(|q| (horizontal(q) - horizontal(&hips[0])).norm() / p.height)
+        .fold(0.0, f64::max);
+    eprintln!(
+        "x-IMU3 lower body: {} of {} frames planted, worst {worst:.4} h off the floor; hips walked {path:.2} h, \
+         at most {reach:.2} h from the start",
+        planted.iter().filter(|p| **p).count(),
+        planted.len()
+    );
+    assert!(planted.iter().filter(|p| **p).count() > planted.len() / 2);
+    assert!(worst <= 0.02, "{worst:.4} h off the floor while planted");
+    assert!(reach > 0.3, "the body stayed in place ({reach:.2} h)");
+}
