@@ -348,8 +348,13 @@ def bake_imported(context, imported, target, *, bone_map_path=None, reference="A
                 [b.name for b in imported.armature.data.bones],
                 [b.name for b in target.data.bones],
             )
-        return retarget(context, imported.armature, target, bone_map=bone_map, reference=reference,
-                        action_name=imported.name)
+        result = retarget(context, imported.armature, target, bone_map=bone_map, reference=reference,
+                          action_name=imported.name)
+        # The feet's contacts go with the motion onto the character.
+        from .take_import import key_contacts
+
+        key_contacts(target, imported.take)
+        return result
     finally:
         remove_armature(imported.armature)
 

@@ -47,6 +47,7 @@ class Take:
         self.rig_name = rig.get("name") if isinstance(rig.get("name"), str) else None
         self.outputs = _outputs(path, data, self.folder)
         self.warnings = [str(w) for w in (_field(path, data, "warnings", list, required=False) or [])]
+        self.contacts = _contacts(path, data, self.frames)
         dropped = _field(path, data, "dropped_lines", list, required=False) or []
         if dropped:
             self.warnings.append("%d line(s) of the capture were dropped (see the sidecar)" % len(dropped))
@@ -187,3 +188,26 @@ def _outputs(path, data, folder):
             )
         outputs.setdefault(fmt, os.path.join(folder, os.path.normpath(rel)))
     return outputs
+
+
+def _contacts(path, data, frames):
+    """The feet's contact intervals ({"left": [[start, end], ...], "right": ...}, frames
+    inclusive), or None when the take has none (root mode other than feet)."""
+    contacts = data.get("contacts")
+    if contacts is None:
+        return None
+    if not isinstance(contacts, dict):
+        raise SidecarError("%s: contacts should be an object, found %s" % (path, type(contacts).__name__))
+    out = {}
+    for side in ("left", "right"):
+        intervals = contacts.get(side, [])
+        ok = isinstance(intervals, list) and all(
+            isinstance(r, list) and len(r) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in r)
+            and 0 <= r[0] <= r[1] < frames
+            for r in intervals
+        )
+        if not ok:
+            raise SidecarError("%s: contacts.%s should be [[start, end], ...] frames within 0..%d"
+                               % (path, side, frames - 1))
+        out[side] = intervals
+    return out

@@ -8,6 +8,9 @@ importers get wrong for imubake takes:
   the frame range is 1..frames (take frame n is scene frame n + 1), shortening the scene too;
 - the glTF importer places a key at t seconds on frame t * fps * fps_base (not fps / fps_base) and
   starts at frame 0, so non-integer rates land off-frame: keys are moved to n + 1 exactly;
+- foot contacts (takes converted with foot-rooted root motion) become the armature's custom
+  properties `contact_left` and `contact_right`, keyed 0/1 on every frame (constant), for IK
+  setups that pin feet;
 - glTF rotations arrive as quaternions: they are turned into Euler curves made continuous with
   `Euler.make_compatible` (Blender's BVH importer already passes the previous Euler).
 
@@ -75,6 +78,7 @@ def import_take(context, path, *, fmt=None, rotation_mode="XYZ"):
             raise TakeError("%s: the importer made no animation" % anim_path)
         armature.name = take.name
         action.name = take.name
+        key_contacts(armature, take)
         set_scene_rate(scene, take)
     except Exception as e:
         _restore(scene, before)
@@ -82,6 +86,23 @@ def import_take(context, path, *, fmt=None, rotation_mode="XYZ"):
             raise
         raise TakeError("%s: import failed: %s" % (anim_path, e)) from e
     return ImportedTake(take, fmt, armature, action)
+
+
+def key_contacts(obj, take):
+    """Keys `contact_left` / `contact_right` on `obj` (its action) from the take's contacts: 1 on
+    the frames a foot is planted, else 0, on scene frames 1..frames (take frame n on n + 1)."""
+    if take.contacts is None or obj.animation_data is None or obj.animation_data.action is None:
+        return
+    frames = [float(n + 1) for n in range(take.frames)]
+    for side in ("left", "right"):
+        values = [0.0] * take.frames
+        for start, end in take.contacts[side]:
+            for n in range(start, end + 1):
+                values[n] = 1.0
+        prop = "contact_" + side
+        obj[prop] = values[0]
+        fc = compat.new_fcurve(obj, '["%s"]' % prop, 0, "Contacts")
+        compat.set_keys(fc, frames, values, interpolation="CONSTANT")
 
 
 def set_scene_rate(scene, take):

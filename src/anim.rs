@@ -18,6 +18,8 @@ pub struct Animation {
     local: Vec<Vec<UnitQuaternion<f64>>>,
     /// Which joints carry motion from a sensor (others keep their rest rotation).
     animated: Vec<bool>,
+    /// Per frame: left and right foot planted (foot-rooted root motion), when known.
+    contacts: Option<Vec<[bool; 2]>>,
     /// Root joint position per frame, rig units, rig world (Y up).
     root_positions: Vec<Vector3<f64>>,
 }
@@ -157,7 +159,40 @@ impl Animation {
             local,
             animated,
             root_positions,
+            contacts: None,
         })
+    }
+
+    /// The feet's contacts, one `[left, right]` per frame.
+    pub fn with_contacts(mut self, per_frame: Vec<[bool; 2]>) -> Result<Animation, AnimationError> {
+        if per_frame.len() != self.frames {
+            return Err(AnimationError::Length {
+                what: "foot contacts".into(),
+                expected: self.frames,
+                found: per_frame.len(),
+            });
+        }
+        self.contacts = Some(per_frame);
+        Ok(self)
+    }
+
+    /// Per frame, left and right foot planted (foot-rooted root motion only).
+    pub fn contacts(&self) -> Option<&[[bool; 2]]> {
+        self.contacts.as_deref()
+    }
+
+    /// The rest pose as a new frame 0 (every rotation the rig's rest, the root at its rest
+    /// position, no contact), the take from frame 1: the bind frame engines retarget from.
+    pub fn with_bind_frame(mut self) -> Animation {
+        for track in &mut self.local {
+            track.insert(0, UnitQuaternion::identity());
+        }
+        self.root_positions.insert(0, self.rig.joints()[0].offset);
+        if let Some(c) = &mut self.contacts {
+            c.insert(0, [false; 2]);
+        }
+        self.frames += 1;
+        self
     }
 
     pub fn rig(&self) -> &Rig {

@@ -18,6 +18,7 @@
 //! skip_seconds: 0
 //! world: ned             # override the format's world
 //! causal: false          # run the take as a live stream would (causal smoothing, no look-ahead)
+//! bind_frame: false      # the rest pose as frame 0, the take from frame 1
 //! sensor_rate_hz: 100    # the sensors' rate, for causal smoothing (else from their first samples)
 //! fusion: offline        # fuse raw readings even where the device gave orientations; or
 //!                        # madgwick:beta=0.1, mahony, trust, gyro, vqf:6d (no magnetometer)
@@ -70,6 +71,9 @@ pub struct Config {
     /// Causal mode: the take runs through the stream's cores (a flag).
     #[serde(default)]
     pub causal: bool,
+    /// The rest pose as frame 0, the take from frame 1 (a flag).
+    #[serde(default)]
+    pub bind_frame: bool,
     /// The sensors' sample rate, Hz, for causal smoothing's grid.
     #[serde(default, deserialize_with = "sensor_rate")]
     pub sensor_rate_hz: Option<f64>,
@@ -238,6 +242,7 @@ impl Config {
             report: self.report || below.report,
             force: self.force || below.force,
             causal: self.causal || below.causal,
+            bind_frame: self.bind_frame || below.bind_frame,
             sensor_rate_hz: self.sensor_rate_hz.or(below.sensor_rate_hz),
             fusion: self.fusion.or(below.fusion),
             sensor_calibration: self.sensor_calibration.or(below.sensor_calibration),
@@ -277,6 +282,7 @@ impl Config {
         }
         s.pipeline.force = self.force;
         s.pipeline.causal = self.causal;
+        s.bind_frame = self.bind_frame;
         s.pipeline.sensor_rate_hz = self.sensor_rate_hz;
         s.pipeline.fusion = self.fusion.clone();
         s.read.format = self.input_format;

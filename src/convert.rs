@@ -48,6 +48,8 @@ pub struct ConvertSettings {
     pub units: LengthUnit,
     /// Also write `<stem>.report.html`.
     pub report: bool,
+    /// The rest pose as frame 0, the take from frame 1 (`--bind-frame`).
+    pub bind_frame: bool,
     /// Where `read.world` came from (`--world` or the config file), when it is set.
     pub world_from: Option<WorldFrom>,
 }
@@ -79,6 +81,7 @@ impl Default for ConvertSettings {
             formats: vec![OutputFormat::Bvh, OutputFormat::Glb],
             units: LengthUnit::Metres,
             report: false,
+            bind_frame: false,
             world_from: None,
         }
     }
@@ -383,6 +386,11 @@ fn convert_unclean(
             quaternion_mode(input, &take, settings, mapping, None)?
         }
     };
+    let conversion = if settings.bind_frame {
+        conversion.with_bind_frame()
+    } else {
+        conversion
+    };
     let source = SourceRecord {
         path: input.to_string_lossy().into_owned(),
         sha256,
@@ -412,6 +420,36 @@ struct Conversion {
     /// The sensors' world, and where it came from.
     world: (World, WorldFrom),
     warnings: Vec<String>,
+}
+
+impl Conversion {
+    /// The rest pose as frame 0, the take from frame 1 (`--bind-frame`): the animation, its BVH
+    /// channels (the quaternion mode's again from the rotations, so the Euler filter runs on from
+    /// the rest pose; paper 002's channels start from zeros), the report's unsmoothed rotations
+    /// and the contacts move one frame on.
+    fn with_bind_frame(mut self) -> Conversion {
+        self.animation = self.animation.with_bind_frame();
+        if self.pipeline.mode == "legacy-euler" {
+            for track in &mut self.euler_deg {
+                track.insert(0, [0.0; 3]);
+            }
+        } else {
+            self.euler_deg = pipeline::output::euler_degrees(&self.animation);
+        }
+        if let Some(unsmoothed) = &mut self.unsmoothed {
+            for track in unsmoothed {
+                track.insert(0, UnitQuaternion::identity());
+            }
+        }
+        if let Some(c) = &mut self.contacts {
+            for r in c.left.iter_mut().chain(&mut c.right).chain(&mut c.airborne) {
+                *r = [r[0] + 1, r[1] + 1];
+            }
+            c.per_frame.insert(0, [false; 2]);
+        }
+        self.pipeline.bind_frame = true;
+        self
+    }
 }
 
 /// The rig: `--rig`, else the mapping's, else `mixamo`.
@@ -588,6 +626,7 @@ fn pipeline_record(
         }),
         mode,
         causal: settings.pipeline.causal,
+        bind_frame: false,
     }
 }
 

@@ -180,6 +180,8 @@ struct FingerprintInput<'a> {
     report: bool,
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     causal: bool,
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    bind_frame: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     sensor_rate_hz: Option<f64>,
     /// The fusion asked for, as its settings text (every parameter).
@@ -224,6 +226,7 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         units: settings.units.name(),
         report: settings.report,
         causal: p.causal,
+        bind_frame: settings.bind_frame,
         sensor_rate_hz: p.sensor_rate_hz,
         fusion: p.fusion.as_ref().map(|f| f.to_string()),
         sensor_calibration: settings.sensor_calibration.as_deref().map(file_sha256),

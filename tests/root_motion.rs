@@ -404,3 +404,97 @@ fn a_real_lower_body_take_stays_on_the_floor() {
     assert!(worst <= 0.02, "{worst:.4} h off the floor while planted");
     assert!(reach > 0.3, "the body stayed in place ({reach:.2} h)");
 }
+
+/// `--bind-frame` on the bundled walk: one frame more, frame 0 the rest pose, the take from frame
+/// 1 exactly as without it, contacts one frame on; the GLB's animation carries the contacts per
+/// frame in its `extras` (0/1, as the sidecar's intervals say) and the Khronos validator reports
+/// no error and no warning.
+#[test]
+fn a_bind_frame_and_contact_curves() {
+    let dir = tempfile::tempdir().unwrap();
+    let convert = |out: &str, extra: &[&str]| {
+        run(Command::new(imubake_bin())
+            .arg("convert")
+            .arg(repo_file("samples/walk.csv"))
+            .arg("--mapping")
+            .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
+            .arg("--out")
+            .arg(dir.path().join(out))
+            .args(extra));
+        let sidecar: Value = serde_json::from_slice(
+            &std::fs::read(dir.path().join(out).join("walk.imubake.json")).unwrap(),
+        )
+        .unwrap();
+        let bvh =
+            imubake::bvh::parse(&std::fs::read(dir.path().join(out).join("walk.bvh")).unwrap())
+                .unwrap();
+        (sidecar, bvh)
+    };
+    let (plain, plain_bvh) = convert("plain", &[]);
+    let (bound, bound_bvh) = convert("bound", &["--bind-frame"]);
+    let frames = plain["frames"].as_u64().unwrap();
+    assert_eq!(bound["frames"].as_u64().unwrap(), frames + 1);
+    assert_eq!(bound["pipeline"]["bind_frame"], true);
+    assert!(plain["pipeline"].get("bind_frame").is_none());
+    // Frame 0: every joint at rest, the root at its rest offset.
+    let rest = bound_bvh.local_rotations(0);
+    assert!(rest.iter().all(|q| q.angle() < 1e-9));
+    let rig = bound_bvh
+        .to_rig("b", imubake::rig::LengthUnit::Metres)
+        .unwrap();
+    assert!((bound_bvh.joint_translations(0)[0] - rig.joints()[0].offset).norm() < 1e-9);
+    // Then the take, frame for frame.
+    for f in [0, frames as usize / 2, frames as usize - 1] {
+        let a = plain_bvh.local_rotations(f);
+        let b = bound_bvh.local_rotations(f + 1);
+        for (qa, qb) in a.iter().zip(&b) {
+            assert!(qa.angle_to(qb) < 1e-5, "frame {f}");
+        }
+        assert!(
+            (plain_bvh.joint_translations(f)[0] - bound_bvh.joint_translations(f + 1)[0]).norm()
+                < 1e-5
+        );
+    }
+    for side in ["left", "right"] {
+        let p = plain["contacts"][side].as_array().unwrap();
+        let b = bound["contacts"][side].as_array().unwrap();
+        assert!(!p.is_empty());
+        for (p, b) in p.iter().zip(b) {
+            assert_eq!(p[0].as_u64().unwrap() + 1, b[0].as_u64().unwrap());
+            assert_eq!(p[1].as_u64().unwrap() + 1, b[1].as_u64().unwrap());
+        }
+    }
+    // The GLB's contact curves against the sidecar's intervals.
+    let glb = std::fs::read(dir.path().join("plain/walk.glb")).unwrap();
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let doc: Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    let curves = &doc["animations"][0]["extras"]["imubake"]["contacts"];
+    assert_eq!(curves["fps"].as_f64().unwrap(), 30.0);
+    for side in ["left", "right"] {
+        let mut expected = vec![0u64; frames as usize];
+        for r in plain["contacts"][side].as_array().unwrap() {
+            for f in r[0].as_u64().unwrap()..=r[1].as_u64().unwrap() {
+                expected[f as usize] = 1;
+            }
+        }
+        let got: Vec<u64> = curves[side]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        assert_eq!(got, expected, "{side}");
+    }
+    if let Some(modules) = common::node_modules() {
+        for report in common::gltf_validate(
+            &[
+                dir.path().join("plain/walk.glb"),
+                dir.path().join("bound/walk.glb"),
+            ],
+            &modules,
+        ) {
+            assert_eq!(report["errors"], 0, "{report}");
+            assert_eq!(report["warnings"], 0, "{report}");
+        }
+    }
+}

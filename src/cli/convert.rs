@@ -85,6 +85,9 @@ pub struct SettingsArgs {
     /// legs are sensed down to the feet, ground when the thighs are, else fixed) [default: auto]
     #[arg(long, value_name = "MODE")]
     root: Option<imubake::pipeline::root::RootMode>,
+    /// The rig's rest pose as frame 0 and the take from frame 1, as engines retarget from
+    #[arg(long)]
+    bind_frame: bool,
     /// Correct raw readings before fusion with this sensor calibration file (written by
     /// `imubake calibrate-sensors`): gyro bias and gain, accelerometer, magnetometer, per sensor.
     #[arg(long, value_name = "FILE.yaml")]
@@ -147,6 +150,7 @@ impl SettingsArgs {
             fusion: self.fusion.clone(),
             sensor_calibration: self.sensor_calibration.clone(),
             root: self.root,
+            bind_frame: self.bind_frame,
             ..self.read.layer()
         }
     }

@@ -390,7 +390,10 @@ pub fn run(
     };
     let (roots, contacts) =
         super::root::root_positions(&rig, root_mode, &local, options.fps.frame_time_s());
-    let animation = Animation::new(rig, options.fps, local, animated, roots)?;
+    let mut animation = Animation::new(rig, options.fps, local, animated, roots)?;
+    if let Some(c) = &contacts {
+        animation = animation.with_contacts(c.per_frame.clone())?;
+    }
     Ok(LegacyAnimation {
         animation,
         root_mode,

@@ -323,7 +323,10 @@ pub fn run(
     let root_mode = root::resolve(options.root, rig, &animated);
     let (roots, contacts) =
         root::root_positions(rig, root_mode, &local, options.fps.frame_time_s());
-    let animation = Animation::new(rig.clone(), options.fps, local, animated, roots)?;
+    let mut animation = Animation::new(rig.clone(), options.fps, local, animated, roots)?;
+    if let Some(c) = &contacts {
+        animation = animation.with_contacts(c.per_frame.clone())?;
+    }
     Ok(Converted {
         animation,
         sensors,
@@ -444,6 +447,10 @@ fn run_causal(
         .get(grid.first..(grid.first + grid.frames).min(feet.len()))
         .unwrap_or(&[]);
     let contacts = (root_mode == RootMode::Feet).then(|| root::Contacts::from_frames(kept));
+    let animation = match &contacts {
+        Some(c) => animation.with_contacts(c.per_frame.clone())?,
+        None => animation,
+    };
     Ok(Converted {
         animation,
         sensors: sources.sensors,

@@ -93,6 +93,11 @@ pub const TAKEOFF_H_S: f64 = 0.45;
 pub const TAKEOFF_S: f64 = 0.04;
 /// Gravity in standing heights per s² (9.81 m/s² on a 1.75 m body).
 pub const GRAVITY_H_S2: f64 = 9.80665 / 1.75;
+/// A foot whose lowest point is this close to its surface, × h …
+pub const PLANT_H: f64 = 0.01;
+/// … and slower than this over the ground, × h / s, is reported planted (released at twice
+/// either).
+pub const PLANT_SPEED_H_S: f64 = 0.15;
 /// Contacts and airborne stretches shorter than this many frames are not reported.
 pub const MIN_FRAMES: usize = 3;
 
@@ -194,6 +199,8 @@ struct FeetState {
     /// The hips' velocity over the last frames (smoothed), rig units per second.
     velocity: Vector3<f64>,
     airborne: bool,
+    /// Each foot planted, as reported (with hysteresis).
+    planted: [bool; 2],
 }
 
 /// Points of a foot's subtree (joint positions and end sites) for positions `pos` and world
@@ -359,10 +366,16 @@ impl RootCore {
                 dominant: usize::from(w_left < 0.5),
                 velocity: Vector3::zeros(),
                 airborne: false,
+                planted: [false; 2],
             });
+            let planted =
+                [0, 1].map(|f| self.floor - body_low + low[f].1 <= self.floor + PLANT_H * h);
+            if let Some(state) = self.state.as_mut() {
+                state.planted = planted;
+            }
             return RootFrame {
                 position: hips,
-                contact: [w_left > 0.25, w_left < 0.75],
+                contact: planted,
                 airborne: false,
             };
         };
@@ -440,18 +453,31 @@ impl RootCore {
             // Smoothed over about three frames: the velocity a take-off carries.
             state.velocity += (v - state.velocity) * (2.0 / 3.0);
         }
+        // Reported contacts: a foot near its surface and nearly still over the ground, engaged
+        // and released at different thresholds so that noise does not flicker them.
+        for f in 0..2 {
+            let (k, _) = lowest(&state.previous[f]);
+            let height = state.hips.y + low[f].1 - state.level[f];
+            let speed = {
+                let d = (state.hips + now[f].get(k).copied().unwrap_or_default())
+                    - (before + state.previous[f][k]);
+                Vector3::new(d.x, 0.0, d.z).norm() / dt
+            };
+            let (height_limit, speed_limit) = if state.planted[f] {
+                (2.0 * PLANT_H * h, 2.0 * PLANT_SPEED_H_S * h)
+            } else {
+                (PLANT_H * h, PLANT_SPEED_H_S * h)
+            };
+            state.planted[f] = !state.airborne && height <= height_limit && speed <= speed_limit;
+        }
         for (previous, now) in state.previous.iter_mut().zip(now) {
             previous.clear();
             previous.extend_from_slice(now);
         }
-        let airborne = state.airborne;
         RootFrame {
             position: state.hips,
-            contact: [
-                !airborne && weights[0] > 0.25,
-                !airborne && weights[1] > 0.25,
-            ],
-            airborne,
+            contact: state.planted,
+            airborne: state.airborne,
         }
     }
 }
@@ -494,12 +520,24 @@ pub struct Contacts {
 }
 
 impl Contacts {
+    /// The intervals of the frames' contacts, and the per-frame flags they make (runs shorter
+    /// than [`MIN_FRAMES`] left out of both, so the two always agree).
     pub fn from_frames(frames: &[RootFrame]) -> Contacts {
+        let left = intervals(frames.iter().map(|f| f.contact[0]));
+        let right = intervals(frames.iter().map(|f| f.contact[1]));
+        let mut per_frame = vec![[false; 2]; frames.len()];
+        for (side, runs) in [&left, &right].into_iter().enumerate() {
+            for [s, e] in runs {
+                for flags in &mut per_frame[*s..=*e] {
+                    flags[side] = true;
+                }
+            }
+        }
         Contacts {
-            left: intervals(frames.iter().map(|f| f.contact[0])),
-            right: intervals(frames.iter().map(|f| f.contact[1])),
+            left,
+            right,
             airborne: intervals(frames.iter().map(|f| f.airborne)),
-            per_frame: frames.iter().map(|f| f.contact).collect(),
+            per_frame,
         }
     }
 

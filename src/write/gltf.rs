@@ -579,11 +579,22 @@ fn document(
             T::Vec4,
         );
     }
+    // Foot contacts as per-frame 0/1 curves on the animation's own frames (frame n at n / fps),
+    // for engines and IK setups that pin feet.
+    let extras = anim.contacts().map(|c| {
+        let curve = |side: usize| c.iter().map(|f| u8::from(f[side])).collect::<Vec<_>>();
+        let value = serde_json::json!({"imubake": {"contacts": {
+            "fps": anim.fps().as_f64(),
+            "left": curve(0),
+            "right": curve(1),
+        }}});
+        serde_json::value::to_raw_value(&value).expect("plain JSON")
+    });
     root.push(json::Animation {
         channels,
         samplers,
         extensions: None,
-        extras: Default::default(),
+        extras,
         name: Some(name.to_string()),
     });
 

@@ -67,6 +67,9 @@ pub struct PipelineRecord {
     /// Causal mode: the take ran through the stream's stages.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub causal: bool,
+    /// Frame 0 is the rig's rest pose and the take starts at frame 1 (`--bind-frame`).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub bind_frame: bool,
 }
 
 /// How raw readings were fused: the filter with every parameter (`method`, then its own keys, and

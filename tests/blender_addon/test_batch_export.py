@@ -312,9 +312,10 @@ class BatchExportTest(unittest.TestCase):
                         np.testing.assert_allclose(node.get("Lcl Translation", [0, 0, 0]), 0, atol=1e-9)
                         np.testing.assert_allclose(node.get("Lcl Rotation", [0, 0, 0]), 0, atol=1e-4)
                         np.testing.assert_allclose(node.get("Lcl Scaling", [1, 1, 1]), 1, atol=1e-6)
-                        # The hips' rest position in file units: the BVH's hips OFFSET (metres,
-                        # BVH axes = Blender (x, -z, y)) carried by the documented conversion.
-                        bvh_hips = Bvh(harness.take(name, "bvh")).joints[0]["offset"]
+                        # The hips' rest position in file units: the BVH's hips at its first frame
+                        # (Blender's BVH importer rests the root there; metres, BVH axes =
+                        # Blender (x, -z, y)) carried by the documented conversion.
+                        bvh_hips = Bvh(harness.take(name, "bvh")).world(0)["Hips"][1]
                         blender_hips = np.array([bvh_hips[0], -bvh_hips[2], bvh_hips[1]])
                         expected = conv["axes"] @ blender_hips / conv["unit_m"]
                         np.testing.assert_allclose(models["Hips"][1]["Lcl Translation"], expected, atol=1e-4)
@@ -376,7 +377,8 @@ class BatchExportTest(unittest.TestCase):
     def test_unreal_export_is_in_centimetres(self):
         for name in POSE_TAKES:
             with self.subTest(take=name):
-                bvh_hips = Bvh(harness.take(name, "bvh")).joints[0]["offset"][1]  # 1.0 m
+                # The hips' height at the first frame (where Blender's importer rests the root).
+                bvh_hips = Bvh(harness.take(name, "bvh")).world(0)["Hips"][1][1]
                 armature = self.import_fbx(self.output("fbx", "unreal", name))
                 self.assertEqual(armature.name, "Armature")
                 # The file says centimetres (UnitScaleFactor 1), so Blender's importer scales the

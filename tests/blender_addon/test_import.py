@@ -137,6 +137,30 @@ class ImportAtExactRate(unittest.TestCase):
         self.assertFalse([fc for fc in harness.fcurves(arm) if "quaternion" in fc.data_path])
 
 
+class Contacts(unittest.TestCase):
+    def test_contacts_are_keyed_as_custom_properties(self):
+        harness.fresh_scene()
+        path = harness.take("walk_60", "imubake.json")
+        data = json.load(open(path, encoding="utf-8"))
+        self.assertEqual(data["pipeline"]["root"], "feet")
+        self.assertEqual(import_op(path), {"FINISHED"})
+        arm = harness.armatures()[0]
+        frames = data["frames"]
+        for side in ("left", "right"):
+            expected = [0.0] * frames
+            for start, end in data["contacts"][side]:
+                for n in range(start, end + 1):
+                    expected[n] = 1.0
+            self.assertGreater(sum(expected), frames / 4, side)
+            fc = next(fc for fc in harness.fcurves(arm) if fc.data_path == '["contact_%s"]' % side)
+            self.assertEqual([p.co[0] for p in fc.keyframe_points], [float(n + 1) for n in range(frames)])
+            self.assertEqual([p.co[1] for p in fc.keyframe_points], expected)
+            # What an IK setup reads: the property's value at a scene frame.
+            for n in (0, frames // 3, frames - 1):
+                bpy.context.scene.frame_set(n + 1)
+                self.assertEqual(arm["contact_%s" % side], expected[n], (side, n))
+
+
 class BadSidecars(unittest.TestCase):
     def setUp(self):
         self.dir = tempfile.mkdtemp()

@@ -78,14 +78,17 @@ class RetargetMixamo(unittest.TestCase):
             self.assertEqual(len(fc.keyframe_points), frames)
         keyed = {fc.data_path.split('"')[1] for fc in harness.fcurves(target)}
         self.assertTrue(set(bone_map.values()) <= keyed)
+        # The feet's contacts come along as the character's custom properties.
+        self.assertTrue({"contact_left", "contact_right"} <= keyed)
         follows(self, target, bone_map, lambda t: rest[t], (0, frames // 2, frames - 1))
 
         # Root motion scaled by hip height: the character's hips (rest height above its lowest
-        # bone point, in its own units) move as the take's hips (1.0 m above the toe's 0.02 m:
-        # offsets 1.0 − 0.0725 − 0.43 − 0.43 − 0.0475) times the ratio.
+        # bone point, in its own units) move as the take's hips (the take walks: --root auto is
+        # feet) times the ratio; the take's hips are 0.98 m above its toes (offsets 0.0725 + 0.43
+        # + 0.43 + 0.0475 below them).
         bones = target.data.bones
         lowest = min(min(b.head_local.z, b.tail_local.z) for b in bones)
-        ratio = (bones["mixamorig:Hips"].head_local.z - lowest) / (1.0 - 0.0725 - 0.43 - 0.43 - 0.0475)
+        ratio = (bones["mixamorig:Hips"].head_local.z - lowest) / (0.0725 + 0.43 + 0.43 + 0.0475)
         bvh = Bvh(harness.take(TAKE, "bvh"))
         source_rest = np.array([0.0, 1.0, 0.0])
         for f in (frames // 2, frames - 1):
