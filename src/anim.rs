@@ -20,6 +20,9 @@ pub struct Animation {
     animated: Vec<bool>,
     /// Per frame: left and right foot planted (foot-rooted root motion), when known.
     contacts: Option<Vec<[bool; 2]>>,
+    /// Joints (other than the root) whose translation from their parent is animated: per frame,
+    /// replacing the rig's offset (rig units, the parent's axes).
+    translations: Vec<(usize, Vec<Vector3<f64>>)>,
     /// Root joint position per frame, rig units, rig world (Y up).
     root_positions: Vec<Vector3<f64>>,
 }
@@ -160,7 +163,75 @@ impl Animation {
             animated,
             root_positions,
             contacts: None,
+            translations: Vec::new(),
         })
+    }
+
+    /// Joints (other than the root) with an animated translation, and per frame that translation
+    /// (rig units, in the parent's axes, replacing the rig's offset).
+    pub fn translations(&self) -> &[(usize, Vec<Vector3<f64>>)] {
+        &self.translations
+    }
+
+    /// `--in-place`: a new `root` joint at floor level above the old root (the hips) carries the
+    /// hips' horizontal motion — the root-motion convention Unreal and Unity import. The root
+    /// joint sits below the hips' rest position on the rest pose's floor, turns not, and moves
+    /// horizontally with the hips; the hips keep a constant horizontal place over it and carry
+    /// only their height above the floor (an animated translation).
+    pub fn in_place(self) -> Result<Animation, AnimationError> {
+        let old = self.rig.joints();
+        let rest_hips = old[0].offset;
+        let floor = rest_hips.y - self.rig.root_height();
+        let name = if old.iter().any(|j| j.name == "root") {
+            "imubake_root"
+        } else {
+            "root"
+        };
+        let mut joints = Vec::with_capacity(old.len() + 1);
+        joints.push(crate::rig::Joint {
+            name: name.to_string(),
+            parent: None,
+            offset: Vector3::new(rest_hips.x, floor, rest_hips.z),
+            order: old[0].order,
+            end_site: None,
+        });
+        for (i, j) in old.iter().enumerate() {
+            joints.push(crate::rig::Joint {
+                parent: Some(j.parent.map_or(0, |p| p + 1)),
+                offset: if i == 0 {
+                    Vector3::new(0.0, rest_hips.y - floor, 0.0)
+                } else {
+                    j.offset
+                },
+                ..j.clone()
+            });
+        }
+        let rig = Rig::new(self.rig.name(), self.rig.units(), joints)
+            .map_err(|e| AnimationError::NonFinite(format!("the in-place rig: {e}")))?;
+        let frames = self.frames;
+        let roots: Vec<Vector3<f64>> = self
+            .root_positions
+            .iter()
+            .map(|p| Vector3::new(p.x, floor, p.z))
+            .collect();
+        let hips: Vec<Vector3<f64>> = self
+            .root_positions
+            .iter()
+            .map(|p| Vector3::new(0.0, p.y - floor, 0.0))
+            .collect();
+        let mut local = Vec::with_capacity(self.local.len() + 1);
+        local.push(vec![UnitQuaternion::identity(); frames]);
+        local.extend(self.local);
+        let mut animated = vec![false];
+        animated.extend(self.animated);
+        let translations = std::iter::once((1, hips))
+            .chain(self.translations.into_iter().map(|(j, t)| (j + 1, t)))
+            .collect();
+        let contacts = self.contacts;
+        let mut out = Animation::new(rig, self.fps, local, animated, roots)?;
+        out.contacts = contacts;
+        out.translations = translations;
+        Ok(out)
     }
 
     /// The feet's contacts, one `[left, right]` per frame.
@@ -190,6 +261,9 @@ impl Animation {
         self.root_positions.insert(0, self.rig.joints()[0].offset);
         if let Some(c) = &mut self.contacts {
             c.insert(0, [false; 2]);
+        }
+        for (j, t) in &mut self.translations {
+            t.insert(0, self.rig.joints()[*j].offset);
         }
         self.frames += 1;
         self

@@ -19,6 +19,7 @@
 //! world: ned             # override the format's world
 //! causal: false          # run the take as a live stream would (causal smoothing, no look-ahead)
 //! bind_frame: false      # the rest pose as frame 0, the take from frame 1
+//! in_place: false        # a root joint at floor level carries the hips' horizontal motion
 //! sensor_rate_hz: 100    # the sensors' rate, for causal smoothing (else from their first samples)
 //! fusion: offline        # fuse raw readings even where the device gave orientations; or
 //!                        # madgwick:beta=0.1, mahony, trust, gyro, vqf:6d (no magnetometer)
@@ -74,6 +75,9 @@ pub struct Config {
     /// The rest pose as frame 0, the take from frame 1 (a flag).
     #[serde(default)]
     pub bind_frame: bool,
+    /// A `root` joint at floor level carries the hips' horizontal motion (a flag).
+    #[serde(default)]
+    pub in_place: bool,
     /// The sensors' sample rate, Hz, for causal smoothing's grid.
     #[serde(default, deserialize_with = "sensor_rate")]
     pub sensor_rate_hz: Option<f64>,
@@ -243,6 +247,7 @@ impl Config {
             force: self.force || below.force,
             causal: self.causal || below.causal,
             bind_frame: self.bind_frame || below.bind_frame,
+            in_place: self.in_place || below.in_place,
             sensor_rate_hz: self.sensor_rate_hz.or(below.sensor_rate_hz),
             fusion: self.fusion.or(below.fusion),
             sensor_calibration: self.sensor_calibration.or(below.sensor_calibration),
@@ -283,6 +288,7 @@ impl Config {
         s.pipeline.force = self.force;
         s.pipeline.causal = self.causal;
         s.bind_frame = self.bind_frame;
+        s.in_place = self.in_place;
         s.pipeline.sensor_rate_hz = self.sensor_rate_hz;
         s.pipeline.fusion = self.fusion.clone();
         s.read.format = self.input_format;

@@ -50,6 +50,8 @@ pub struct ConvertSettings {
     pub report: bool,
     /// The rest pose as frame 0, the take from frame 1 (`--bind-frame`).
     pub bind_frame: bool,
+    /// A `root` joint at floor level carries the hips' horizontal motion (`--in-place`).
+    pub in_place: bool,
     /// Where `read.world` came from (`--world` or the config file), when it is set.
     pub world_from: Option<WorldFrom>,
 }
@@ -82,6 +84,7 @@ impl Default for ConvertSettings {
             units: LengthUnit::Metres,
             report: false,
             bind_frame: false,
+            in_place: false,
             world_from: None,
         }
     }
@@ -386,6 +389,16 @@ fn convert_unclean(
             quaternion_mode(input, &take, settings, mapping, None)?
         }
     };
+    let conversion = if settings.in_place {
+        conversion
+            .in_place()
+            .map_err(|source| ConvertError::Pipeline {
+                input: input.to_path_buf(),
+                source: source.into(),
+            })?
+    } else {
+        conversion
+    };
     let conversion = if settings.bind_frame {
         conversion.with_bind_frame()
     } else {
@@ -423,6 +436,24 @@ struct Conversion {
 }
 
 impl Conversion {
+    /// `--in-place` ([`Animation::in_place`]): a `root` joint at floor level carries the hips'
+    /// horizontal motion; the BVH channels (a zero row for the new joint in paper 002's mode)
+    /// and the report's unsmoothed rotations get the new joint.
+    fn in_place(mut self) -> Result<Conversion, crate::anim::AnimationError> {
+        self.animation = self.animation.in_place()?;
+        let frames = self.animation.frames();
+        if self.pipeline.mode == "legacy-euler" {
+            self.euler_deg.insert(0, vec![[0.0; 3]; frames]);
+        } else {
+            self.euler_deg = pipeline::output::euler_degrees(&self.animation);
+        }
+        if let Some(unsmoothed) = &mut self.unsmoothed {
+            unsmoothed.insert(0, vec![UnitQuaternion::identity(); frames]);
+        }
+        self.pipeline.in_place = true;
+        Ok(self)
+    }
+
     /// The rest pose as frame 0, the take from frame 1 (`--bind-frame`): the animation, its BVH
     /// channels (the quaternion mode's again from the rotations, so the Euler filter runs on from
     /// the rest pose; paper 002's channels start from zeros), the report's unsmoothed rotations
@@ -627,6 +658,7 @@ fn pipeline_record(
         mode,
         causal: settings.pipeline.causal,
         bind_frame: false,
+        in_place: false,
     }
 }
 

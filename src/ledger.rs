@@ -182,6 +182,8 @@ struct FingerprintInput<'a> {
     causal: bool,
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     bind_frame: bool,
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    in_place: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     sensor_rate_hz: Option<f64>,
     /// The fusion asked for, as its settings text (every parameter).
@@ -227,6 +229,7 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         report: settings.report,
         causal: p.causal,
         bind_frame: settings.bind_frame,
+        in_place: settings.in_place,
         sensor_rate_hz: p.sensor_rate_hz,
         fusion: p.fusion.as_ref().map(|f| f.to_string()),
         sensor_calibration: settings.sensor_calibration.as_deref().map(file_sha256),

@@ -38,6 +38,25 @@ fn make_takes(dir: &Path) {
             String::from_utf8_lossy(&out.stderr)
         );
     }
+    let csv = input.join("walk_inplace.csv");
+    std::fs::copy(common::repo_file("samples/walk.csv"), &csv).unwrap();
+    let out = Command::new(common::imubake_bin())
+        .args([
+            "convert",
+            "--fps",
+            "30",
+            "--in-place",
+            "--format",
+            "bvh,glb",
+            "--mapping",
+        ])
+        .arg(common::repo_file("mappings/paper000_16imu_mixamo.json"))
+        .arg("--out")
+        .arg(dir.join("takes"))
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "convert walk_inplace: {out:?}");
     let out = Command::new(common::imubake_bin())
         .args(["convert", "--fps", "30", "--format", "bvh", "--mapping"])
         .arg(common::repo_file("mappings/paper002_sou12.json"))

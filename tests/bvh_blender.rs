@@ -121,6 +121,7 @@ fn blender_imports_our_bvh() {
                 fps: Fps::new(num, den).unwrap(),
                 root_positions: &roots,
                 euler_deg: &angles,
+                translations: &[],
             },
         )
         .unwrap();

@@ -102,6 +102,7 @@ fn bvh_anim_reads_our_small_rig() {
             fps: Fps::new(30000, 1001).unwrap(),
             root_positions: &roots,
             euler_deg: &angles,
+            translations: &[],
         },
     )
     .unwrap();
@@ -145,6 +146,7 @@ fn bvh_anim_reads_our_rewrite_of_real_files() {
                 fps: Fps::new(120, 1).unwrap(),
                 root_positions: &roots,
                 euler_deg: &angles,
+                translations: &[],
             },
         )
         .unwrap();

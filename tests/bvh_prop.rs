@@ -247,6 +247,7 @@ fn write(c: &Case) -> Vec<u8> {
             fps: c.fps,
             root_positions: &c.roots,
             euler_deg: &c.angles,
+            translations: &[],
         },
     )
     .unwrap();

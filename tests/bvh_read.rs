@@ -458,6 +458,7 @@ fn deep_nesting() {
             fps: imubake::fps::Fps::new(10, 1).unwrap(),
             root_positions: &roots,
             euler_deg: &angles,
+            translations: &[],
         },
     )
     .unwrap();

@@ -77,6 +77,7 @@ fn real_files_round_trip() {
             fps,
             root_positions: &roots,
             euler_deg: &angles,
+            translations: &[],
         });
         let back = bvh::parse(&bytes).unwrap_or_else(|e| panic!("{rel}: {e}"));
 
@@ -102,6 +103,7 @@ fn real_files_round_trip() {
             fps,
             root_positions: &roots,
             euler_deg: &angles,
+            translations: &[],
         });
         assert_eq!(bytes, again, "{rel}");
     }
@@ -157,6 +159,7 @@ fn other_euler_orders_keep_the_rotations() {
         fps,
         root_positions: &roots,
         euler_deg: &angles,
+        translations: &[],
     });
     let back = bvh::parse(&bytes).unwrap();
     assert_eq!(back.frame_count(), frames.len());
@@ -238,6 +241,7 @@ fn layout_end_sites_and_units() {
         fps: Fps::new(30000, 1001).unwrap(),
         root_positions: &roots,
         euler_deg: &angles,
+        translations: &[],
     };
     let text = String::from_utf8(write(&motion)).unwrap();
     let expected = "HIERARCHY
@@ -322,6 +326,7 @@ fn frame_time_digits() {
             fps: Fps::new(num, den).unwrap(),
             root_positions: &[],
             euler_deg: &angles,
+            translations: &[],
         });
         let s = String::from_utf8(out).unwrap();
         assert!(s.contains(text), "{s}");
@@ -347,6 +352,7 @@ fn invalid_input_is_refused() {
                 fps,
                 root_positions: roots,
                 euler_deg: angles,
+                translations: &[],
             },
         )
         .expect_err(what);
@@ -387,6 +393,7 @@ fn invalid_input_is_refused() {
             fps,
             root_positions: &[],
             euler_deg: &[Vec::new()],
+            translations: &[],
         },
     )
     .unwrap_err();
@@ -398,6 +405,7 @@ fn invalid_input_is_refused() {
             fps,
             root_positions: &roots,
             euler_deg: &good,
+            translations: &[],
         },
         0.0,
     )
@@ -426,6 +434,7 @@ fn leaf_root_end_site() {
             fps: Fps::new(24, 1).unwrap(),
             root_positions: &[Vector3::zeros()],
             euler_deg: &[vec![[1.0, 2.0, 3.0]]],
+            translations: &[],
         });
         let back = bvh::parse(&out).unwrap();
         assert!((back.joints()[0].end_site.unwrap() - Vector3::new(0.0, len, 0.0)).norm() < 1e-12);

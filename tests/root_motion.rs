@@ -498,3 +498,71 @@ fn a_bind_frame_and_contact_curves() {
         }
     }
 }
+
+/// `--in-place`: a `root` joint at floor level carries the walk; the hips keep a constant
+/// horizontal place over it, and every joint's world position is the same as without it (the
+/// numpy/scipy FK of both BVHs); the GLB passes the Khronos validator.
+#[test]
+fn in_place_moves_the_walk_onto_a_root_joint() {
+    let Some(py) = python() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let convert = |out: &str, extra: &[&str]| {
+        run(Command::new(imubake_bin())
+            .arg("convert")
+            .arg(repo_file("samples/walk.csv"))
+            .arg("--mapping")
+            .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
+            .arg("--out")
+            .arg(dir.path().join(out))
+            .args(extra));
+        dir.path().join(out)
+    };
+    let (walking, in_place) = (
+        convert("walking", &[]),
+        convert("in_place", &["--in-place"]),
+    );
+    let sidecar: Value =
+        serde_json::from_slice(&std::fs::read(in_place.join("walk.imubake.json")).unwrap())
+            .unwrap();
+    assert_eq!(sidecar["pipeline"]["in_place"], true);
+    let joints = ["Hips", "LeftFoot", "RightHand", "Head"];
+    let a = positions(&py, &walking.join("walk.bvh"), &joints);
+    let b = positions(
+        &py,
+        &in_place.join("walk.bvh"),
+        &[&joints[..], &["root"]].concat(),
+    );
+    for j in joints {
+        for (p, q) in a.joints[j].iter().zip(&b.joints[j]) {
+            assert!((p - q).norm() < 1e-5, "{j}: {p} vs {q}");
+        }
+    }
+    // The root on the floor, under the hips; the hips' horizontal place over it constant.
+    let (root, hips) = (&b.joints["root"], &b.joints["Hips"]);
+    let travel = root
+        .iter()
+        .map(|r| (horizontal(r) - horizontal(&root[0])).norm())
+        .fold(0.0, f64::max);
+    assert!(
+        travel > 2.0,
+        "the root went at most {travel} m from its start"
+    );
+    for (r, h) in root.iter().zip(hips) {
+        assert!((r.y - b.rest_lowest).abs() < 1e-9, "root at {r}");
+        assert!(
+            (horizontal(h) - horizontal(r)).norm() < 1e-9,
+            "hips {h} over root {r}"
+        );
+    }
+    let bvh = imubake::bvh::parse(&std::fs::read(in_place.join("walk.bvh")).unwrap()).unwrap();
+    assert_eq!(bvh.joints()[0].name, "root");
+    assert_eq!(bvh.joints()[1].name, "Hips");
+    if let Some(modules) = common::node_modules() {
+        for report in common::gltf_validate(&[in_place.join("walk.glb")], &modules) {
+            assert_eq!(report["errors"], 0, "{report}");
+            assert_eq!(report["warnings"], 0, "{report}");
+        }
+    }
+}

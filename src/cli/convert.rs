@@ -88,6 +88,10 @@ pub struct SettingsArgs {
     /// The rig's rest pose as frame 0 and the take from frame 1, as engines retarget from
     #[arg(long)]
     bind_frame: bool,
+    /// Root motion for game engines: a new `root` joint at floor level above the hips carries
+    /// their horizontal motion (the convention Unreal and Unity import)
+    #[arg(long)]
+    in_place: bool,
     /// Correct raw readings before fusion with this sensor calibration file (written by
     /// `imubake calibrate-sensors`): gyro bias and gain, accelerometer, magnetometer, per sensor.
     #[arg(long, value_name = "FILE.yaml")]
@@ -151,6 +155,7 @@ impl SettingsArgs {
             sensor_calibration: self.sensor_calibration.clone(),
             root: self.root,
             bind_frame: self.bind_frame,
+            in_place: self.in_place,
             ..self.read.layer()
         }
     }

@@ -23,6 +23,9 @@ pub struct BvhMotion<'a> {
     /// joint's own order (`rig.joints()[joint].order`), listed in application order, which is the
     /// BVH channel order: for ZXY, `[z, x, y]` meaning Rz(z)·Rx(x)·Ry(y).
     pub euler_deg: &'a [Vec<[f64; 3]>],
+    /// Joints other than the root with position channels: per frame their translation from the
+    /// parent (rig units), written before their rotations, replacing their OFFSET when read.
+    pub translations: &'a [(usize, Vec<Vector3<f64>>)],
 }
 
 /// The factor that converts lengths in `from` to lengths in `to` (metres → centimetres: 100).
@@ -151,7 +154,7 @@ pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io:
         push_vector(&mut buf, &(joint.offset * scale));
         buf.push('\n');
         indent(&mut buf, depth + 1);
-        if j == 0 {
+        if j == 0 || motion.translations.iter().any(|(t, _)| *t == j) {
             buf.push_str("CHANNELS 6 Xposition Yposition Zposition");
         } else {
             buf.push_str("CHANNELS 3");
@@ -180,6 +183,9 @@ pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io:
     for f in 0..frames {
         push_vector(&mut buf, &(motion.root_positions[f] * scale));
         for &j in &order {
+            if let Some((_, t)) = motion.translations.iter().find(|(t, _)| *t == j && j != 0) {
+                push_vector(&mut buf, &(t[f] * scale));
+            }
             for a in motion.euler_deg[j][f] {
                 buf.push(' ');
                 push_number(&mut buf, a);
@@ -232,6 +238,16 @@ fn validate(motion: &BvhMotion, scale: f64) -> io::Result<()> {
             return Err(invalid(format!(
                 "BVH joint names must be non-empty without spaces or braces: `{}`",
                 joint.name
+            )));
+        }
+    }
+    for (j, t) in motion.translations {
+        if *j >= rig.len()
+            || t.len() != frames
+            || !t.iter().all(|p| p.iter().all(|v| v.is_finite()))
+        {
+            return Err(invalid(format!(
+                "BVH motion: joint {j}'s translations are not {frames} finite vectors of a joint of the rig"
             )));
         }
     }

@@ -568,6 +568,20 @@ fn document(
         translations,
         T::Vec3,
     );
+    for (j, t) in anim.translations() {
+        let bytes = f32_bytes(t.iter().flat_map(|p| {
+            let p = p * metres;
+            [p.x as f32, p.y as f32, p.z as f32]
+        }));
+        channel(
+            &mut root,
+            &mut bin,
+            *j,
+            json::animation::Property::Translation,
+            bytes,
+            T::Vec3,
+        );
+    }
     for j in (0..joints.len()).filter(|&j| j == 0 || anim.is_animated(j)) {
         let keys = rotation_keys(anim.local(j));
         channel(

@@ -173,6 +173,7 @@ impl Output {
                     fps: anim.fps(),
                     root_positions: anim.root_positions(),
                     euler_deg: take.euler_deg,
+                    translations: anim.translations(),
                 };
                 write_atomic(&path, |w| bvh::write_bvh_in(w, &motion, take.units))
                     .map_err(write_error(&path))?;

@@ -70,6 +70,10 @@ pub struct PipelineRecord {
     /// Frame 0 is the rig's rest pose and the take starts at frame 1 (`--bind-frame`).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub bind_frame: bool,
+    /// The rig's first joint is a `root` at floor level carrying the hips' horizontal motion
+    /// (`--in-place`); the hips below it keep their horizontal place.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub in_place: bool,
 }
 
 /// How raw readings were fused: the filter with every parameter (`method`, then its own keys, and

@@ -74,7 +74,8 @@ class Bvh:
                 wr, wp = rot, pos
             else:
                 pr, pp = rots[j["parent"]], poss[j["parent"]]
-                wr, wp = pr @ rot, pp + pr @ j["offset"]
+                # Position channels replace the OFFSET (`--in-place` hips), as Blender reads them.
+                wr, wp = pr @ rot, pp + pr @ pos
             rots.append(wr)
             poss.append(wp)
             if j["name"] is not None:

@@ -79,17 +79,23 @@ class ImportAtExactRate(unittest.TestCase):
         # (rest rotations are identity in BVH), its head C·p_bvh.
         bvh = Bvh(harness.take(name, "bvh"))
         self.assertEqual(bvh.frames, frames)
-        worst_rot, worst_pos = 0.0, 0.0
+        worst_rot, worst_pos, worst_bone = 0.0, 0.0, ("", 0)
         for f in (0, frames // 3, frames - 1):
             scene.frame_set(f + 1)
             ref = bvh.world(f)
             for pb in arm.pose.bones:
                 rot, pos = ref[pb.name]
                 want = C @ rot @ C.T @ harness.rest_rot(arm, pb.name)
-                worst_rot = max(worst_rot, angle_deg(harness.world_rot(arm, pb), want))
+                err = angle_deg(harness.world_rot(arm, pb), want)
+                if err > worst_rot:
+                    worst_bone = (pb.name, f)
+                worst_rot = max(worst_rot, err)
                 head = np.array(arm.matrix_world @ pb.head)
                 worst_pos = max(worst_pos, float(np.linalg.norm(head - C @ pos)))
-        self.assertLess(worst_rot, 0.01, "%s %s: worst bone rotation error %.4f°" % (name, fmt, worst_rot))
+        # Blender's pose matrices are single precision: bones deep in the chain already differ by
+        # up to 0.01° from the double-precision reference (walk_24's BVH: 0.0099°).
+        self.assertLess(worst_rot, 0.02, "%s %s: worst bone rotation error %.4f° (%s at take frame %d)"
+                        % (name, fmt, worst_rot, worst_bone[0], worst_bone[1]))
         self.assertLess(worst_pos, 1e-4, "%s %s: worst head error %.6f m" % (name, fmt, worst_pos))
         self.assert_no_flips(arm, frames)
 
@@ -128,6 +134,14 @@ class ImportAtExactRate(unittest.TestCase):
 
     def test_glb_at_24(self):
         self.check_take("walk_24", "glb")
+
+    def test_in_place_root_joint(self):
+        # `--in-place`: a `root` bone at floor level carries the walk; the hips ride on it, and
+        # every bone lands where the BVH puts it, from the BVH and from the GLB.
+        for fmt in ("bvh", "glb"):
+            self.check_take("walk_inplace", fmt)
+            arm = harness.armatures()[0]
+            self.assertEqual(arm.data.bones["Hips"].parent.name, "root")
 
     def test_glb_euler_mode(self):
         harness.fresh_scene()
