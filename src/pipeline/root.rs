@@ -358,6 +358,8 @@ impl RootCore {
             // The first frame: the body stands on the floor where the rest pose stood.
             let hips = Vector3::new(self.rest_root.x, self.floor - body_low, self.rest_root.z);
             let w_left = smooth((low[1].1 - low[0].1) / (BAND_H * h));
+            let planted =
+                [0, 1].map(|f| self.floor - body_low + low[f].1 <= self.floor + PLANT_H * h);
             self.state = Some(FeetState {
                 hips,
                 previous: now.clone(),
@@ -366,13 +368,8 @@ impl RootCore {
                 dominant: usize::from(w_left < 0.5),
                 velocity: Vector3::zeros(),
                 airborne: false,
-                planted: [false; 2],
+                planted,
             });
-            let planted =
-                [0, 1].map(|f| self.floor - body_low + low[f].1 <= self.floor + PLANT_H * h);
-            if let Some(state) = self.state.as_mut() {
-                state.planted = planted;
-            }
             return RootFrame {
                 position: hips,
                 contact: planted,
