@@ -16,17 +16,20 @@ use std::process::Command;
 fn make_takes(dir: &Path) {
     let input = dir.join("in");
     std::fs::create_dir_all(&input).unwrap();
-    for (stem, fps) in [
-        ("walk_24", "24"),
-        ("walk_2997", "29.97"),
-        ("walk_60", "60"),
-        ("walk_120", "120"),
+    // The bundled walk at four rates, and once with its walk on a `root` joint (`--in-place`).
+    for (stem, fps, extra) in [
+        ("walk_24", "24", None),
+        ("walk_2997", "29.97", None),
+        ("walk_60", "60", None),
+        ("walk_120", "120", None),
+        ("walk_inplace", "30", Some("--in-place")),
     ] {
         let csv = input.join(format!("{stem}.csv"));
         std::fs::copy(common::repo_file("samples/walk.csv"), &csv).unwrap();
         let out = Command::new(common::imubake_bin())
             .args(["convert", "--fps", fps, "--format", "bvh,glb", "--mapping"])
             .arg(common::repo_file("mappings/paper000_16imu_mixamo.json"))
+            .args(extra)
             .arg("--out")
             .arg(dir.join("takes"))
             .arg(&csv)
@@ -38,25 +41,6 @@ fn make_takes(dir: &Path) {
             String::from_utf8_lossy(&out.stderr)
         );
     }
-    let csv = input.join("walk_inplace.csv");
-    std::fs::copy(common::repo_file("samples/walk.csv"), &csv).unwrap();
-    let out = Command::new(common::imubake_bin())
-        .args([
-            "convert",
-            "--fps",
-            "30",
-            "--in-place",
-            "--format",
-            "bvh,glb",
-            "--mapping",
-        ])
-        .arg(common::repo_file("mappings/paper000_16imu_mixamo.json"))
-        .arg("--out")
-        .arg(dir.join("takes"))
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "convert walk_inplace: {out:?}");
     let out = Command::new(common::imubake_bin())
         .args(["convert", "--fps", "30", "--format", "bvh", "--mapping"])
         .arg(common::repo_file("mappings/paper002_sou12.json"))

@@ -21,6 +21,19 @@ fn run(cmd: &mut Command) -> Vec<u8> {
     out.stdout
 }
 
+/// Converts the bundled walk into `dir/out` with `extra` flags; the output folder.
+fn convert_walk(dir: &Path, out: &str, extra: &[&str]) -> PathBuf {
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(repo_file("samples/walk.csv"))
+        .arg("--mapping")
+        .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
+        .arg("--out")
+        .arg(dir.join(out))
+        .args(extra));
+    dir.join(out)
+}
+
 /// A BVH's joint positions per frame, its lowest point per frame and its rest pose's extent.
 struct Positions {
     joints: std::collections::HashMap<String, Vec<Vector3<f64>>>,
@@ -413,21 +426,10 @@ fn a_real_lower_body_take_stays_on_the_floor() {
 fn a_bind_frame_and_contact_curves() {
     let dir = tempfile::tempdir().unwrap();
     let convert = |out: &str, extra: &[&str]| {
-        run(Command::new(imubake_bin())
-            .arg("convert")
-            .arg(repo_file("samples/walk.csv"))
-            .arg("--mapping")
-            .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
-            .arg("--out")
-            .arg(dir.path().join(out))
-            .args(extra));
-        let sidecar: Value = serde_json::from_slice(
-            &std::fs::read(dir.path().join(out).join("walk.imubake.json")).unwrap(),
-        )
-        .unwrap();
-        let bvh =
-            imubake::bvh::parse(&std::fs::read(dir.path().join(out).join("walk.bvh")).unwrap())
-                .unwrap();
+        let out = convert_walk(dir.path(), out, extra);
+        let sidecar: Value =
+            serde_json::from_slice(&std::fs::read(out.join("walk.imubake.json")).unwrap()).unwrap();
+        let bvh = imubake::bvh::parse(&std::fs::read(out.join("walk.bvh")).unwrap()).unwrap();
         (sidecar, bvh)
     };
     let (plain, plain_bvh) = convert("plain", &[]);
@@ -508,20 +510,9 @@ fn in_place_moves_the_walk_onto_a_root_joint() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let convert = |out: &str, extra: &[&str]| {
-        run(Command::new(imubake_bin())
-            .arg("convert")
-            .arg(repo_file("samples/walk.csv"))
-            .arg("--mapping")
-            .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
-            .arg("--out")
-            .arg(dir.path().join(out))
-            .args(extra));
-        dir.path().join(out)
-    };
     let (walking, in_place) = (
-        convert("walking", &[]),
-        convert("in_place", &["--in-place"]),
+        convert_walk(dir.path(), "walking", &[]),
+        convert_walk(dir.path(), "in_place", &["--in-place"]),
     );
     let sidecar: Value =
         serde_json::from_slice(&std::fs::read(in_place.join("walk.imubake.json")).unwrap())

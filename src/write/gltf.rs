@@ -556,27 +556,19 @@ fn document(
                 extras: Default::default(),
             });
         };
-    let translations = f32_bytes(anim.root_positions().iter().flat_map(|p| {
-        let p = p * metres;
-        [p.x as f32, p.y as f32, p.z as f32]
-    }));
-    channel(
-        &mut root,
-        &mut bin,
-        0,
-        json::animation::Property::Translation,
-        translations,
-        T::Vec3,
-    );
-    for (j, t) in anim.translations() {
-        let bytes = f32_bytes(t.iter().flat_map(|p| {
+    // The root's position, and the joints with an animated translation (`--in-place` hips).
+    let root_track = (0, anim.root_positions());
+    let moving =
+        std::iter::once(root_track).chain(anim.translations().iter().map(|(j, t)| (*j, &t[..])));
+    for (j, track) in moving {
+        let bytes = f32_bytes(track.iter().flat_map(|p| {
             let p = p * metres;
             [p.x as f32, p.y as f32, p.z as f32]
         }));
         channel(
             &mut root,
             &mut bin,
-            *j,
+            j,
             json::animation::Property::Translation,
             bytes,
             T::Vec3,

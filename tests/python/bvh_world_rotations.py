@@ -14,38 +14,12 @@ import sys
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-
-def parse(path):
-    tokens = open(path).read().split()
-    joints, stack, i = [], [], 0
-    while tokens[i] != "MOTION":
-        t = tokens[i]
-        if t in ("ROOT", "JOINT"):
-            joints.append({"name": tokens[i + 1], "parent": stack[-1] if stack else None, "channels": []})
-            i += 2
-        elif t == "End":
-            joints.append({"name": None, "parent": stack[-1], "channels": []})
-            i += 2
-        elif t == "{":
-            stack.append(len(joints) - 1)
-            i += 1
-        elif t == "}":
-            stack.pop()
-            i += 1
-        elif t == "CHANNELS":
-            n = int(tokens[i + 1])
-            joints[-1]["channels"] = tokens[i + 2:i + 2 + n]
-            i += 2 + n
-        else:
-            i += 1
-    frames = int(tokens[i + 2])
-    values = np.array([float(v) for v in tokens[i + 6:]]).reshape(frames, -1)
-    return joints, values
+from bvh_positions import parse
 
 
 def main():
     path, names, frames = sys.argv[1], sys.argv[2].split(","), [float(f) for f in sys.argv[3].split(",")]
-    joints, values = parse(path)
+    joints, values, _ = parse(path)
     start, local = 0, []
     for j in joints:
         rot = [c for c in j["channels"] if c.endswith("rotation")]
