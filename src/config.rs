@@ -20,6 +20,7 @@
 //! causal: false          # run the take as a live stream would (causal smoothing, no look-ahead)
 //! bind_frame: false      # the rest pose as frame 0, the take from frame 1
 //! in_place: false        # a root joint at floor level carries the hips' horizontal motion
+//! unsensed: interpolate  # joints between two sensors share the bend; or rest
 //! sensor_rate_hz: 100    # the sensors' rate, for causal smoothing (else from their first samples)
 //! fusion: offline        # fuse raw readings even where the device gave orientations; or
 //!                        # madgwick:beta=0.1, mahony, trust, gyro, vqf:6d (no magnetometer)
@@ -78,6 +79,8 @@ pub struct Config {
     /// A `root` joint at floor level carries the hips' horizontal motion (a flag).
     #[serde(default)]
     pub in_place: bool,
+    /// What joints without a sensor do: interpolate (default) or rest.
+    pub unsensed: Option<crate::pipeline::relative::Unsensed>,
     /// The sensors' sample rate, Hz, for causal smoothing's grid.
     #[serde(default, deserialize_with = "sensor_rate")]
     pub sensor_rate_hz: Option<f64>,
@@ -248,6 +251,7 @@ impl Config {
             causal: self.causal || below.causal,
             bind_frame: self.bind_frame || below.bind_frame,
             in_place: self.in_place || below.in_place,
+            unsensed: self.unsensed.or(below.unsensed),
             sensor_rate_hz: self.sensor_rate_hz.or(below.sensor_rate_hz),
             fusion: self.fusion.or(below.fusion),
             sensor_calibration: self.sensor_calibration.or(below.sensor_calibration),
@@ -289,6 +293,9 @@ impl Config {
         s.pipeline.causal = self.causal;
         s.bind_frame = self.bind_frame;
         s.in_place = self.in_place;
+        if let Some(u) = self.unsensed {
+            s.pipeline.unsensed = u;
+        }
         s.pipeline.sensor_rate_hz = self.sensor_rate_hz;
         s.pipeline.fusion = self.fusion.clone();
         s.read.format = self.input_format;

@@ -647,6 +647,11 @@ fn pipeline_record(
         fusion: None,
         smoothing: Some(serde_json::to_value(&settings.pipeline.smoothing).expect("serialisable")),
         root: root.label(),
+        unsensed: if mode == "legacy-euler" {
+            "rest"
+        } else {
+            settings.pipeline.unsensed.label()
+        },
         heading: heading.label(),
         heading_sensor: heading.sensor().map(str::to_string),
         heading_deg,

@@ -156,8 +156,9 @@ const RACY_NS: u64 = 2_000_000_000;
 /// fused (takes that failed for want of orientations convert now) and the sidecar records each
 /// sensor's origin and world; 4: filters that do not estimate the gyro bias (madgwick, trust,
 /// gyro) get it from the take's opening stillness; 5: the root mode `auto` is the default (the
-/// body walks when both legs are sensed).
-pub const FINGERPRINT_SCHEMA: u32 = 5;
+/// body walks when both legs are sensed); 6: joints between two sensed ones share the bend
+/// (`unsensed: interpolate`, the default).
+pub const FINGERPRINT_SCHEMA: u32 = 6;
 
 /// What decides a conversion's outputs besides the capture, in a stable serialisation: field
 /// names and values, not Rust's `Debug` text; the mapping and rig files by content, not by path.
@@ -184,6 +185,7 @@ struct FingerprintInput<'a> {
     bind_frame: bool,
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     in_place: bool,
+    unsensed: &'static str,
     #[serde(skip_serializing_if = "Option::is_none")]
     sensor_rate_hz: Option<f64>,
     /// The fusion asked for, as its settings text (every parameter).
@@ -230,6 +232,7 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         causal: p.causal,
         bind_frame: settings.bind_frame,
         in_place: settings.in_place,
+        unsensed: p.unsensed.label(),
         sensor_rate_hz: p.sensor_rate_hz,
         fusion: p.fusion.as_ref().map(|f| f.to_string()),
         sensor_calibration: settings.sensor_calibration.as_deref().map(file_sha256),

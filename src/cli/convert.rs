@@ -85,6 +85,10 @@ pub struct SettingsArgs {
     /// legs are sensed down to the feet, ground when the thighs are, else fixed) [default: auto]
     #[arg(long, value_name = "MODE")]
     root: Option<imubake::pipeline::root::RootMode>,
+    /// Joints without a sensor: interpolate (a chain between two sensed joints shares the bend
+    /// between them) or rest (keep the rest rotation) [default: interpolate]
+    #[arg(long, value_name = "MODE")]
+    unsensed: Option<imubake::pipeline::relative::Unsensed>,
     /// The rig's rest pose as frame 0 and the take from frame 1, as engines retarget from
     #[arg(long)]
     bind_frame: bool,
@@ -156,6 +160,7 @@ impl SettingsArgs {
             root: self.root,
             bind_frame: self.bind_frame,
             in_place: self.in_place,
+            unsensed: self.unsensed,
             ..self.read.layer()
         }
     }

@@ -105,6 +105,8 @@ pub struct PipelineOptions {
     /// the device gave an orientation. `None`: device orientations where there are some, the
     /// default filter for sensors with raw readings only.
     pub fusion: Option<crate::fusion::Fusion>,
+    /// What joints without a sensor do (`--unsensed`).
+    pub unsensed: relative::Unsensed,
     /// Corrections of raw readings before fusion, per sensor id (`--sensor-calibration`).
     pub sensor_calibration: Option<std::sync::Arc<crate::intrinsics::SensorCalibration>>,
 }
@@ -122,6 +124,7 @@ impl Default for PipelineOptions {
             causal: false,
             sensor_rate_hz: None,
             fusion: None,
+            unsensed: relative::Unsensed::Interpolate,
             sensor_calibration: None,
         }
     }
@@ -316,8 +319,9 @@ pub fn run(
     warnings.extend(smoothing::not_smoothed_warnings(&not_smoothed));
 
     // 6. Local rotations; 7. the root.
-    let local = relative::to_local(rig, &world_tracks, grid.frames);
-    let unsmoothed = raw_tracks.map(|raw| relative::to_local(rig, &raw, grid.frames));
+    let local = relative::to_local(rig, &world_tracks, grid.frames, options.unsensed);
+    let unsmoothed =
+        raw_tracks.map(|raw| relative::to_local(rig, &raw, grid.frames, options.unsensed));
     let animated: Vec<bool> = world_tracks.iter().map(Option::is_some).collect();
     drop(world_tracks);
     let root_mode = root::resolve(options.root, rig, &animated);

@@ -63,6 +63,8 @@ pub struct PoseStream {
     values: Vec<Option<UnitQuaternion<f64>>>,
     frame_world: Vec<UnitQuaternion<f64>>,
     bone_world: Vec<Option<UnitQuaternion<f64>>>,
+    /// How each unsensed joint turns ([`super::relative::plan`]).
+    between: Vec<Option<super::relative::Between>>,
     pose: Pose,
 }
 
@@ -96,20 +98,18 @@ impl PoseStream {
         let mut resampler = FrameResampler::new(options.fps, n);
         resampler.stale_after_s = DEFAULT_STALE_AFTER_S;
         let joints = rig.len();
+        let mut sensed = vec![false; joints];
+        for s in &sensors {
+            sensed[s.bone] = true;
+        }
         Ok(PoseStream {
             rig: rig.clone(),
             fps: options.fps,
-            root: {
-                let mut animated = vec![false; joints];
-                for s in &sensors {
-                    animated[s.bone] = true;
-                }
-                RootCore::new(
-                    rig,
-                    super::root::resolve(options.root, rig, &animated),
-                    options.fps.frame_time_s(),
-                )
-            },
+            root: RootCore::new(
+                rig,
+                super::root::resolve(options.root, rig, &sensed),
+                options.fps.frame_time_s(),
+            ),
             to_rig: world.to_rig(),
             sensors,
             calibration,
@@ -123,6 +123,7 @@ impl PoseStream {
             values: vec![None; n],
             frame_world: vec![UnitQuaternion::identity(); joints],
             bone_world: vec![None; joints],
+            between: super::relative::plan(rig, &sensed, options.unsensed),
             pose: Pose {
                 frame: 0,
                 time_s: 0.0,
@@ -307,6 +308,7 @@ impl PoseStream {
             values,
             frame_world,
             bone_world,
+            between,
             pose,
             ..
         } = self;
@@ -315,7 +317,13 @@ impl PoseStream {
             for (s, v) in sensors.iter().zip(values) {
                 bone_world[s.bone] = *v;
             }
-            frame_to_local(rig, |j| bone_world[j], frame_world, &mut pose.local);
+            frame_to_local(
+                rig,
+                |j| bone_world[j],
+                between,
+                frame_world,
+                &mut pose.local,
+            );
             pose.frame = n;
             pose.time_s = fps.frame_time_of(n);
             let r = root.push(&pose.local);

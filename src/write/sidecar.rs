@@ -54,6 +54,8 @@ pub struct PipelineRecord {
     pub fusion: Option<FusionRecord>,
     pub smoothing: Option<serde_json::Value>,
     pub root: &'static str,
+    /// What joints without a sensor did: `interpolate` or `rest`.
+    pub unsensed: &'static str,
     pub heading: &'static str,
     /// The sensor whose forward axis or mount gave the heading.
     #[serde(skip_serializing_if = "Option::is_none")]
