@@ -25,6 +25,7 @@
 //! fusion: offline        # fuse raw readings even where the device gave orientations; or
 //!                        # madgwick:beta=0.1, mahony, trust, gyro, vqf:6d (no magnetometer)
 //! sensor_calibration: sensors.yaml   # calibrate-sensors' file; relative to this one
+//! subject: subject.yaml  # height_m and/or segment lengths: the rig scaled to the subject
 //! smoothing: butterworth:order=4,cutoff=14   # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
 //! # or with per-bone overrides:
 //! # smoothing: {method: "butterworth:cutoff=4", bones: {LeftHand: none, Head: "gaussian:sigma=0.05"}}
@@ -89,6 +90,8 @@ pub struct Config {
     pub fusion: Option<crate::fusion::Fusion>,
     /// A sensor calibration file (`imubake calibrate-sensors`) applied before fusion.
     pub sensor_calibration: Option<PathBuf>,
+    /// A subject file (`height_m`, segment lengths) the rig is scaled to.
+    pub subject: Option<PathBuf>,
 }
 
 fn fusion<'de, D: Deserializer<'de>>(d: D) -> Result<Option<crate::fusion::Fusion>, D::Error> {
@@ -255,6 +258,7 @@ impl Config {
             sensor_rate_hz: self.sensor_rate_hz.or(below.sensor_rate_hz),
             fusion: self.fusion.or(below.fusion),
             sensor_calibration: self.sensor_calibration.or(below.sensor_calibration),
+            subject: self.subject.or(below.subject),
         }
     }
 
@@ -265,6 +269,7 @@ impl Config {
             mapping: self.mapping.clone(),
             rig: self.rig.clone(),
             sensor_calibration: self.sensor_calibration.clone(),
+            subject: self.subject.clone(),
             ..ConvertSettings::default()
         };
         if let Some(fps) = self.fps {

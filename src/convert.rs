@@ -42,6 +42,8 @@ pub struct ConvertSettings {
     /// A sensor calibration file (`imubake calibrate-sensors`): corrections of raw readings
     /// before fusion.
     pub sensor_calibration: Option<PathBuf>,
+    /// A subject file (`height_m`, segment lengths): the rig scaled to the subject.
+    pub subject: Option<PathBuf>,
     pub pipeline: PipelineOptions,
     pub formats: Vec<OutputFormat>,
     /// Length unit of the BVH output (glTF is always metres).
@@ -79,6 +81,7 @@ impl Default for ConvertSettings {
             mapping: None,
             rig: None,
             sensor_calibration: None,
+            subject: None,
             pipeline: PipelineOptions::default(),
             formats: vec![OutputFormat::Bvh, OutputFormat::Glb],
             units: LengthUnit::Metres,
@@ -100,6 +103,8 @@ pub enum ConvertError {
     Rig(#[from] RigLoadError),
     #[error(transparent)]
     SensorCalibration(#[from] crate::intrinsics::IntrinsicsError),
+    #[error(transparent)]
+    Subject(#[from] crate::rig::subject::SubjectError),
     #[error("{}: {source}", .input.display())]
     Pipeline {
         input: PathBuf,
@@ -133,6 +138,7 @@ impl crate::diagnostic::Diagnostic for ConvertError {
                 ..
             }) => Some(path),
             ConvertError::SensorCalibration(_) => None,
+            ConvertError::Subject(e) => Some(&e.path),
             ConvertError::Pipeline { input, .. } | ConvertError::NoMapping { input, .. } => {
                 Some(input)
             }
@@ -156,6 +162,9 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             ConvertError::Pipeline { .. } | ConvertError::NoMapping { .. } => None,
             ConvertError::SensorCalibration(_) => {
                 Some("write the file again with `imubake calibrate-sensors`")
+            }
+            ConvertError::Subject(_) => {
+                Some("a subject file holds `height_m` and/or `segments: {bone: metres}`")
             }
             ConvertError::Output(_) => Some("check the output folder: free space and permissions"),
         }
@@ -486,7 +495,11 @@ impl Conversion {
 /// The rig: `--rig`, else the mapping's, else `mixamo`.
 fn rig_for(settings: &ConvertSettings, mapping_rig: Option<&str>) -> Result<Rig, ConvertError> {
     let name = settings.rig.as_deref().or(mapping_rig).unwrap_or("mixamo");
-    Ok(load_rig(name)?)
+    let rig = load_rig(name)?;
+    match &settings.subject {
+        Some(path) => Ok(crate::rig::subject::Subject::load(path)?.apply(&rig, path)?),
+        None => Ok(rig),
+    }
 }
 
 /// The quaternion pipeline ([`pipeline::run`]) with a quaternion mapping (`file`: where it came
@@ -743,6 +756,16 @@ fn write_take(
             name: out_rig.name().to_string(),
             units: settings.units.name(),
             bones: out_rig.len(),
+            subject: settings
+                .subject
+                .as_ref()
+                .map(|path| crate::write::sidecar::SubjectRecord {
+                    path: path.display().to_string(),
+                    sha256: source_sha256(path).unwrap_or_else(|_| "(unreadable)".into()),
+                    subject: crate::rig::subject::Subject::load(path).unwrap_or_default(),
+                    standing_height_m: out_rig.standing_height()
+                        * out_rig.units().metres_per_unit(),
+                }),
         },
         mapping: conversion.mapping,
         pipeline: conversion.pipeline,

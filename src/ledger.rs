@@ -194,6 +194,9 @@ struct FingerprintInput<'a> {
     /// SHA-256 of the sensor calibration file's content.
     #[serde(skip_serializing_if = "Option::is_none")]
     sensor_calibration: Option<String>,
+    /// SHA-256 of the subject file's content.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    subject: Option<String>,
 }
 
 fn file_sha256(path: &Path) -> String {
@@ -236,6 +239,7 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         sensor_rate_hz: p.sensor_rate_hz,
         fusion: p.fusion.as_ref().map(|f| f.to_string()),
         sensor_calibration: settings.sensor_calibration.as_deref().map(file_sha256),
+        subject: settings.subject.as_deref().map(file_sha256),
     };
     let json = serde_json::to_vec(&input).expect("the fingerprint input serialises");
     format!("{FINGERPRINT_SCHEMA}:{}", hex(&Sha256::digest(&json)))

@@ -85,6 +85,9 @@ pub struct SettingsArgs {
     /// legs are sensed down to the feet, ground when the thighs are, else fixed) [default: auto]
     #[arg(long, value_name = "MODE")]
     root: Option<imubake::pipeline::root::RootMode>,
+    /// Scale the rig to a subject: a YAML file with `height_m` and/or `segments: {bone: metres}`
+    #[arg(long, value_name = "FILE.yaml")]
+    subject: Option<PathBuf>,
     /// Joints without a sensor: interpolate (a chain between two sensed joints shares the bend
     /// between them) or rest (keep the rest rotation) [default: interpolate]
     #[arg(long, value_name = "MODE")]
@@ -161,6 +164,7 @@ impl SettingsArgs {
             bind_frame: self.bind_frame,
             in_place: self.in_place,
             unsensed: self.unsensed,
+            subject: self.subject.clone(),
             ..self.read.layer()
         }
     }

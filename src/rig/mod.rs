@@ -6,6 +6,7 @@
 //! BVH file's hierarchy serves as a rig too.
 
 pub mod file;
+pub mod subject;
 
 mod bvh;
 
@@ -274,6 +275,37 @@ impl Rig {
     pub fn rest_positions(&self) -> Vec<Vector3<f64>> {
         let identity = vec![UnitQuaternion::identity(); self.joints.len()];
         self.world_positions(&identity, self.joints[0].offset)
+    }
+
+    /// The rest pose's extent from its lowest point to its highest (joints and End Sites), rig
+    /// units: the standing height of the body the rig models.
+    pub fn standing_height(&self) -> f64 {
+        let rest = self.rest_positions();
+        let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (i, j) in self.joints.iter().enumerate() {
+            for y in std::iter::once(rest[i].y).chain(j.end_site.map(|e| rest[i].y + e.y)) {
+                low = low.min(y);
+                high = high.max(y);
+            }
+        }
+        high - low
+    }
+
+    /// The same rig (names, hierarchy, poses) with other offsets and End Sites.
+    pub fn with_lengths(
+        &self,
+        offsets: Vec<Vector3<f64>>,
+        end_sites: Vec<Option<Vector3<f64>>>,
+    ) -> Result<Rig, RigError> {
+        let mut rig = self.clone();
+        for ((j, o), e) in rig.joints.iter_mut().zip(offsets).zip(end_sites) {
+            if !o.iter().chain(e.iter().flatten()).all(|v| v.is_finite()) {
+                return Err(RigError::NonFinite(j.name.clone()));
+            }
+            j.offset = o;
+            j.end_site = e;
+        }
+        Ok(rig)
     }
 
     /// Height of the root above the lowest point of the rest pose (joints and end sites), in rig

@@ -46,6 +46,19 @@ pub struct RigRecord {
     /// Length unit of the written BVH (glTF is always metres).
     pub units: &'static str,
     pub bones: usize,
+    /// The subject the rig was scaled to (`--subject`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub subject: Option<SubjectRecord>,
+}
+
+/// A subject file: where, its content's hash, its measurements and the standing height they gave.
+#[derive(Debug, Clone, Serialize)]
+pub struct SubjectRecord {
+    pub path: String,
+    pub sha256: String,
+    #[serde(flatten)]
+    pub subject: crate::rig::subject::Subject,
+    pub standing_height_m: f64,
 }
 
 #[derive(Debug, Clone, Serialize)]
