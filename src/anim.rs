@@ -16,7 +16,8 @@ pub struct Animation {
     frames: usize,
     /// `local[joint][frame]`: q_parent_joint (the root's is q_world_root), rig world axes.
     local: Vec<Vec<UnitQuaternion<f64>>>,
-    /// Which joints carry motion from a sensor (others keep their rest rotation).
+    /// Which joints move: those a sensor drives, and those between two of them that share
+    /// their bend (the others keep their rest rotation).
     animated: Vec<bool>,
     /// Per frame: left and right foot planted (foot-rooted root motion), when known.
     contacts: Option<Vec<[bool; 2]>>,

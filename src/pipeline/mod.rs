@@ -327,7 +327,8 @@ pub fn run(
     let root_mode = root::resolve(options.root, rig, &animated);
     let (roots, contacts) =
         root::root_positions(rig, root_mode, &local, options.fps.frame_time_s());
-    let mut animation = Animation::new(rig.clone(), options.fps, local, animated, roots)?;
+    let moving = relative::moving(rig, &animated, options.unsensed);
+    let mut animation = Animation::new(rig.clone(), options.fps, local, moving, roots)?;
     if let Some(c) = &contacts {
         animation = animation.with_contacts(c.per_frame.clone())?;
     }
@@ -446,7 +447,8 @@ fn run_causal(
     let calibration = stream.calibration().cloned().expect("solved at the end");
     let root_mode = stream.root_mode();
     drop(stream);
-    let animation = animation.finish(grid.first, grid.frames, animated)?;
+    let moving = relative::moving(rig, &animated, options.unsensed);
+    let animation = animation.finish(grid.first, grid.frames, moving)?;
     let kept = feet
         .get(grid.first..(grid.first + grid.frames).min(feet.len()))
         .unwrap_or(&[]);

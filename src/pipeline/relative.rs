@@ -115,6 +115,16 @@ pub fn plan(rig: &Rig, sensed: &[bool], mode: Unsensed) -> Vec<Option<Between>> 
     out
 }
 
+/// Which joints move: the sensed ones, and (under [`Unsensed::Interpolate`]) the unsensed ones
+/// between two sensed joints, which share the bend between them.
+pub fn moving(rig: &Rig, sensed: &[bool], mode: Unsensed) -> Vec<bool> {
+    plan(rig, sensed, mode)
+        .iter()
+        .zip(sensed)
+        .map(|(between, sensed)| *sensed || between.is_some())
+        .collect()
+}
+
 /// `world[j]`: the world rotation track of joint j when a sensor drives it. Returns `local[j][frame]`.
 pub fn to_local(
     rig: &Rig,
