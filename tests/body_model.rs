@@ -14,18 +14,21 @@ fn a_subject_scales_the_rig() {
     let dir = tempfile::tempdir().unwrap();
     let subject = dir.path().join("subject.yaml");
     std::fs::write(&subject, "height_m: 1.6\nsegments:\n  LeftUpLeg: 0.4\n").unwrap();
+    let convert = |out: &std::path::Path| {
+        Command::new(imubake_bin())
+            .arg("convert")
+            .arg(repo_file("samples/walk.csv"))
+            .arg("--mapping")
+            .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
+            .arg("--subject")
+            .arg(&subject)
+            .args(["--format", "bvh", "--root", "fixed", "--out"])
+            .arg(out)
+            .output()
+            .unwrap()
+    };
     let out = dir.path().join("out");
-    let run = Command::new(imubake_bin())
-        .arg("convert")
-        .arg(repo_file("samples/walk.csv"))
-        .arg("--mapping")
-        .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
-        .arg("--subject")
-        .arg(&subject)
-        .args(["--format", "bvh", "--root", "fixed", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let run = convert(&out);
     assert!(
         run.status.success(),
         "{}",
@@ -77,17 +80,7 @@ fn a_subject_scales_the_rig() {
     assert_eq!(record["sha256"].as_str().unwrap().len(), 64);
 
     std::fs::write(&subject, "height_m: 0\n").unwrap();
-    let bad = Command::new(imubake_bin())
-        .arg("convert")
-        .arg(repo_file("samples/walk.csv"))
-        .arg("--mapping")
-        .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
-        .arg("--subject")
-        .arg(&subject)
-        .arg("--out")
-        .arg(dir.path().join("bad"))
-        .output()
-        .unwrap();
+    let bad = convert(&dir.path().join("bad"));
     let message = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success());
     assert!(
