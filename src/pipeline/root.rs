@@ -240,15 +240,7 @@ impl RootCore {
     /// A core for `rig` at `fps`, in `mode` (resolved with [`resolve`] first; `auto` acts as
     /// `feet` here).
     pub fn new(rig: &Rig, mode: RootMode, frame_time_s: f64) -> RootCore {
-        let rest = rig.rest_positions();
-        let mut low = f64::INFINITY;
-        let mut high = f64::NEG_INFINITY;
-        for (i, j) in rig.joints().iter().enumerate() {
-            for y in std::iter::once(rest[i].y).chain(j.end_site.map(|e| rest[i].y + e.y)) {
-                low = low.min(y);
-                high = high.max(y);
-            }
-        }
+        let (low, high) = rig.rest_extent();
         let mode = if mode == RootMode::Auto {
             RootMode::Feet
         } else {
@@ -376,10 +368,11 @@ impl RootCore {
                 airborne: false,
             };
         };
-        // How each foot's previously lowest point moved relative to the hips.
+        // How each foot's previously lowest point (`pivot`) moved relative to the hips.
+        let pivot = [0, 1].map(|f| lowest(&state.previous[f]).0);
         let mut moved = [Vector3::zeros(); 2];
         for f in 0..2 {
-            let (k, _) = lowest(&state.previous[f]);
+            let k = pivot[f];
             moved[f] = now[f].get(k).copied().unwrap_or_default() - state.previous[f][k];
         }
         // Contact weights: the foot that is lower, slower relative to the hips and not rising
@@ -453,13 +446,10 @@ impl RootCore {
         // Reported contacts: a foot near its surface and nearly still over the ground, engaged
         // and released at different thresholds so that noise does not flicker them.
         for f in 0..2 {
-            let (k, _) = lowest(&state.previous[f]);
             let height = state.hips.y + low[f].1 - state.level[f];
-            let speed = {
-                let d = (state.hips + now[f].get(k).copied().unwrap_or_default())
-                    - (before + state.previous[f][k]);
-                Vector3::new(d.x, 0.0, d.z).norm() / dt
-            };
+            // The pivot's ground speed: the hips' step plus its motion relative to them.
+            let d = state.hips - before + moved[f];
+            let speed = Vector3::new(d.x, 0.0, d.z).norm() / dt;
             let (height_limit, speed_limit) = if state.planted[f] {
                 (2.0 * PLANT_H * h, 2.0 * PLANT_SPEED_H_S * h)
             } else {

@@ -277,9 +277,9 @@ impl Rig {
         self.world_positions(&identity, self.joints[0].offset)
     }
 
-    /// The rest pose's extent from its lowest point to its highest (joints and End Sites), rig
-    /// units: the standing height of the body the rig models.
-    pub fn standing_height(&self) -> f64 {
+    /// The rest pose's lowest and highest points' heights (joints and End Sites), rig units, the
+    /// root at its offset.
+    pub fn rest_extent(&self) -> (f64, f64) {
         let rest = self.rest_positions();
         let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
         for (i, j) in self.joints.iter().enumerate() {
@@ -288,6 +288,13 @@ impl Rig {
                 high = high.max(y);
             }
         }
+        (low, high)
+    }
+
+    /// The rest pose's extent from its lowest point to its highest, rig units: the standing
+    /// height of the body the rig models.
+    pub fn standing_height(&self) -> f64 {
+        let (low, high) = self.rest_extent();
         high - low
     }
 
@@ -311,16 +318,7 @@ impl Rig {
     /// Height of the root above the lowest point of the rest pose (joints and end sites), in rig
     /// units: where the root stands when the feet are on the ground.
     pub fn root_height(&self) -> f64 {
-        let rest = self.rest_positions();
-        let lowest = self
-            .joints
-            .iter()
-            .enumerate()
-            .flat_map(|(i, j)| {
-                std::iter::once(rest[i].y).chain(j.end_site.map(|e| rest[i].y + e.y))
-            })
-            .fold(f64::INFINITY, f64::min);
-        rest[0].y - lowest
+        self.joints[0].offset.y - self.rest_extent().0
     }
 }
 
