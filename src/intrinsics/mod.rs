@@ -24,6 +24,7 @@ use gyro_gain::GyroGain;
 use magnetometer::MagCalibration;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -148,16 +149,26 @@ impl SensorIntrinsics {
         }
     }
 
-    /// A sensor's tracks corrected (the magnetometer's only when there is a correction for it).
-    pub fn apply(
+    /// A sensor's tracks corrected; each is borrowed as it is when nothing corrects it.
+    #[allow(clippy::type_complexity)]
+    pub fn apply<'a>(
         &self,
-        inertial: &Track<ImuSample>,
-        magnetometer: Option<&Track<Vector3<f64>>>,
-    ) -> (Track<ImuSample>, Option<Track<Vector3<f64>>>) {
-        let inertial = inertial.clone().map_in_place(|s| self.correct_inertial(s));
+        inertial: &'a Track<ImuSample>,
+        magnetometer: Option<&'a Track<Vector3<f64>>>,
+    ) -> (
+        Cow<'a, Track<ImuSample>>,
+        Option<Cow<'a, Track<Vector3<f64>>>>,
+    ) {
+        let corrected =
+            self.gyro_bias.is_some() || self.gyro_gain.is_some() || self.accelerometer.is_some();
+        let inertial = if corrected {
+            Cow::Owned(inertial.clone().map_in_place(|s| self.correct_inertial(s)))
+        } else {
+            Cow::Borrowed(inertial)
+        };
         let magnetometer = magnetometer.map(|m| match &self.magnetometer {
-            Some(cal) => m.clone().map_in_place(|x| cal.correct(x)),
-            None => m.clone(),
+            Some(cal) => Cow::Owned(m.clone().map_in_place(|x| cal.correct(x))),
+            None => Cow::Borrowed(m),
         });
         (inertial, magnetometer)
     }
@@ -260,20 +271,21 @@ impl SensorCalibration {
 /// the offline fusion do; correcting twice would fight them) — the bias read over the take's
 /// opening stillness (a stretch starting in its first second). `corrections` says what ran;
 /// `warnings` when a bias was wanted but the take does not open still.
-pub struct Prepared {
-    pub inertial: Track<ImuSample>,
-    pub magnetometer: Option<Track<Vector3<f64>>>,
+/// The tracks are borrowed where nothing corrects them (the default for most takes).
+pub struct Prepared<'a> {
+    pub inertial: Cow<'a, Track<ImuSample>>,
+    pub magnetometer: Option<Cow<'a, Track<Vector3<f64>>>>,
     pub corrections: Vec<String>,
     pub warnings: Vec<String>,
 }
 
-pub fn prepare(
+pub fn prepare<'a>(
     sensor: &str,
-    inertial: &Track<ImuSample>,
-    magnetometer: Option<&Track<Vector3<f64>>>,
+    inertial: &'a Track<ImuSample>,
+    magnetometer: Option<&'a Track<Vector3<f64>>>,
     calibration: Option<&SensorIntrinsics>,
     filter_estimates_bias: bool,
-) -> Prepared {
+) -> Prepared<'a> {
     let mut corrections: Vec<String> = calibration
         .map(|c| {
             c.kinds()

@@ -144,7 +144,7 @@ pub fn orientations(
                 fusion::fuse(
                     sensor.id(),
                     &prepared.inertial,
-                    prepared.magnetometer.as_ref(),
+                    prepared.magnetometer.as_deref(),
                     &filter,
                 )
                 .map(|mut fused| {
