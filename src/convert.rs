@@ -17,6 +17,7 @@ use crate::read::{
     sniff,
 };
 use crate::rig::file::RigLoadError;
+use crate::rig::subject::Subject;
 use crate::rig::{LengthUnit, Rig, load_rig};
 use crate::take::{LineReport, Take};
 use crate::world::{World, WorldFrom};
@@ -382,20 +383,29 @@ fn convert_unclean(
     settings: &ConvertSettings,
 ) -> Result<ConvertOutcome, ConvertError> {
     let (take, sha256) = read_and_hash(input, &settings.read)?;
+    // The subject file, read once: it scales the rig, and the sidecar records it.
+    let subject = match &settings.subject {
+        Some(path) => Some(Subject::load(path)?),
+        None => None,
+    };
+    let subject = subject.as_ref();
     let conversion = match &settings.mapping {
         Some(path) => match load_mapping(path)? {
-            MappingFile::Quaternion(m) => quaternion_mode(input, &take, settings, m, Some(path))?,
-            MappingFile::Legacy(m) => legacy_mode(input, &take, settings, &m, path)?,
+            MappingFile::Quaternion(m) => {
+                quaternion_mode(input, &take, settings, subject, m, Some(path))?
+            }
+            MappingFile::Legacy(m) => legacy_mode(input, &take, settings, subject, &m, path)?,
         },
         None => {
-            let rig = rig_for(settings, None)?;
+            // Matching sensors to bones by name needs only the names: the rig unscaled.
+            let rig = rig_for(settings, None, None)?;
             let ids: Vec<&str> = take.sensors().iter().map(|s| s.id()).collect();
             let mapping = Mapping::by_name(&rig, &ids).ok_or_else(|| ConvertError::NoMapping {
                 input: input.to_path_buf(),
                 rig: settings.rig.clone().unwrap_or_else(|| "mixamo".into()),
                 sensors: ids.join(", "),
             })?;
-            quaternion_mode(input, &take, settings, mapping, None)?
+            quaternion_mode(input, &take, settings, subject, mapping, None)?
         }
     };
     let conversion = if settings.in_place {
@@ -424,7 +434,7 @@ fn convert_unclean(
     // What the sidecar and the report keep of the take; its samples are freed here, before the
     // outputs are built (which halves the peak memory of a long take).
     let facts = TakeFacts::of(take, &conversion.warnings);
-    write_take(input, out_dir, settings, source, facts, conversion)
+    write_take(input, out_dir, settings, subject, source, facts, conversion)
 }
 
 /// A converted take, whichever mapping mode made it: the animation, what the writers need of it,
@@ -492,13 +502,18 @@ impl Conversion {
     }
 }
 
-/// The rig: `--rig`, else the mapping's, else `mixamo`.
-fn rig_for(settings: &ConvertSettings, mapping_rig: Option<&str>) -> Result<Rig, ConvertError> {
+/// The rig: `--rig`, else the mapping's, else `mixamo`, scaled to `subject` (read from
+/// `settings.subject`) when there is one.
+fn rig_for(
+    settings: &ConvertSettings,
+    mapping_rig: Option<&str>,
+    subject: Option<&Subject>,
+) -> Result<Rig, ConvertError> {
     let name = settings.rig.as_deref().or(mapping_rig).unwrap_or("mixamo");
     let rig = load_rig(name)?;
-    match &settings.subject {
-        Some(path) => Ok(crate::rig::subject::Subject::load(path)?.apply(&rig, path)?),
-        None => Ok(rig),
+    match (subject, &settings.subject) {
+        (Some(subject), Some(path)) => Ok(subject.apply(&rig, path)?),
+        _ => Ok(rig),
     }
 }
 
@@ -508,10 +523,11 @@ fn quaternion_mode(
     input: &Path,
     take: &Take,
     settings: &ConvertSettings,
+    subject: Option<&Subject>,
     mapping: Mapping,
     file: Option<&Path>,
 ) -> Result<Conversion, ConvertError> {
-    let rig = rig_for(settings, mapping.rig.as_deref())?;
+    let rig = rig_for(settings, mapping.rig.as_deref(), subject)?;
     let mapping_name = file.map_or_else(
         || PathBuf::from("(sensors matched to bones by name)"),
         Path::to_path_buf,
@@ -564,10 +580,11 @@ fn legacy_mode(
     input: &Path,
     take: &Take,
     settings: &ConvertSettings,
+    subject: Option<&Subject>,
     mapping: &LegacyMapping,
     mapping_path: &Path,
 ) -> Result<Conversion, ConvertError> {
-    let rig = rig_for(settings, None)?;
+    let rig = rig_for(settings, None, subject)?;
     let table1 = load_rig("sou12")?;
     let legacy = pipeline::legacy::run(
         take,
@@ -685,6 +702,7 @@ fn write_take(
     input: &Path,
     out_dir: &Path,
     settings: &ConvertSettings,
+    subject: Option<&Subject>,
     source: SourceRecord,
     facts: TakeFacts,
     conversion: Conversion,
@@ -759,10 +777,11 @@ fn write_take(
             subject: settings
                 .subject
                 .as_ref()
-                .map(|path| crate::write::sidecar::SubjectRecord {
+                .zip(subject)
+                .map(|(path, subject)| crate::write::sidecar::SubjectRecord {
                     path: path.display().to_string(),
                     sha256: source_sha256(path).unwrap_or_else(|_| "(unreadable)".into()),
-                    subject: crate::rig::subject::Subject::load(path).unwrap_or_default(),
+                    subject: subject.clone(),
                     standing_height_m: out_rig.standing_height()
                         * out_rig.units().metres_per_unit(),
                 }),
