@@ -16,13 +16,15 @@ use std::process::Command;
 fn make_takes(dir: &Path) {
     let input = dir.join("in");
     std::fs::create_dir_all(&input).unwrap();
-    // The bundled walk at four rates, and once with its walk on a `root` joint (`--in-place`).
+    // The bundled walk at four rates, once with its walk on a `root` joint (`--in-place`), once
+    // with the rest pose as frame 0 (`--bind-frame`).
     for (stem, fps, extra) in [
         ("walk_24", "24", None),
         ("walk_2997", "29.97", None),
         ("walk_60", "60", None),
         ("walk_120", "120", None),
         ("walk_inplace", "30", Some("--in-place")),
+        ("walk_bind", "30", Some("--bind-frame")),
     ] {
         let csv = input.join(format!("{stem}.csv"));
         std::fs::copy(common::repo_file("samples/walk.csv"), &csv).unwrap();

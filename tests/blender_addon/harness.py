@@ -6,7 +6,7 @@ import bpy
 
 MODULE = "bl_ext.user_default.imubake"
 RATES = {"walk_24": (24, 1.0), "walk_2997": (30, 1.001), "walk_60": (60, 1.0), "walk_120": (120, 1.0),
-         "walk_inplace": (30, 1.0)}
+         "walk_inplace": (30, 1.0), "walk_bind": (30, 1.0)}
 
 
 def install(zip_path):

@@ -135,6 +135,18 @@ class ImportAtExactRate(unittest.TestCase):
     def test_glb_at_24(self):
         self.check_take("walk_24", "glb")
 
+    def test_bind_frame_at_scene_frame_1(self):
+        # `--bind-frame`: take frame 0 is the rig's rest pose, so scene frame 1 shows it (every
+        # bone at rest) and the take plays from scene frame 2, each frame where the BVH puts it.
+        self.check_take("walk_bind", "bvh")
+        self.assertTrue(sidecar("walk_bind")["pipeline"]["bind_frame"])
+        arm = harness.armatures()[0]
+        bpy.context.scene.frame_set(1)
+        for pb in arm.pose.bones:
+            self.assertLess(pb.matrix_basis.to_quaternion().angle, 1e-5, pb.name)
+        bpy.context.scene.frame_set(2)
+        self.assertTrue(any(pb.matrix_basis.to_quaternion().angle > 1e-3 for pb in arm.pose.bones))
+
     def test_in_place_root_joint(self):
         # `--in-place`: a `root` bone at floor level carries the walk; the hips ride on it, and
         # every bone lands where the BVH puts it, from the BVH and from the GLB.
