@@ -230,6 +230,16 @@ fn check_window(
     Ok(())
 }
 
+/// The local rotation of every joint in the pose held at calibration (the first window's; the
+/// rest pose's identities without a window, or for a pose the rig does not know — calibration
+/// itself refuses that one): where joints without a sensor start from ([`super::relative`]).
+pub fn held_pose(rig: &Rig, window: Option<&CalibrationWindow>) -> Vec<UnitQuaternion<f64>> {
+    window
+        .and_then(|w| rig.pose(&w.pose.label()))
+        .map(|p| p.local)
+        .unwrap_or_else(|| vec![UnitQuaternion::identity(); rig.len()])
+}
+
 /// Each sensor's bone's world orientation in `pose`.
 fn pose_world(
     rig: &Rig,

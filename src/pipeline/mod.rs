@@ -319,15 +319,16 @@ pub fn run(
     warnings.extend(smoothing::not_smoothed_warnings(&not_smoothed));
 
     // 6. Local rotations; 7. the root.
-    let local = relative::to_local(rig, &world_tracks, grid.frames, options.unsensed);
+    let held = calibrate::held_pose(rig, window.as_ref());
+    let local = relative::to_local(rig, &world_tracks, grid.frames, options.unsensed, &held);
     let unsmoothed =
-        raw_tracks.map(|raw| relative::to_local(rig, &raw, grid.frames, options.unsensed));
+        raw_tracks.map(|raw| relative::to_local(rig, &raw, grid.frames, options.unsensed, &held));
     let animated: Vec<bool> = world_tracks.iter().map(Option::is_some).collect();
     drop(world_tracks);
     let root_mode = root::resolve(options.root, rig, &animated);
     let (roots, contacts) =
         root::root_positions(rig, root_mode, &local, options.fps.frame_time_s());
-    let moving = relative::moving(rig, &animated, options.unsensed);
+    let moving = relative::moving(rig, &animated, options.unsensed, &held);
     let mut animation = Animation::new(rig.clone(), options.fps, local, moving, roots)?;
     if let Some(c) = &contacts {
         animation = animation.with_contacts(c.per_frame.clone())?;
@@ -447,7 +448,8 @@ fn run_causal(
     let calibration = stream.calibration().cloned().expect("solved at the end");
     let root_mode = stream.root_mode();
     drop(stream);
-    let moving = relative::moving(rig, &animated, options.unsensed);
+    let held = calibrate::held_pose(rig, window.as_ref());
+    let moving = relative::moving(rig, &animated, options.unsensed, &held);
     let animation = animation.finish(grid.first, grid.frames, moving)?;
     let kept = feet
         .get(grid.first..(grid.first + grid.frames).min(feet.len()))

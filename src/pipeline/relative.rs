@@ -10,9 +10,17 @@
 //!   `Σ_{j≤i} f_j = (Σ_{j<i} ℓ_j + ℓ_i / 2) / Σ ℓ`; `D` keeps the rest of the rotation, so the
 //!   chain bends smoothly and `D` is exactly where its sensor says (two equal segments: ¼, ½, and
 //!   ¼ left for `D`). An unsensed joint without a sensed descendant (a head with no sensor) keeps its
-//!   rest rotation; where branches meet, the first sensed descendant in the rig's order decides.
-//! - `rest`: every unsensed joint keeps its rest (identity) local rotation, so its world rotation
-//!   is its parent's and the whole bend between two sensors happens at the lower one.
+//!   held rotation (below); where branches meet, the first sensed descendant in the rig's order
+//!   decides.
+//! - `rest`: every unsensed joint keeps its held local rotation, so the whole change of the bend
+//!   between two sensors happens at the lower one.
+//!
+//! The held rotation `h_j` of an unsensed joint is its local rotation in the pose the subject held
+//! at calibration (identity for the rest pose; a BVH rig's `frame:N` may bend the spine), since
+//! that is the one moment the sensors say how the body stood. Between two sensors the chain then
+//! shares the change from that pose: with `H = h_1 ⊗ … ⊗ h_k ⊗ h_D` the pose's rotation from `A`
+//! to `D` and `E = H⁻¹ ⊗ R`, `q_local_i = h_i ⊗ exp(f_i · log E)`; `D` keeps the remainder, so at
+//! calibration (`R = H`) every joint is exactly in the pose.
 
 use crate::rig::Rig;
 use nalgebra::UnitQuaternion;
@@ -49,22 +57,40 @@ impl std::str::FromStr for Unsensed {
     }
 }
 
-/// An unsensed joint between two sensed ones: the sensed ancestor, the sensed descendant and the
-/// fraction of the rotation between them that this joint takes.
+/// An unsensed joint between two sensed ones: the sensed ancestor, the sensed descendant, the
+/// fraction of the change between them that this joint takes, and the pose held at calibration
+/// (`held`: this joint's local rotation in it; `span_held_inverse`: `H⁻¹`, the inverse of that
+/// pose's rotation from the ancestor to the descendant).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Between {
     pub ancestor: usize,
     pub descendant: usize,
     pub fraction: f64,
+    pub held: UnitQuaternion<f64>,
+    pub span_held_inverse: UnitQuaternion<f64>,
 }
 
-/// For each joint, how it turns when it has no sensor: `Some` for the joints of a chain between
-/// two sensed joints (under [`Unsensed::Interpolate`]), `None` to keep the rest rotation.
-pub fn plan(rig: &Rig, sensed: &[bool], mode: Unsensed) -> Vec<Option<Between>> {
+/// How each joint turns when it has no sensor: its share of the bend between two sensed joints
+/// (`between`, under [`Unsensed::Interpolate`]), else its rotation in the held pose (`held`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    pub between: Vec<Option<Between>>,
+    pub held: Vec<UnitQuaternion<f64>>,
+}
+
+/// The plan for `rig` with the joints `sensed` driven by sensors, `held` the local rotations of
+/// the pose held at calibration (one per joint; identities for the rest pose).
+pub fn plan(rig: &Rig, sensed: &[bool], mode: Unsensed, held: &[UnitQuaternion<f64>]) -> Plan {
     let n = rig.len();
+    debug_assert_eq!(held.len(), n);
     let mut out = vec![None; n];
+    let held_world = rig.world_rotations(held);
+    let done = |out| Plan {
+        between: out,
+        held: held.to_vec(),
+    };
     if mode == Unsensed::Rest {
-        return out;
+        return done(out);
     }
     let joints = rig.joints();
     // Sensed joints in the rig's (parents-first) order: each claims the unsensed chain above it.
@@ -109,32 +135,44 @@ pub fn plan(rig: &Rig, sensed: &[bool], mode: Unsensed) -> Vec<Option<Between>> 
                 ancestor: a,
                 descendant: d,
                 fraction,
+                held: held[u],
+                span_held_inverse: held_world[d].inverse() * held_world[a],
             });
         }
     }
-    out
+    done(out)
 }
 
-/// Which joints move: the sensed ones, and (under [`Unsensed::Interpolate`]) the unsensed ones
-/// between two sensed joints, which share the bend between them.
-pub fn moving(rig: &Rig, sensed: &[bool], mode: Unsensed) -> Vec<bool> {
-    plan(rig, sensed, mode)
+/// Which joints the animation keys: the sensed ones, (under [`Unsensed::Interpolate`]) the
+/// unsensed ones between two sensed joints, which share the bend between them, and those held
+/// away from their rest rotation (`held`: the pose held at calibration). The others stay at rest.
+pub fn moving(
+    rig: &Rig,
+    sensed: &[bool],
+    mode: Unsensed,
+    held: &[UnitQuaternion<f64>],
+) -> Vec<bool> {
+    let plan = plan(rig, sensed, mode, held);
+    plan.between
         .iter()
         .zip(sensed)
-        .map(|(between, sensed)| *sensed || between.is_some())
+        .zip(&plan.held)
+        .map(|((between, sensed), held)| *sensed || between.is_some() || held.angle() > 1e-12)
         .collect()
 }
 
-/// `world[j]`: the world rotation track of joint j when a sensor drives it. Returns `local[j][frame]`.
+/// `world[j]`: the world rotation track of joint j when a sensor drives it; `held`: the local
+/// rotations of the pose held at calibration. Returns `local[j][frame]`.
 pub fn to_local(
     rig: &Rig,
     world: &[Option<Vec<UnitQuaternion<f64>>>],
     frames: usize,
     unsensed: Unsensed,
+    held: &[UnitQuaternion<f64>],
 ) -> Vec<Vec<UnitQuaternion<f64>>> {
     let n = rig.len();
     let sensed: Vec<bool> = world.iter().map(Option::is_some).collect();
-    let between = plan(rig, &sensed, unsensed);
+    let plan = plan(rig, &sensed, unsensed, held);
     let mut local = vec![vec![UnitQuaternion::identity(); frames]; n];
     let mut frame_world = vec![UnitQuaternion::identity(); n];
     let mut frame_local = vec![UnitQuaternion::identity(); n];
@@ -142,7 +180,7 @@ pub fn to_local(
         frame_to_local(
             rig,
             |j| world[j].as_ref().map(|track| track[f]),
-            &between,
+            &plan,
             &mut frame_world,
             &mut frame_local,
         );
@@ -155,11 +193,11 @@ pub fn to_local(
 
 /// The incremental core: one frame's local rotations (`local`, one per joint) from the world
 /// rotations of the joints a sensor drives (`world(j)`); `frame_world` is scratch (one per joint).
-/// A joint without a sensor turns as `between` says ([`plan`]), else keeps its rest rotation.
+/// A joint without a sensor turns as the [`Plan`] says.
 pub fn frame_to_local(
     rig: &Rig,
     world: impl Fn(usize) -> Option<UnitQuaternion<f64>>,
-    between: &[Option<Between>],
+    plan: &Plan,
     frame_world: &mut [UnitQuaternion<f64>],
     local: &mut [UnitQuaternion<f64>],
 ) {
@@ -176,20 +214,25 @@ pub fn frame_to_local(
             }
             (None, pw) => {
                 let pw = pw.unwrap_or_else(UnitQuaternion::identity);
-                // Between two sensed joints: its share of the rotation between them (when both
-                // have a value this frame; a stream's stale sensor leaves it at rest).
-                local[j] = between
+                // Between two sensed joints: its share of the change between them since the
+                // held pose (when both have a value this frame; a stream's stale sensor leaves
+                // it as held).
+                local[j] = plan
+                    .between
                     .get(j)
                     .copied()
                     .flatten()
                     .and_then(|b| {
                         let d = world(b.descendant)?;
-                        let r = frame_world[b.ancestor].inverse() * d;
-                        Some(UnitQuaternion::from_scaled_axis(
-                            r.scaled_axis() * b.fraction,
-                        ))
+                        let change = b.span_held_inverse * frame_world[b.ancestor].inverse() * d;
+                        Some(
+                            b.held
+                                * UnitQuaternion::from_scaled_axis(
+                                    change.scaled_axis() * b.fraction,
+                                ),
+                        )
                     })
-                    .unwrap_or_else(UnitQuaternion::identity);
+                    .unwrap_or(plan.held[j]);
                 pw * local[j]
             }
         };
@@ -213,7 +256,8 @@ mod tests {
         let a = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -1.2);
         world[hips] = Some(vec![h; 2]);
         world[arm] = Some(vec![a; 2]);
-        let local = to_local(&rig, &world, 2, Unsensed::Rest);
+        let rest = vec![UnitQuaternion::identity(); rig.len()];
+        let local = to_local(&rig, &world, 2, Unsensed::Rest, &rest);
         assert!(local[hips][1].angle_to(&h) < 1e-12);
         assert!(
             local[spine][0].angle() < 1e-12,
@@ -239,7 +283,8 @@ mod tests {
         let bend = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 60f64.to_radians());
         world[idx("Hips")] = Some(vec![h]);
         world[idx("Spine2")] = Some(vec![h * bend]);
-        let local = to_local(&rig, &world, 1, Unsensed::Interpolate);
+        let rest = vec![UnitQuaternion::identity(); rig.len()];
+        let local = to_local(&rig, &world, 1, Unsensed::Interpolate, &rest);
         // Two equal segments (Spine → Spine1 → Spine2, 0.12 m each): ¼, ½ and ¼ of the bend.
         for (n, share) in ["Spine", "Spine1", "Spine2"].iter().zip([0.25, 0.5, 0.25]) {
             let angle = local[idx(n)][0].angle().to_degrees();
@@ -249,13 +294,58 @@ mod tests {
         assert!(worlds[idx("Spine2")].angle_to(&(h * bend)) < 1e-12);
         assert!(local[idx("Neck")][0].angle() < 1e-12);
         let sensed: Vec<bool> = world.iter().map(Option::is_some).collect();
-        let p = plan(&rig, &sensed, Unsensed::Interpolate);
+        let p = plan(&rig, &sensed, Unsensed::Interpolate, &rest).between;
         assert_eq!(p[idx("Spine")].unwrap().descendant, idx("Spine2"));
         assert!(p[idx("Neck")].is_none() && p[idx("Spine2")].is_none());
         assert!(
-            plan(&rig, &sensed, Unsensed::Rest)
+            plan(&rig, &sensed, Unsensed::Rest, &rest)
+                .between
                 .iter()
                 .all(Option::is_none)
         );
+    }
+
+    /// The subject held a pose with the spine bent (Spine 20° and Spine1 10° about x, the neck
+    /// 15°): while the sensors read that pose every unsensed joint is exactly in it, under either
+    /// mode; a further 40° between the hips and the chest is shared ¼ ½ ¼ on top of it, and the
+    /// chest lands where its sensor says.
+    #[test]
+    fn unsensed_joints_start_from_the_pose_held_at_calibration() {
+        let rig = load_rig("mixamo").unwrap();
+        let idx = |n: &str| rig.joint_index(n).unwrap();
+        let x = |deg: f64| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), deg.to_radians());
+        let mut held = vec![UnitQuaternion::identity(); rig.len()];
+        held[idx("Spine")] = x(20.0);
+        held[idx("Spine1")] = x(10.0);
+        held[idx("Neck")] = x(15.0);
+        let held_world = rig.world_rotations(&held);
+        let h = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 0.4);
+        let chest_in_pose = h * held_world[idx("Spine2")];
+        let mut world = vec![None; rig.len()];
+        world[idx("Hips")] = Some(vec![h, h]);
+        // Frame 0: the pose; frame 1: the chest bent 40° further (about the pose's chest x axis).
+        world[idx("Spine2")] = Some(vec![chest_in_pose, h * x(70.0)]);
+        for mode in [Unsensed::Interpolate, Unsensed::Rest] {
+            let local = to_local(&rig, &world, 2, mode, &held);
+            for n in ["Spine", "Spine1", "Spine2", "Neck", "Head"] {
+                let expected = if n == "Spine2" {
+                    UnitQuaternion::identity()
+                } else {
+                    held[idx(n)]
+                };
+                assert!(local[idx(n)][0].angle_to(&expected) < 1e-12, "{mode:?} {n}");
+            }
+            assert!(local[idx("Neck")][1].angle_to(&held[idx("Neck")]) < 1e-12);
+        }
+        let local = to_local(&rig, &world, 2, Unsensed::Interpolate, &held);
+        for (n, bend) in [("Spine", 20.0 + 10.0), ("Spine1", 10.0 + 20.0), ("Spine2", 10.0)] {
+            let angle = local[idx(n)][1].angle().to_degrees();
+            assert!((angle - bend).abs() < 1e-9, "{n}: {angle}");
+        }
+        let worlds = rig.world_rotations(&local.iter().map(|t| t[1]).collect::<Vec<_>>());
+        assert!(worlds[idx("Spine2")].angle_to(&(h * x(70.0))) < 1e-12);
+        // Under `rest` the whole 40° is the chest's own.
+        let local = to_local(&rig, &world, 2, Unsensed::Rest, &held);
+        assert!((local[idx("Spine2")][1].angle().to_degrees() - 40.0).abs() < 1e-9);
     }
 }

@@ -64,7 +64,7 @@ pub struct PoseStream {
     frame_world: Vec<UnitQuaternion<f64>>,
     bone_world: Vec<Option<UnitQuaternion<f64>>>,
     /// How each unsensed joint turns ([`super::relative::plan`]).
-    between: Vec<Option<super::relative::Between>>,
+    plan: super::relative::Plan,
     pose: Pose,
 }
 
@@ -93,6 +93,7 @@ impl PoseStream {
                 })?;
             smoothers.push(smoother);
         }
+        let held = super::calibrate::held_pose(rig, window.as_ref());
         let calibration = CalibrationCore::new(rig, sensors.clone(), window, mapping_file)?;
         let n = sensors.len();
         let mut resampler = FrameResampler::new(options.fps, n);
@@ -123,7 +124,7 @@ impl PoseStream {
             values: vec![None; n],
             frame_world: vec![UnitQuaternion::identity(); joints],
             bone_world: vec![None; joints],
-            between: super::relative::plan(rig, &sensed, options.unsensed),
+            plan: super::relative::plan(rig, &sensed, options.unsensed, &held),
             pose: Pose {
                 frame: 0,
                 time_s: 0.0,
@@ -308,7 +309,7 @@ impl PoseStream {
             values,
             frame_world,
             bone_world,
-            between,
+            plan,
             pose,
             ..
         } = self;
@@ -320,7 +321,7 @@ impl PoseStream {
             frame_to_local(
                 rig,
                 |j| bone_world[j],
-                between,
+                plan,
                 frame_world,
                 &mut pose.local,
             );
