@@ -389,40 +389,7 @@ fn convert_unclean(
         None => None,
     };
     let subject = subject.as_ref();
-    let conversion = match &settings.mapping {
-        Some(path) => match load_mapping(path)? {
-            MappingFile::Quaternion(m) => {
-                quaternion_mode(input, &take, settings, subject, m, Some(path))?
-            }
-            MappingFile::Legacy(m) => legacy_mode(input, &take, settings, subject, &m, path)?,
-        },
-        None => {
-            // Matching sensors to bones by name needs only the names: the rig unscaled.
-            let rig = rig_for(settings, None, None)?;
-            let ids: Vec<&str> = take.sensors().iter().map(|s| s.id()).collect();
-            let mapping = Mapping::by_name(&rig, &ids).ok_or_else(|| ConvertError::NoMapping {
-                input: input.to_path_buf(),
-                rig: settings.rig.clone().unwrap_or_else(|| "mixamo".into()),
-                sensors: ids.join(", "),
-            })?;
-            quaternion_mode(input, &take, settings, subject, mapping, None)?
-        }
-    };
-    let conversion = if settings.in_place {
-        conversion
-            .in_place()
-            .map_err(|source| ConvertError::Pipeline {
-                input: input.to_path_buf(),
-                source: source.into(),
-            })?
-    } else {
-        conversion
-    };
-    let conversion = if settings.bind_frame {
-        conversion.with_bind_frame()
-    } else {
-        conversion
-    };
+    let conversion = conversion(input, &take, settings, subject)?;
     let source = SourceRecord {
         path: input.to_string_lossy().into_owned(),
         sha256,
@@ -435,6 +402,60 @@ fn convert_unclean(
     // outputs are built (which halves the peak memory of a long take).
     let facts = TakeFacts::of(take, &conversion.warnings);
     write_take(input, out_dir, settings, subject, source, facts, conversion)
+}
+
+/// The animation of one take, as `convert` would write it, without writing anything (for
+/// `imubake angles` and `compare` on a capture).
+pub fn animate(input: &Path, settings: &ConvertSettings) -> Result<Animation, ConvertError> {
+    let take = read_take(input, &settings.read)?;
+    let subject = match &settings.subject {
+        Some(path) => Some(Subject::load(path)?),
+        None => None,
+    };
+    Ok(conversion(input, &take, settings, subject.as_ref())?.animation)
+}
+
+/// The take converted by its mapping's mode, then `--in-place` and `--bind-frame`.
+fn conversion(
+    input: &Path,
+    take: &Take,
+    settings: &ConvertSettings,
+    subject: Option<&Subject>,
+) -> Result<Conversion, ConvertError> {
+    let conversion = match &settings.mapping {
+        Some(path) => match load_mapping(path)? {
+            MappingFile::Quaternion(m) => {
+                quaternion_mode(input, take, settings, subject, m, Some(path))?
+            }
+            MappingFile::Legacy(m) => legacy_mode(input, take, settings, subject, &m, path)?,
+        },
+        None => {
+            // Matching sensors to bones by name needs only the names: the rig unscaled.
+            let rig = rig_for(settings, None, None)?;
+            let ids: Vec<&str> = take.sensors().iter().map(|s| s.id()).collect();
+            let mapping = Mapping::by_name(&rig, &ids).ok_or_else(|| ConvertError::NoMapping {
+                input: input.to_path_buf(),
+                rig: settings.rig.clone().unwrap_or_else(|| "mixamo".into()),
+                sensors: ids.join(", "),
+            })?;
+            quaternion_mode(input, take, settings, subject, mapping, None)?
+        }
+    };
+    let conversion = if settings.in_place {
+        conversion
+            .in_place()
+            .map_err(|source| ConvertError::Pipeline {
+                input: input.to_path_buf(),
+                source: source.into(),
+            })?
+    } else {
+        conversion
+    };
+    Ok(if settings.bind_frame {
+        conversion.with_bind_frame()
+    } else {
+        conversion
+    })
 }
 
 /// A converted take, whichever mapping mode made it: the animation, what the writers need of it,

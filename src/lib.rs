@@ -5,6 +5,7 @@
 //! time and units are those of `conventions.md`: quaternions are Hamilton, written w, x, y, z;
 //! times are seconds on the take's clock (t = 0 at the earliest kept sample).
 
+pub mod analysis;
 pub mod anim;
 pub mod batch;
 pub mod bvh;

@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 use std::process::Command;
 
-const COMMANDS: [&str; 7] = [
+const COMMANDS: [&str; 9] = [
     "convert",
     "batch",
     "fuse",
@@ -14,6 +14,8 @@ const COMMANDS: [&str; 7] = [
     "watch",
     "inspect",
     "simulate",
+    "angles",
+    "compare",
 ];
 
 fn docs(rel: &str) -> String {

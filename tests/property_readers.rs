@@ -33,6 +33,26 @@ proptest! {
         let _ = imubake_csv::read_from(&bytes[..], Path::new("fuzz.csv"), &ReadOptions::default());
     }
 
+    /// `compare`'s angle tables: any text is a table or an error naming a line, never a panic.
+    #[test]
+    fn angle_table_reader_never_panics(
+        text in proptest::string::string_regex(r"(frame,)?time_s(,[a-z_]{0,6}){0,3}\n([-0-9.ena, ]{0,16}\n){0,6}").unwrap(),
+        bytes in proptest::collection::vec(any::<u8>(), 0..512),
+    ) {
+        for t in [text.as_str(), &String::from_utf8_lossy(&bytes)] {
+            match imubake::analysis::AngleTable::parse_csv(t, Path::new("fuzz.csv")) {
+                Ok(table) => {
+                    prop_assert!(table.rows() > 0);
+                    prop_assert!(table.time_s().windows(2).all(|w| w[0] < w[1]));
+                    for n in table.names() {
+                        prop_assert_eq!(table.column(n).unwrap().len(), table.rows());
+                    }
+                }
+                Err(e) => prop_assert!(e.to_string().starts_with("fuzz.csv: line "), "{}", e),
+            }
+        }
+    }
+
     /// Arbitrary edits of valid logs: every outcome is a take or an error, and a take's tracks
     /// keep their invariants (strictly increasing finite times starting at 0, unit quaternions).
     #[test]

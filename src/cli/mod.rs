@@ -1,7 +1,9 @@
 //! Command-line interface: one module per subcommand.
 
+mod angles;
 mod batch;
 mod calibrate_sensors;
+mod compare;
 mod convert;
 mod fuse;
 mod inspect;
@@ -45,6 +47,11 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     /// Convert an inbox's backlog, then each take as it arrives or changes.
     Watch(watch::WatchArgs),
+    /// Joint angles per frame (paper 000): between segments, and flexion, abduction, rotation.
+    Angles(angles::AnglesArgs),
+    /// RMSE and Pearson's r per joint angle of two takes after synchronising them (paper 000's
+    /// Table 1).
+    Compare(compare::CompareArgs),
 }
 
 /// Flags shared by every command that reads captures.
@@ -123,5 +130,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Inspect(args) => inspect::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Watch(args) => watch::run(args),
+        Command::Angles(args) => angles::run(args),
+        Command::Compare(args) => compare::run(args),
     }
 }

@@ -338,7 +338,11 @@ mod tests {
             assert!(local[idx("Neck")][1].angle_to(&held[idx("Neck")]) < 1e-12);
         }
         let local = to_local(&rig, &world, 2, Unsensed::Interpolate, &held);
-        for (n, bend) in [("Spine", 20.0 + 10.0), ("Spine1", 10.0 + 20.0), ("Spine2", 10.0)] {
+        for (n, bend) in [
+            ("Spine", 20.0 + 10.0),
+            ("Spine1", 10.0 + 20.0),
+            ("Spine2", 10.0),
+        ] {
             let angle = local[idx(n)][1].angle().to_degrees();
             assert!((angle - bend).abs() < 1e-9, "{n}: {angle}");
         }

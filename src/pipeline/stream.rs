@@ -318,13 +318,7 @@ impl PoseStream {
             for (s, v) in sensors.iter().zip(values) {
                 bone_world[s.bone] = *v;
             }
-            frame_to_local(
-                rig,
-                |j| bone_world[j],
-                plan,
-                frame_world,
-                &mut pose.local,
-            );
+            frame_to_local(rig, |j| bone_world[j], plan, frame_world, &mut pose.local);
             pose.frame = n;
             pose.time_s = fps.frame_time_of(n);
             let r = root.push(&pose.local);

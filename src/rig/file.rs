@@ -38,6 +38,9 @@ pub struct RigFile {
     pub joints: Vec<JointEntry>,
     #[serde(default)]
     pub poses: BTreeMap<String, BTreeMap<String, RotationEntry>>,
+    /// Anatomical landmarks → joints, for `imubake angles` on rigs its table does not know.
+    #[serde(default)]
+    pub segments: BTreeMap<String, String>,
 }
 
 fn default_order() -> EulerOrder {
@@ -152,6 +155,9 @@ impl RigFile {
                 list.push((joint.clone(), q));
             }
             rig.set_pose(pose, &list)?;
+        }
+        for (landmark, joint) in &self.segments {
+            rig.set_segment(landmark, joint)?;
         }
         Ok(rig)
     }

@@ -77,6 +77,8 @@ pub enum RigError {
     NonFinite(String),
     #[error("pose `{pose}`: unknown joint `{joint}`")]
     PoseJoint { pose: String, joint: String },
+    #[error("segments: `{landmark}` names `{joint}`, which is not a joint of the rig")]
+    SegmentJoint { landmark: String, joint: String },
 }
 
 /// A validated joint hierarchy: joint 0 is the root, every parent comes before its children,
@@ -89,6 +91,9 @@ pub struct Rig {
     poses: BTreeMap<String, Pose>,
     /// Local rotations per frame of a BVH rig's motion: the poses `frame:N`.
     frame_poses: Vec<Vec<UnitQuaternion<f64>>>,
+    /// Anatomical landmarks named by the rig file (`segments:`, landmark → joint), for rigs the
+    /// analysis's own table does not know.
+    segments: BTreeMap<String, usize>,
 }
 
 /// The prefix Mixamo puts before its bone names; names match with or without it.
@@ -144,6 +149,7 @@ impl Rig {
             joints,
             poses: BTreeMap::new(),
             frame_poses: Vec::new(),
+            segments: BTreeMap::new(),
         })
     }
 
@@ -206,6 +212,24 @@ impl Rig {
 
     /// Makes the frames of a BVH rig's motion available as poses `frame:N`; each entry holds
     /// every joint's local rotation.
+    /// Names the joint of an anatomical landmark (`left_upper_arm: LeftArm`, ...; the landmarks
+    /// are those of `imubake angles`): the rig file's `segments:`.
+    pub fn set_segment(&mut self, landmark: &str, joint: &str) -> Result<(), RigError> {
+        let j = self
+            .joint_index(joint)
+            .ok_or_else(|| RigError::SegmentJoint {
+                landmark: landmark.to_string(),
+                joint: joint.to_string(),
+            })?;
+        self.segments.insert(landmark.to_string(), j);
+        Ok(())
+    }
+
+    /// The landmarks the rig file names, landmark → joint index.
+    pub fn segments(&self) -> &BTreeMap<String, usize> {
+        &self.segments
+    }
+
     pub fn set_frame_poses(&mut self, frames: Vec<Vec<UnitQuaternion<f64>>>) {
         self.frame_poses = frames
             .into_iter()

@@ -1,0 +1,517 @@
+//! The anatomical segments of a rig: which joint is the pelvis, the thorax, each side's upper arm,
+//! forearm, hand, thigh, shank and foot, and where the neck, the hands' and the feet's ends are;
+//! and each segment's anatomical frame at rest.
+//!
+//! # Landmarks
+//! A rig file's `segments:` names them (`left_upper_arm: LeftArm`, ...); otherwise the first of
+//! these joint names the rig has (any `namespace:` prefix ignored; `S` is `Left` or `Right`, and
+//! sou12's nodes are listed too: `N2_*`/`N4_*` left arm/leg, `N1_*`/`N3_*` right):
+//!
+//! | landmark | names |
+//! |---|---|
+//! | `upper_arm` | `SArm`, `SUpArm`, `SUpperArm`, `SShoulder` (mocapbank style), `N2_0`/`N1_0` |
+//! | `forearm` | `SForeArm`, `SLowArm`, `SLowerArm`, `SElbow`, `N2_1`/`N1_1` |
+//! | `hand` | `SHand`, `SWrist` |
+//! | `hand_end` (a point) | `SHandMiddle1`, `SFingerBase`, `SHand_End`, `SHandEnd` |
+//! | `thigh` | `SUpLeg`, `SThigh`, `SUpperLeg`, `SHip`, `N4_0`/`N3_0` |
+//! | `shank` | `SLeg`, `SKnee`, `SShin`, `SLowerLeg`, `SLowLeg`, `N4_1`/`N3_1` |
+//! | `foot` | `SFoot`, `SAnkle` |
+//! | `toe` (a point) | `SToeBase`, `SToe`, `SToes` |
+//! | `neck` (a point) | `Neck`, `N5_0`, `Head` |
+//! | `pelvis` | the lowest common ancestor of the two thighs |
+//! | `thorax` | the lowest common ancestor of the two upper arms |
+//!
+//! Each limb landmark must lie below the one before it (forearm below upper arm, ...), else it
+//! is missing. A point is its joint's position, unless that coincides with the segment's own joint
+//! at rest (CMU's `LeftFingerBase` sits on `LeftHand`): then the joint's first child, again, or at
+//! the end of the chain its End Site. Without a `hand_end` or `toe` joint, the walk starts at the
+//! hand or foot itself. Without a hand (sou12) the wrist point is the forearm's End Site, the
+//! ankle the shank's.
+//!
+//! # Frames at rest
+//! Rest rotations are identity (the rig convention), so a segment's anatomical frame at rest is a
+//! rotation `F_rest` (columns X anterior, Y superior/along the segment towards its proximal end,
+//! Z to the right; the ISB's axes) and at any frame `F = q_world_joint ⊗ F_rest`.
+//! - Body: `up` = the rig's +Y; `right` = right thigh − left thigh (else upper arms) at rest,
+//!   perpendicular to up; `forward = up × right`.
+//! - Pelvis, thorax, foot: the body frame (the rest pose's foot is neutral, 0°).
+//! - Thigh, shank, upper arm: `Y = (proximal − distal point) / |…|`, `X` = forward made
+//!   perpendicular to `Y`, `Z = X × Y`.
+//! - Forearm, hand: the same with the palm's direction for forward: forward if the rest upper arm
+//!   hangs within 30° of straight down (anatomical position, palms forward), else down (a T- or
+//!   A-pose, palms down). So a palms-down T-pose reads as a pronated forearm (elbow rotation
+//!   ≈ 90°), which it anatomically is.
+
+use super::AnalysisError;
+use crate::rig::Rig;
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+
+/// Left or right; `Left` is index 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    Left,
+    Right,
+}
+
+impl Side {
+    pub const BOTH: [Side; 2] = [Side::Left, Side::Right];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Left => "left",
+            Side::Right => "right",
+        }
+    }
+
+    fn prefix(self) -> &'static str {
+        match self {
+            Side::Left => "Left",
+            Side::Right => "Right",
+        }
+    }
+
+    fn sou12(self, arm: bool) -> &'static str {
+        match (self, arm) {
+            (Side::Left, true) => "N2",
+            (Side::Left, false) => "N4",
+            (Side::Right, true) => "N1",
+            (Side::Right, false) => "N3",
+        }
+    }
+}
+
+/// A point of the body: a joint's position, or its End Site's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Point {
+    Joint(usize),
+    EndSite(usize),
+}
+
+impl Point {
+    /// Its position, from every joint's world position and rotation.
+    pub fn position(
+        self,
+        rig: &Rig,
+        positions: &[Vector3<f64>],
+        rotations: &[UnitQuaternion<f64>],
+    ) -> Vector3<f64> {
+        match self {
+            Point::Joint(j) => positions[j],
+            Point::EndSite(j) => {
+                positions[j] + rotations[j] * rig.joints()[j].end_site.unwrap_or_default()
+            }
+        }
+    }
+}
+
+/// One side's limbs: joints (indices) and points.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Limbs {
+    pub upper_arm: Option<usize>,
+    pub forearm: Option<usize>,
+    pub hand: Option<usize>,
+    /// Where the forearm ends: the hand joint, or the forearm's End Site.
+    pub wrist: Option<Point>,
+    pub hand_end: Option<Point>,
+    pub thigh: Option<usize>,
+    pub shank: Option<usize>,
+    pub foot: Option<usize>,
+    /// Where the shank ends: the foot joint, or the shank's End Site.
+    pub ankle: Option<Point>,
+    pub toe: Option<Point>,
+}
+
+/// A rig's anatomical segments and their frames at rest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Segments {
+    pub pelvis: Option<usize>,
+    pub thorax: Option<usize>,
+    pub neck: Option<Point>,
+    /// `[left, right]`.
+    pub sides: [Limbs; 2],
+    /// The body frame at rest (columns forward, up, right).
+    pub body: Matrix3<f64>,
+    /// `[left, right]`: the palm's direction at rest (forward or down).
+    pub palm: [Vector3<f64>; 2],
+}
+
+/// The landmarks a rig file's `segments:` may name.
+pub fn landmark_names() -> Vec<String> {
+    let mut names = vec!["pelvis".to_string(), "thorax".into(), "neck".into()];
+    for side in Side::BOTH {
+        for l in [
+            "upper_arm",
+            "forearm",
+            "hand",
+            "hand_end",
+            "thigh",
+            "shank",
+            "foot",
+            "toe",
+        ] {
+            names.push(format!("{}_{l}", side.name()));
+        }
+    }
+    names
+}
+
+fn bare(name: &str) -> &str {
+    name.rsplit(':').next().unwrap_or(name)
+}
+
+fn is_below(rig: &Rig, joint: usize, ancestor: usize) -> bool {
+    let mut j = rig.joints()[joint].parent;
+    while let Some(p) = j {
+        if p == ancestor {
+            return true;
+        }
+        j = rig.joints()[p].parent;
+    }
+    false
+}
+
+fn ancestors(rig: &Rig, joint: usize) -> Vec<usize> {
+    let mut out = vec![joint];
+    let mut j = rig.joints()[joint].parent;
+    while let Some(p) = j {
+        out.push(p);
+        j = rig.joints()[p].parent;
+    }
+    out
+}
+
+fn common_ancestor(rig: &Rig, a: usize, b: usize) -> usize {
+    let up_a = ancestors(rig, a);
+    ancestors(rig, b)
+        .into_iter()
+        .find(|j| up_a.contains(j))
+        .unwrap_or(0)
+}
+
+struct Finder<'a> {
+    rig: &'a Rig,
+    rest: Vec<Vector3<f64>>,
+}
+
+impl Finder<'_> {
+    /// The landmark's joint: the rig file's, else the first of `names` the rig has.
+    fn joint(&self, landmark: &str, names: &[String]) -> Option<usize> {
+        if let Some(&j) = self.rig.segments().get(landmark) {
+            return Some(j);
+        }
+        names.iter().find_map(|n| {
+            self.rig
+                .joints()
+                .iter()
+                .position(|j| bare(&j.name) == n.as_str())
+        })
+    }
+
+    /// A limb landmark that must lie below `above`: missing when it does not (an error when the
+    /// rig file named it).
+    fn below(
+        &self,
+        landmark: &str,
+        names: &[String],
+        above: Option<(usize, &str)>,
+    ) -> Result<Option<usize>, AnalysisError> {
+        let Some(j) = self.joint(landmark, names) else {
+            return Ok(None);
+        };
+        match above {
+            None => Ok(Some(j)),
+            Some((a, _)) if is_below(self.rig, j, a) => Ok(Some(j)),
+            Some((a, above_name)) if self.rig.segments().contains_key(landmark) => {
+                Err(AnalysisError::NotBelow {
+                    rig: self.rig.name().to_string(),
+                    landmark: landmark.to_string(),
+                    joint: self.rig.joints()[j].name.clone(),
+                    above: above_name.to_string(),
+                    above_joint: self.rig.joints()[a].name.clone(),
+                })
+            }
+            Some(_) => Ok(None),
+        }
+    }
+
+    /// The end point of the segment of joint `of`: `start` (a named joint below it, else `of`
+    /// itself), walked down first children while it sits on `of`, ending at an End Site.
+    fn end_point(&self, of: usize, start: Option<usize>) -> Option<Point> {
+        let eps = 1e-9 * (1.0 + self.rest[of].norm());
+        let mut j = start.filter(|&s| is_below(self.rig, s, of)).unwrap_or(of);
+        loop {
+            if j != of && (self.rest[j] - self.rest[of]).norm() > eps {
+                return Some(Point::Joint(j));
+            }
+            match self.rig.children(j).next() {
+                Some(c) => j = c,
+                None => {
+                    let e = self.rig.joints()[j].end_site?;
+                    let p = self.rest[j] + e;
+                    return ((p - self.rest[of]).norm() > eps).then_some(Point::EndSite(j));
+                }
+            }
+        }
+    }
+}
+
+fn names(side: Side, stems: &[&str], sou12: Option<&str>) -> Vec<String> {
+    let mut out: Vec<String> = stems
+        .iter()
+        .map(|s| format!("{}{s}", side.prefix()))
+        .collect();
+    out.extend(sou12.map(String::from));
+    out
+}
+
+fn limbs(f: &Finder, side: Side) -> Result<Limbs, AnalysisError> {
+    let s = side.name();
+    let key = |l: &str| format!("{s}_{l}");
+    let arm = side.sou12(true);
+    let leg = side.sou12(false);
+    let upper_arm = f.below(
+        &key("upper_arm"),
+        &names(
+            side,
+            &["Arm", "UpArm", "UpperArm", "Shoulder"],
+            Some(&format!("{arm}_0")),
+        ),
+        None,
+    )?;
+    let forearm = match upper_arm {
+        Some(u) => f.below(
+            &key("forearm"),
+            &names(
+                side,
+                &["ForeArm", "LowArm", "LowerArm", "Elbow"],
+                Some(&format!("{arm}_1")),
+            ),
+            Some((u, "upper_arm")),
+        )?,
+        None => None,
+    };
+    let hand = match forearm {
+        Some(fa) => f.below(
+            &key("hand"),
+            &names(side, &["Hand", "Wrist"], None),
+            Some((fa, "forearm")),
+        )?,
+        None => None,
+    };
+    let wrist = match (hand, forearm) {
+        (Some(h), _) => Some(Point::Joint(h)),
+        (None, Some(fa)) => f.rig.joints()[fa].end_site.map(|_| Point::EndSite(fa)),
+        _ => None,
+    };
+    let hand_end = hand.and_then(|h| {
+        let start = f.joint(
+            &key("hand_end"),
+            &names(
+                side,
+                &["HandMiddle1", "FingerBase", "Hand_End", "HandEnd"],
+                None,
+            ),
+        );
+        f.end_point(h, start)
+    });
+    let thigh = f.below(
+        &key("thigh"),
+        &names(
+            side,
+            &["UpLeg", "Thigh", "UpperLeg", "Hip"],
+            Some(&format!("{leg}_0")),
+        ),
+        None,
+    )?;
+    let shank = match thigh {
+        Some(t) => f.below(
+            &key("shank"),
+            &names(
+                side,
+                &["Leg", "Knee", "Shin", "LowerLeg", "LowLeg"],
+                Some(&format!("{leg}_1")),
+            ),
+            Some((t, "thigh")),
+        )?,
+        None => None,
+    };
+    let foot = match shank {
+        Some(sh) => f.below(
+            &key("foot"),
+            &names(side, &["Foot", "Ankle"], None),
+            Some((sh, "shank")),
+        )?,
+        None => None,
+    };
+    let ankle = match (foot, shank) {
+        (Some(ft), _) => Some(Point::Joint(ft)),
+        (None, Some(sh)) => f.rig.joints()[sh].end_site.map(|_| Point::EndSite(sh)),
+        _ => None,
+    };
+    let toe = foot.and_then(|ft| {
+        let start = f.joint(&key("toe"), &names(side, &["ToeBase", "Toe", "Toes"], None));
+        f.end_point(ft, start)
+    });
+    Ok(Limbs {
+        upper_arm,
+        forearm,
+        hand,
+        wrist,
+        hand_end,
+        thigh,
+        shank,
+        foot,
+        ankle,
+        toe,
+    })
+}
+
+impl Segments {
+    /// The rig's segments (see the module's docs).
+    pub fn of(rig: &Rig) -> Result<Segments, AnalysisError> {
+        let known = landmark_names();
+        if let Some(bad) = rig.segments().keys().find(|k| !known.contains(k)) {
+            return Err(AnalysisError::UnknownLandmark {
+                rig: rig.name().to_string(),
+                landmark: bad.clone(),
+                known: known.join(", "),
+            });
+        }
+        let f = Finder {
+            rig,
+            rest: rig.rest_positions(),
+        };
+        let sides = [limbs(&f, Side::Left)?, limbs(&f, Side::Right)?];
+        let [l, r] = &sides;
+        let pair = |a: Option<usize>, b: Option<usize>| a.zip(b);
+        let pelvis = f
+            .joint("pelvis", &[])
+            .or_else(|| pair(l.thigh, r.thigh).map(|(a, b)| common_ancestor(rig, a, b)));
+        let thorax = f
+            .joint("thorax", &[])
+            .or_else(|| pair(l.upper_arm, r.upper_arm).map(|(a, b)| common_ancestor(rig, a, b)));
+        if pelvis.is_none() && thorax.is_none() {
+            return Err(AnalysisError::NoSegments {
+                rig: rig.name().to_string(),
+            });
+        }
+        let neck = f
+            .joint("neck", &["Neck".into(), "N5_0".into(), "Head".into()])
+            .map(Point::Joint);
+        let (left, right) = pair(l.thigh, r.thigh)
+            .or_else(|| pair(l.upper_arm, r.upper_arm))
+            .ok_or_else(|| AnalysisError::NoSides {
+                rig: rig.name().to_string(),
+            })?;
+        let up = Vector3::y();
+        let across = f.rest[right] - f.rest[left];
+        let right_dir = across - up * up.dot(&across);
+        if right_dir.norm() < 1e-9 * (1.0 + across.norm()) {
+            return Err(AnalysisError::NoSides {
+                rig: rig.name().to_string(),
+            });
+        }
+        let right_dir = right_dir.normalize();
+        let forward = up.cross(&right_dir);
+        let body = Matrix3::from_columns(&[forward, up, right_dir]);
+        let palm = [0, 1].map(|i| {
+            let hanging = match (sides[i].upper_arm, sides[i].forearm) {
+                (Some(u), Some(fa)) => {
+                    let d = (f.rest[fa] - f.rest[u]).normalize();
+                    d.dot(&-up) >= 30f64.to_radians().cos()
+                }
+                _ => true,
+            };
+            if hanging { forward } else { -up }
+        });
+        Ok(Segments {
+            pelvis,
+            thorax,
+            neck,
+            sides,
+            body,
+            palm,
+        })
+    }
+
+    /// The anatomical frame at rest of a limb segment running from `proximal` to `distal`
+    /// (rest positions), with `reference` for anterior: `Y` along the segment towards its
+    /// proximal end, `X` the reference made perpendicular to it, `Z = X × Y`. `None` for a
+    /// segment of no length or one along the reference.
+    pub fn limb_frame(
+        proximal: Vector3<f64>,
+        distal: Vector3<f64>,
+        reference: Vector3<f64>,
+    ) -> Option<Rotation3<f64>> {
+        let y = (proximal - distal).try_normalize(1e-12)?;
+        let x = (reference - y * y.dot(&reference)).try_normalize(1e-6)?;
+        let z = x.cross(&y);
+        Some(Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[
+            x, y, z,
+        ])))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rig::load_rig;
+
+    #[test]
+    fn mixamo_and_sou12_name_their_segments() {
+        let rig = load_rig("mixamo").unwrap();
+        let s = Segments::of(&rig).unwrap();
+        let name = |j: Option<usize>| rig.joints()[j.unwrap()].name.as_str();
+        assert_eq!(name(s.pelvis), "Hips");
+        assert_eq!(name(s.thorax), "Spine2");
+        assert_eq!(name(s.sides[0].upper_arm), "LeftArm");
+        assert_eq!(name(s.sides[1].shank), "RightLeg");
+        assert_eq!(
+            s.sides[0].hand_end,
+            Some(Point::EndSite(rig.joint_index("LeftHand").unwrap()))
+        );
+        // Mixamo faces +Z with +X on the character's left: right is −X, forward +Z.
+        assert!((s.body.column(0) - Vector3::z()).norm() < 1e-12);
+        assert!((s.body.column(2) + Vector3::x()).norm() < 1e-12);
+        // A T-pose: palms down.
+        assert_eq!(s.palm[0], -Vector3::y());
+
+        let rig = load_rig("sou12").unwrap();
+        let s = Segments::of(&rig).unwrap();
+        let name = |j: Option<usize>| rig.joints()[j.unwrap()].name.as_str();
+        assert_eq!(name(s.pelvis), "N0_0");
+        assert_eq!(name(s.thorax), "N0_1");
+        assert_eq!(name(s.sides[0].upper_arm), "N2_0");
+        assert_eq!(name(s.sides[1].thigh), "N3_0");
+        assert_eq!(s.sides[0].hand, None);
+        assert_eq!(
+            s.sides[0].wrist,
+            Some(Point::EndSite(rig.joint_index("N2_1").unwrap()))
+        );
+        assert_eq!(
+            s.sides[1].ankle,
+            Some(Point::EndSite(rig.joint_index("N3_1").unwrap()))
+        );
+    }
+
+    #[test]
+    fn a_rig_file_names_landmarks_and_bad_ones_are_errors() {
+        let text = "name: odd\njoints:\n  - {name: root, offset: [0, 1, 0]}\n  - {name: a, parent: root, offset: [0.1, 0, 0]}\n  - {name: b, parent: a, offset: [0, -0.4, 0]}\n  - {name: c, parent: root, offset: [-0.1, 0, 0]}\n  - {name: d, parent: c, offset: [0, -0.4, 0], end_site: [0, -0.4, 0]}\nsegments: {left_thigh: a, left_shank: b, right_thigh: c, right_shank: d}\n";
+        let rig = crate::rig::file::parse_rig(text, std::path::Path::new("odd.yaml")).unwrap();
+        let s = Segments::of(&rig).unwrap();
+        assert_eq!(s.pelvis, Some(0));
+        assert_eq!(s.sides[1].ankle, Some(Point::EndSite(4)));
+        assert_eq!(s.sides[0].ankle, None, "b has no End Site and no foot");
+        let bad = text.replace("right_shank: d", "right_shank: a");
+        let rig = crate::rig::file::parse_rig(&bad, std::path::Path::new("odd.yaml")).unwrap();
+        let e = Segments::of(&rig).unwrap_err().to_string();
+        assert!(
+            e.contains("`right_shank` (`a`) is not below `thigh` (`c`)"),
+            "{e}"
+        );
+        let bad = text.replace("left_thigh", "left_thighs");
+        let rig = crate::rig::file::parse_rig(&bad, std::path::Path::new("odd.yaml")).unwrap();
+        let e = Segments::of(&rig).unwrap_err().to_string();
+        assert!(e.contains("`left_thighs`, which is no landmark"), "{e}");
+    }
+}
