@@ -30,7 +30,7 @@ install_venv() { # name requirements-file
 }
 install_venv venv scripts/test-requirements.txt
 install_venv venv-blender42 scripts/test-requirements-blender42.txt
-"$CACHE/venv/bin/python" -c 'import bpy, numpy, scipy, h5py, vqf, ahrs; print("venv: Blender", bpy.app.version_string, "numpy", numpy.__version__, "scipy", scipy.__version__)'
+"$CACHE/venv/bin/python" -c 'import bpy, numpy, scipy, h5py, vqf, ahrs, pythonosc; print("venv: Blender", bpy.app.version_string, "numpy", numpy.__version__, "scipy", scipy.__version__)'
 "$CACHE/venv-blender42/bin/python" -c 'import bpy; print("venv-blender42: Blender", bpy.app.version_string)'
 
 # Khronos glTF-Validator (npm package; run through scripts/gltf_validate.mjs).

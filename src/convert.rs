@@ -125,6 +125,13 @@ pub enum ConvertError {
     /// Writing an output (or the sidecar) failed: the take's outputs are removed.
     #[error(transparent)]
     Output(#[from] OutputError),
+    #[error(
+        "{}: paper 002's Euler-channel mappings convert whole takes only; a stream needs a quaternion mapping (mappings/paper002_sou12.json for SOU nodes)",
+        .0.display()
+    )]
+    LegacyStream(PathBuf),
+    #[error("a stream needs --mapping (its sensors are not known in advance)")]
+    NoStreamMapping,
 }
 
 impl crate::diagnostic::Diagnostic for ConvertError {
@@ -145,6 +152,8 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             }
             ConvertError::Output(OutputError::Write { path, .. })
             | ConvertError::Output(OutputError::Gltf { path, .. }) => Some(path),
+            ConvertError::LegacyStream(path) => Some(path),
+            ConvertError::NoStreamMapping => None,
         }
     }
 
@@ -168,6 +177,7 @@ impl crate::diagnostic::Diagnostic for ConvertError {
                 Some("a subject file holds `height_m` and/or `segments: {bone: metres}`")
             }
             ConvertError::Output(_) => Some("check the output folder: free space and permissions"),
+            ConvertError::LegacyStream(_) | ConvertError::NoStreamMapping => None,
         }
     }
 }
@@ -413,6 +423,33 @@ pub fn animate(input: &Path, settings: &ConvertSettings) -> Result<Animation, Co
         None => None,
     };
     Ok(conversion(input, &take, settings, subject.as_ref())?.animation)
+}
+
+/// What a stream of `settings` runs on: the rig (scaled to the subject), the quaternion mapping
+/// and its path, and the pipeline options (the sensor calibration loaded).
+pub fn stream_setup(
+    settings: &ConvertSettings,
+) -> Result<(Rig, Mapping, PathBuf, pipeline::PipelineOptions), ConvertError> {
+    let path = settings
+        .mapping
+        .clone()
+        .ok_or(ConvertError::NoStreamMapping)?;
+    let mapping = match load_mapping(&path)? {
+        MappingFile::Quaternion(m) => m,
+        MappingFile::Legacy(_) => return Err(ConvertError::LegacyStream(path)),
+    };
+    let subject = match &settings.subject {
+        Some(p) => Some(Subject::load(p)?),
+        None => None,
+    };
+    let rig = rig_for(settings, mapping.rig.as_deref(), subject.as_ref())?;
+    let mut options = settings.pipeline.clone();
+    if let Some(p) = &settings.sensor_calibration {
+        options.sensor_calibration = Some(std::sync::Arc::new(
+            crate::intrinsics::SensorCalibration::load(p)?,
+        ));
+    }
+    Ok((rig, mapping, path, options))
 }
 
 /// The take converted by its mapping's mode, then `--in-place` and `--bind-frame`.

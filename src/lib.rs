@@ -17,6 +17,7 @@ pub mod fusion;
 pub mod inspect;
 pub mod intrinsics;
 pub mod ledger;
+pub mod live;
 pub mod mapping;
 pub mod pipeline;
 pub mod read;

@@ -17,7 +17,7 @@ const LAYERS: [&[&str]; 11] = [
     &["write"],
     &["convert", "simulate"],
     &["config", "ledger"],
-    &["batch"],
+    &["batch", "live"],
     &["watch"],
 ];
 

@@ -138,6 +138,15 @@ impl SettingsArgs {
         Ok(imubake::config::settings(self.layer(), config)?)
     }
 
+    /// Whether a frame rate was given, by flag or in the config file.
+    pub fn fps_given(&self) -> anyhow::Result<bool> {
+        Ok(self.fps.is_some()
+            || match self.config() {
+                Some(path) => Config::load(path)?.fps.is_some(),
+                None => false,
+            })
+    }
+
     /// These flags as one settings layer.
     fn layer(&self) -> Config {
         Config {

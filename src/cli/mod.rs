@@ -7,6 +7,7 @@ mod compare;
 mod convert;
 mod fuse;
 mod inspect;
+mod live;
 mod simulate;
 mod watch;
 
@@ -47,6 +48,8 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     /// Convert an inbox's backlog, then each take as it arrives or changes.
     Watch(watch::WatchArgs),
+    /// Sensors to a moving character in real time: serial, UDP, TCP in; VMC out; recorded.
+    Live(live::LiveArgs),
     /// Joint angles per frame (paper 000): between segments, and flexion, abduction, rotation.
     Angles(angles::AnglesArgs),
     /// RMSE and Pearson's r per joint angle of two takes after synchronising them (paper 000's
@@ -130,6 +133,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Inspect(args) => inspect::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::Watch(args) => watch::run(args),
+        Command::Live(args) => live::run(args),
         Command::Angles(args) => angles::run(args),
         Command::Compare(args) => compare::run(args),
     }

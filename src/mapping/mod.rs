@@ -80,6 +80,22 @@ pub struct SecondPose {
 }
 
 impl CalibrationWindow {
+    /// The same poses held again from `start_s` (a recalibration): every start moves by the
+    /// same amount.
+    pub fn starting_at(&self, start_s: f64) -> CalibrationWindow {
+        let shift = start_s - self.start_s;
+        CalibrationWindow {
+            pose: self.pose.clone(),
+            start_s,
+            duration_s: self.duration_s,
+            second: self.second.as_ref().map(|p| SecondPose {
+                pose: p.pose.clone(),
+                start_s: p.start_s + shift,
+                duration_s: p.duration_s,
+            }),
+        }
+    }
+
     /// Where the last pose ends, seconds.
     pub fn end_s(&self) -> f64 {
         match &self.second {

@@ -18,6 +18,11 @@
 //! the take's samples, so a stream and a file of the same rows give the same frames.
 //!
 //! Once warmed up, a frame costs no allocation: the pose handed out is reused.
+//!
+//! A recalibration ([`PoseStream::recalibrate`]) holds the mapping's pose again from a time `t`:
+//! samples before the new window's end go on with the calibration in force (frames keep coming),
+//! those from its end wait until the new calibration is solved and then go on with it — by their
+//! times, not their order of arrival, so a recording converted later gives the same frames.
 
 use super::calibrate::{Calibration, CalibrationCore};
 use super::relative::frame_to_local;
@@ -66,6 +71,16 @@ pub struct PoseStream {
     /// How each unsensed joint turns ([`super::relative::plan`]).
     plan: super::relative::Plan,
     pose: Pose,
+    /// A recalibration under way.
+    recalibration: Option<Recalibration>,
+}
+
+/// A calibration being solved again while the one in force goes on.
+struct Recalibration {
+    core: CalibrationCore,
+    /// The new window's end: samples from here on wait for the new calibration.
+    end_s: f64,
+    waiting: Vec<(usize, f64, UnitQuaternion<f64>)>,
 }
 
 impl PoseStream {
@@ -133,6 +148,7 @@ impl PoseStream {
                 contact: [false; 2],
                 airborne: false,
             },
+            recalibration: None,
         })
     }
 
@@ -234,6 +250,9 @@ impl PoseStream {
             }
             return;
         }
+        if self.recalibrating(sensor, t, q, on_pose) {
+            return;
+        }
         self.feed(sensor, t, q);
         self.emit(None, on_pose);
     }
@@ -245,6 +264,25 @@ impl PoseStream {
             self.calibration
                 .finish(&self.mapping_file, &mut self.warnings)?;
             self.replay(on_pose);
+        }
+        if let Some(r) = &mut self.recalibration {
+            // Solved with what there is; a window the stream ended before keeps the calibration
+            // in force.
+            if r.core
+                .finish(&self.mapping_file, &mut self.warnings)
+                .is_ok()
+            {
+                self.take_over();
+            } else {
+                let r = self.recalibration.take().expect("under way");
+                self.warnings.push(format!(
+                    "the stream ended before the recalibration's pose was held ({} s on); the calibration before it stays",
+                    r.end_s
+                ));
+                for (sensor, t, q) in r.waiting {
+                    self.feed(sensor, t, q);
+                }
+            }
         }
         for (i, smoother) in self.smoothers.iter_mut().enumerate() {
             self.smoothed.clear();
@@ -285,6 +323,75 @@ impl PoseStream {
     /// The root mode the stream runs (`auto` resolved).
     pub fn root_mode(&self) -> super::root::RootMode {
         self.root.mode()
+    }
+
+    /// Holds the mapping's calibration pose(s) again from `t_s` (stream time): the seconds to hold
+    /// them. Until the new window has passed, frames go on with the calibration in force.
+    /// Refused when the mapping has no calibration window, or the first calibration is not
+    /// done yet.
+    pub fn recalibrate(&mut self, t_s: f64) -> Result<f64, String> {
+        let Some(window) = self.calibration.window() else {
+            return Err("the mapping has no calibration window (every mount is fixed)".into());
+        };
+        if self.calibration.result().is_none() {
+            return Err("the first calibration is still under way".into());
+        }
+        let window = window.starting_at(t_s);
+        let end_s = window.end_s();
+        let core = CalibrationCore::new(
+            &self.rig,
+            self.sensors.clone(),
+            Some(window),
+            &self.mapping_file,
+        )
+        .map_err(|e| e.to_string())?;
+        // Samples already in the new window's stretch (a sensor ahead of the others) cannot be
+        // given to it any more; the window is measured from what comes.
+        self.recalibration = Some(Recalibration {
+            core,
+            end_s,
+            waiting: Vec::new(),
+        });
+        Ok(end_s - t_s)
+    }
+
+    /// A sample while a recalibration is under way (`false` when none is): one before the new
+    /// window's end goes on with the calibration in force, one after waits; once the new
+    /// calibration is solved, it takes over and the waiting samples go on with it.
+    fn recalibrating(
+        &mut self,
+        sensor: usize,
+        t: f64,
+        q: UnitQuaternion<f64>,
+        on_pose: &mut impl FnMut(&Pose),
+    ) -> bool {
+        let Some(r) = &mut self.recalibration else {
+            return false;
+        };
+        r.core.push(sensor, t, q);
+        if t >= r.end_s {
+            r.waiting.push((sensor, t, q));
+        } else {
+            self.feed(sensor, t, q);
+        }
+        let stale: Vec<bool> = (0..self.sensors.len())
+            .map(|i| self.resampler.is_stale(i))
+            .collect();
+        let r = self.recalibration.as_mut().expect("under way");
+        if r.core.try_solve(|i| stale[i], &mut self.warnings).is_some() {
+            self.take_over();
+        }
+        self.emit(None, on_pose);
+        true
+    }
+
+    /// The new calibration takes over; the samples that waited for it go on.
+    fn take_over(&mut self) {
+        let r = self.recalibration.take().expect("under way");
+        self.calibration = r.core;
+        for (sensor, t, q) in r.waiting {
+            self.feed(sensor, t, q);
+        }
     }
 
     /// Stages 3 and 4 for one sample, into the resampler.

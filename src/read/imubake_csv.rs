@@ -78,6 +78,11 @@ fn mag_scale(unit: &str) -> Option<f64> {
 }
 
 impl Layout {
+    /// The index of the time column.
+    pub(crate) fn time_column(&self) -> usize {
+        self.time
+    }
+
     pub(crate) fn from_header(header: &[u8], path: &Path, line: u64) -> Result<Layout, ReadError> {
         let text = std::str::from_utf8(header).map_err(|_| {
             ReadError::line(

@@ -22,6 +22,89 @@ pub enum LineFormat {
     ImubakeCsv,
 }
 
+impl LineFormat {
+    /// The format a line shows, if it shows one: a SOU data line, or an imubake CSV header.
+    /// Anything else (a SOU log's debug text, a CSV's `# world:` comment) says nothing yet.
+    pub fn recognise(line: &[u8]) -> Option<LineFormat> {
+        let t = line.trim_ascii();
+        if t.is_empty() || t.starts_with(b"#") {
+            return None;
+        }
+        if sou::format_problem(t).is_none() {
+            return Some(LineFormat::Sou);
+        }
+        imubake_csv::Layout::from_header(t, Path::new(""), 0)
+            .is_ok()
+            .then_some(LineFormat::ImubakeCsv)
+    }
+}
+
+/// Each data line's time, read by the same parsers as [`LineStream`] (for pacing a replayed
+/// capture), and data lines restamped with another time (a live session's host clock).
+#[derive(Debug, Default)]
+pub struct LineClock {
+    format: Option<LineFormat>,
+    csv: Option<imubake_csv::Layout>,
+}
+
+impl LineClock {
+    /// The line's time in seconds (the capture's clock), if it is a data line.
+    pub fn time_s(&mut self, line: &[u8]) -> Option<f64> {
+        self.see(line)?;
+        match self.format? {
+            LineFormat::Sou => sou::parse_line(line)
+                .ok()
+                .map(|(ms, _, _)| ms as f64 / 1000.0),
+            LineFormat::ImubakeCsv => {
+                let layout = self.csv.as_ref()?;
+                let row = imubake_csv::parse_row(layout, line).ok()??;
+                Some(row.time * layout.clock.seconds_per_unit())
+            }
+        }
+    }
+
+    /// The line with its time replaced by `t_s` seconds (in the line's own unit: whole
+    /// milliseconds for SOU), if it is a data line.
+    pub fn restamp(&mut self, line: &[u8], t_s: f64) -> Option<Vec<u8>> {
+        self.time_s(line)?;
+        let (column, value) = match self.format? {
+            LineFormat::Sou => (0, format!("{}", (t_s * 1000.0).round() as u64)),
+            LineFormat::ImubakeCsv => {
+                let layout = self.csv.as_ref()?;
+                let unit = layout.clock.seconds_per_unit();
+                (layout.time_column(), format!("{:.6}", t_s / unit))
+            }
+        };
+        let mut out = Vec::with_capacity(line.len() + 8);
+        for (i, field) in line.split(|&b| b == b',').enumerate() {
+            if i > 0 {
+                out.push(b',');
+            }
+            if i == column {
+                out.extend_from_slice(value.as_bytes());
+            } else {
+                out.extend_from_slice(field);
+            }
+        }
+        Some(out)
+    }
+
+    /// Learns the format and a CSV's header; `None` for a line that is not data.
+    fn see(&mut self, line: &[u8]) -> Option<()> {
+        if self.format.is_none() {
+            self.format = Some(LineFormat::recognise(line)?);
+        }
+        if self.format == Some(LineFormat::ImubakeCsv) && self.csv.is_none() {
+            let t = line.trim_ascii();
+            if !t.starts_with(b"#") {
+                self.csv = imubake_csv::Layout::from_header(t, Path::new(""), 0).ok();
+            }
+            return None;
+        }
+        Some(())
+    }
+}
+
 /// A capture arriving line by line (see the module documentation).
 pub struct LineStream {
     format: LineFormat,
@@ -209,5 +292,40 @@ impl LineStream {
     /// The name reports give the stream.
     pub fn name(&self) -> &Path {
         &self.name
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formats_are_recognised_and_lines_restamped() {
+        assert_eq!(LineFormat::recognise(b"Initializing I2C devices..."), None);
+        assert_eq!(
+            LineFormat::recognise(b"1042,N1,1.0,2.0,3.0,4.0,5.0,6.0"),
+            Some(LineFormat::Sou)
+        );
+        assert_eq!(LineFormat::recognise(b"# world: ned"), None);
+        assert_eq!(
+            LineFormat::recognise(b"time_s,sensor,qw,qx,qy,qz"),
+            Some(LineFormat::ImubakeCsv)
+        );
+        let mut sou = LineClock::default();
+        assert_eq!(sou.time_s(b"debug text"), None);
+        assert_eq!(sou.time_s(b"1042,N1,1.0,2.0,3.0,4.0,5.0,6.0"), Some(1.042));
+        assert_eq!(
+            sou.restamp(b"1042,N1,1.0,2.0,3.0,4.0,5.0,6.0", 2.5)
+                .unwrap(),
+            b"2500,N1,1.0,2.0,3.0,4.0,5.0,6.0"
+        );
+        let mut csv = LineClock::default();
+        assert_eq!(csv.time_s(b"time_ms,sensor,qw,qx,qy,qz"), None);
+        assert_eq!(csv.time_s(b"250,a,1,0,0,0"), Some(0.25));
+        assert_eq!(
+            csv.restamp(b"250,a,1,0,0,0", 1.5).unwrap(),
+            b"1500.000000,a,1,0,0,0"
+        );
+        assert_eq!(csv.restamp(b"# a comment", 1.5), None);
     }
 }

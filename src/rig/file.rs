@@ -41,6 +41,9 @@ pub struct RigFile {
     /// Anatomical landmarks → joints, for `imubake angles` on rigs its table does not know.
     #[serde(default)]
     pub segments: BTreeMap<String, String>,
+    /// Joints → Unity humanoid bone names, for `imubake live`'s VMC output.
+    #[serde(default)]
+    pub vmc_names: BTreeMap<String, String>,
 }
 
 fn default_order() -> EulerOrder {
@@ -158,6 +161,9 @@ impl RigFile {
         }
         for (landmark, joint) in &self.segments {
             rig.set_segment(landmark, joint)?;
+        }
+        for (joint, unity) in &self.vmc_names {
+            rig.set_vmc_name(joint, unity)?;
         }
         Ok(rig)
     }

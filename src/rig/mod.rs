@@ -77,6 +77,8 @@ pub enum RigError {
     NonFinite(String),
     #[error("pose `{pose}`: unknown joint `{joint}`")]
     PoseJoint { pose: String, joint: String },
+    #[error("vmc_names: `{0}` is not a joint of the rig")]
+    VmcJoint(String),
     #[error("segments: `{landmark}` names `{joint}`, which is not a joint of the rig")]
     SegmentJoint { landmark: String, joint: String },
 }
@@ -94,6 +96,8 @@ pub struct Rig {
     /// Anatomical landmarks named by the rig file (`segments:`, landmark → joint), for rigs the
     /// analysis's own table does not know.
     segments: BTreeMap<String, usize>,
+    /// Unity humanoid bone names for VMC (`vmc_names:`, joint → name).
+    vmc_names: BTreeMap<String, String>,
 }
 
 /// The prefix Mixamo puts before its bone names; names match with or without it.
@@ -150,6 +154,7 @@ impl Rig {
             poses: BTreeMap::new(),
             frame_poses: Vec::new(),
             segments: BTreeMap::new(),
+            vmc_names: BTreeMap::new(),
         })
     }
 
@@ -223,6 +228,21 @@ impl Rig {
             })?;
         self.segments.insert(landmark.to_string(), j);
         Ok(())
+    }
+
+    /// Names a joint for VMC (a Unity humanoid bone name): the rig file's `vmc_names:`.
+    pub fn set_vmc_name(&mut self, joint: &str, unity: &str) -> Result<(), RigError> {
+        let j = self
+            .joint_index(joint)
+            .ok_or_else(|| RigError::VmcJoint(joint.to_string()))?;
+        let name = self.joints[j].name.clone();
+        self.vmc_names.insert(name, unity.to_string());
+        Ok(())
+    }
+
+    /// Joint name → Unity humanoid bone name, as the rig file gives them.
+    pub fn vmc_names(&self) -> &BTreeMap<String, String> {
+        &self.vmc_names
     }
 
     /// The landmarks the rig file names, landmark → joint index.

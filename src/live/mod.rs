@@ -1,0 +1,669 @@
+//! `imubake live`: sensors to a moving character in real time.
+//!
+//! Sources ([`source`]) send lines over one bounded channel to the session, which runs them
+//! through the same code a file takes in causal mode: the readers' line parsers and cleaning
+//! rules ([`crate::read::stream::LineStream`]) and the pipeline's incremental cores
+//! ([`crate::pipeline::stream::PoseStream`]). Each frame goes out as a VMC bundle ([`vmc`]);
+//! everything received is recorded as a take ([`record`]).
+//!
+//! Clock: a line keeps its own timestamp when one source sends it (a replayed file, a single
+//! serial port); with several sources, whose devices' clocks differ, each data line is restamped
+//! with the host's monotonic clock when it arrives (`--clock host`), as paper 002's driver does.
+//! The recording holds the lines as the stream saw them, so converting it gives the same frames.
+
+pub mod record;
+pub mod source;
+pub mod vmc;
+
+use crate::anim::Pose;
+use crate::convert::{ConvertError, ConvertSettings};
+use crate::pipeline::stream::{PoseStream, StreamStatus};
+use crate::read::stream::{LineClock, LineFormat, LineStream};
+use crate::take::{LineReport, StreamSample};
+use source::{Allow, Event, Link, SourceCounters, SourceSpec};
+use std::net::{SocketAddr, UdpSocket};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{RecvTimeoutError, sync_channel};
+use std::time::{Duration, Instant, SystemTime};
+
+/// Where VMC goes by default (the Marionette's port).
+pub const DEFAULT_VMC: &str = "127.0.0.1:39539";
+/// Where calibration requests are heard by default (the Performer's port).
+pub const DEFAULT_LISTEN: &str = "127.0.0.1:39540";
+
+#[derive(Debug, thiserror::Error)]
+pub enum LiveError {
+    #[error("{0}")]
+    Setup(#[from] ConvertError),
+    #[error("source `{source_name}`: {reason}")]
+    Source { source_name: String, reason: String },
+    #[error("{what} {addr}: {reason}")]
+    Network {
+        what: &'static str,
+        addr: SocketAddr,
+        reason: String,
+    },
+    #[error("--record {path}: {reason}")]
+    Record { path: PathBuf, reason: String },
+    #[error("{0}")]
+    Stream(String),
+    #[error(
+        "rig `{0}` has no bones with Unity humanoid names for VMC (no `Hips`); name them in the rig file's `vmc_names:`"
+    )]
+    NoVmcNames(String),
+}
+
+impl crate::diagnostic::Diagnostic for LiveError {
+    fn hint(&self) -> Option<&'static str> {
+        match self {
+            LiveError::Network { .. } => {
+                Some("is another program using the port? (--vmc, --listen)")
+            }
+            LiveError::Source { .. } => Some("check --source (docs: live)"),
+            _ => None,
+        }
+    }
+}
+
+/// Which clock data lines keep.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Clock {
+    /// Each line's own timestamp.
+    Source,
+    /// The host's monotonic clock at arrival, since the session started.
+    Host,
+}
+
+impl std::str::FromStr for Clock {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Clock, String> {
+        match s {
+            "source" => Ok(Clock::Source),
+            "host" => Ok(Clock::Host),
+            _ => Err(format!("unknown `{s}`; expected source or host")),
+        }
+    }
+}
+
+/// A live session's settings, validated.
+#[derive(Debug, Clone)]
+pub struct LiveSettings {
+    pub sources: Vec<SourceSpec>,
+    /// The conversion settings (mapping, rig, fps, smoothing, root, world …), run causal.
+    pub convert: ConvertSettings,
+    /// Where VMC bundles go (`None`: not sent).
+    pub vmc: Option<SocketAddr>,
+    /// Where calibration requests are heard (`None`: not at all).
+    pub listen: Option<SocketAddr>,
+    pub record: Option<PathBuf>,
+    pub allow: Allow,
+    /// `None`: source for one source, host for several.
+    pub clock: Option<Clock>,
+    /// Read lines from the terminal: `c` asks for a calibration.
+    pub keys: bool,
+}
+
+/// One sensor's figures on the status line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorStatus {
+    pub id: String,
+    /// Samples per second over the last status period.
+    pub rate_hz: f64,
+    /// Seconds since its last sample (stream time).
+    pub silent_s: f64,
+}
+
+/// What the session is doing, every half second.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Phase {
+    /// No data line yet.
+    Waiting,
+    /// Hold the calibration pose for this much longer.
+    Calibrating {
+        left_s: f64,
+    },
+    Running,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Status {
+    pub elapsed_s: f64,
+    pub phase: Phase,
+    pub frames: u64,
+    pub sensors: Vec<SensorStatus>,
+    pub lines: u64,
+    pub dropped_lines: u64,
+    /// Lines lost before the session could read them (a burst of datagrams).
+    pub overflowed: u64,
+    /// Median and 99th percentile, milliseconds, of the last frames' latency: from the arrival
+    /// of the batch holding the sample that completed a frame to its bundle's sending.
+    pub latency_ms: Option<(f64, f64)>,
+}
+
+/// What the session says as it goes.
+#[derive(Debug, Clone)]
+pub enum Report {
+    Status(Status),
+    /// A line for the terminal: a source reconnecting, a warning of the stream, a calibration.
+    Notice(String),
+}
+
+/// How a session ended.
+#[derive(Debug, Clone)]
+pub struct Summary {
+    pub frames: u64,
+    pub lines: u64,
+    pub dropped: Vec<LineReport>,
+    pub overflowed: u64,
+    pub recording: Option<PathBuf>,
+    pub warnings: Vec<String>,
+    pub latency_ms: Option<(f64, f64)>,
+}
+
+/// Latencies of the last frames, for the median and the 99th percentile.
+struct Latencies {
+    ring: Vec<f64>,
+    next: usize,
+}
+
+impl Latencies {
+    const KEEP: usize = 4096;
+
+    fn push(&mut self, ms: f64) {
+        if self.ring.len() < Self::KEEP {
+            self.ring.push(ms);
+        } else {
+            self.ring[self.next] = ms;
+        }
+        self.next = (self.next + 1) % Self::KEEP;
+    }
+
+    fn summary(&self) -> Option<(f64, f64)> {
+        if self.ring.is_empty() {
+            return None;
+        }
+        let mut v = self.ring.clone();
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        Some((at(0.5), at(0.99)))
+    }
+}
+
+/// The stages once the format (and so the world) is known.
+struct Running {
+    lines: LineStream,
+    poses: PoseStream,
+    /// LineStream sensor index → PoseStream index (`None`: not mapped).
+    index: Vec<Option<Option<usize>>>,
+}
+
+/// Runs a session until `stop` is set or every source has ended; `report` hears the status and
+/// notices.
+pub fn run(
+    settings: &LiveSettings,
+    stop: Arc<AtomicBool>,
+    mut report: impl FnMut(Report),
+) -> Result<Summary, LiveError> {
+    let (rig, mapping, mapping_file, mut options) =
+        crate::convert::stream_setup(&settings.convert)?;
+    options.causal = true;
+    let skeleton = vmc::VmcSkeleton::new(&rig);
+    let vmc_out = match settings.vmc {
+        Some(addr) => {
+            let skeleton = skeleton
+                .clone()
+                .ok_or_else(|| LiveError::NoVmcNames(rig.name().to_string()))?;
+            let local: SocketAddr = if addr.is_ipv4() {
+                "0.0.0.0:0".parse().expect("an address")
+            } else {
+                "[::]:0".parse().expect("an address")
+            };
+            let socket = UdpSocket::bind(local)
+                .and_then(|s| s.connect(addr).map(|()| s))
+                .map_err(|e| LiveError::Network {
+                    what: "--vmc",
+                    addr,
+                    reason: e.to_string(),
+                })?;
+            Some((socket, skeleton))
+        }
+        None => None,
+    };
+    let clock = settings.clock.unwrap_or(if settings.sources.len() > 1 {
+        Clock::Host
+    } else {
+        Clock::Source
+    });
+    if let Some(dir) = &settings.record {
+        for path in record::recover(dir).map_err(|e| LiveError::Record {
+            path: dir.clone(),
+            reason: e.to_string(),
+        })? {
+            report(Report::Notice(format!(
+                "warning: a recording left by an earlier session that did not end is now {}",
+                path.display()
+            )));
+        }
+    }
+
+    let (tx, rx) = sync_channel::<Event>(1024);
+    let mut counters = Vec::new();
+    let mut threads = Vec::new();
+    for (i, spec) in settings.sources.iter().enumerate() {
+        let c = Arc::new(SourceCounters::default());
+        counters.push(Arc::clone(&c));
+        let link = Link {
+            source: i,
+            tx: tx.clone(),
+            stop: Arc::clone(&stop),
+            counters: c,
+        };
+        threads.push(source::start(spec, link, settings.allow.clone())?);
+    }
+    if let Some(addr) = settings.listen {
+        let socket = UdpSocket::bind(addr).map_err(|e| LiveError::Network {
+            what: "--listen",
+            addr,
+            reason: e.to_string(),
+        })?;
+        let _ = socket.set_read_timeout(Some(Duration::from_millis(100)));
+        let tx = tx.clone();
+        let stop = Arc::clone(&stop);
+        let allow = settings.allow.clone();
+        threads.push(std::thread::spawn(move || {
+            let mut buf = vec![0u8; 65_536];
+            while !stop.load(Ordering::Relaxed) {
+                if let Ok((n, from)) = socket.recv_from(&mut buf)
+                    && allow.admits(from.ip())
+                    && vmc::is_calibration_request(&buf[..n])
+                    && tx
+                        .send(Event::Calibrate {
+                            from: format!("VMC request from {from}"),
+                        })
+                        .is_err()
+                {
+                    return;
+                }
+            }
+        }));
+    }
+    if settings.keys {
+        // Not joined: a read of the terminal cannot be interrupted; it ends with the process.
+        let tx = tx.clone();
+        std::thread::spawn(move || {
+            let stdin = std::io::stdin();
+            let mut line = String::new();
+            while std::io::BufRead::read_line(&mut stdin.lock(), &mut line).is_ok_and(|n| n > 0) {
+                if line.trim().eq_ignore_ascii_case("c")
+                    && tx
+                        .send(Event::Calibrate {
+                            from: "the terminal".into(),
+                        })
+                        .is_err()
+                {
+                    return;
+                }
+                line.clear();
+            }
+        });
+    }
+    drop(tx);
+
+    let started = Instant::now();
+    let stamp = record::stamp(SystemTime::now());
+    let mut open = vec![true; settings.sources.len()];
+    let mut clocks: Vec<LineClock> = settings
+        .sources
+        .iter()
+        .map(|_| LineClock::default())
+        .collect();
+    let mut format: Option<LineFormat> = None;
+    // Lines before the format is known (a SOU log's debug text), bounded.
+    let mut early: Vec<Vec<u8>> = Vec::new();
+    let mut recorder: Option<record::Recorder> = None;
+    let mut running: Option<Running> = None;
+    let mut line_no: u64 = 0;
+    let mut samples: Vec<StreamSample> = Vec::with_capacity(64);
+    let mut frames: u64 = 0;
+    let mut latencies = Latencies {
+        ring: Vec::new(),
+        next: 0,
+    };
+    let mut warned = 0usize;
+    let mut last_status = Instant::now();
+    let mut last_ok = Instant::now() - Duration::from_secs(2);
+    let mut per_sensor: Vec<(u64, f64)> = Vec::new(); // samples this period, last time
+    let mut pending_calibration = false;
+    let name = PathBuf::from("live");
+
+    let result: Result<(), LiveError> = (|| {
+        while open.iter().any(|o| *o) && !stop.load(Ordering::Relaxed) {
+            let event = match rx.recv_timeout(Duration::from_millis(50)) {
+                Ok(e) => Some(e),
+                Err(RecvTimeoutError::Timeout) => None,
+                Err(RecvTimeoutError::Disconnected) => break,
+            };
+            match event {
+                Some(Event::Lines { source, lines, at }) => {
+                    for line in lines {
+                        let line = match clock {
+                            Clock::Source => line,
+                            Clock::Host => clocks[source]
+                                .restamp(&line, started.elapsed().as_secs_f64())
+                                .unwrap_or(line),
+                        };
+                        if format.is_none() {
+                            match LineFormat::recognise(&line) {
+                                Some(f) => {
+                                    format = Some(f);
+                                    if let Some(dir) = &settings.record {
+                                        let ext = if f == LineFormat::Sou { "log" } else { "csv" };
+                                        recorder = Some(
+                                            record::Recorder::start(dir, &stamp, ext).map_err(
+                                                |e| LiveError::Record {
+                                                    path: dir.clone(),
+                                                    reason: e.to_string(),
+                                                },
+                                            )?,
+                                        );
+                                    }
+                                    let stream_name = recorder
+                                        .as_ref()
+                                        .map_or_else(|| name.clone(), |r| r.path().to_path_buf());
+                                    let mut lines = LineStream::new(f, stream_name, None);
+                                    let held = std::mem::take(&mut early);
+                                    for l in held.iter().chain(std::iter::once(&line)) {
+                                        line_no += 1;
+                                        if let Some(r) = &mut recorder {
+                                            r.line(l).map_err(|e| record_error(settings, e))?;
+                                        }
+                                        lines
+                                            .push_line(line_no, l, &mut samples)
+                                            .map_err(|e| LiveError::Stream(e.to_string()))?;
+                                    }
+                                    running = start_running(
+                                        lines,
+                                        &rig,
+                                        &mapping,
+                                        &mapping_file,
+                                        &options,
+                                        settings,
+                                    )?;
+                                    continue;
+                                }
+                                None => {
+                                    if early.len() < 10_000 {
+                                        early.push(line);
+                                    }
+                                    continue;
+                                }
+                            }
+                        }
+                        line_no += 1;
+                        if let Some(r) = &mut recorder {
+                            r.line(&line).map_err(|e| record_error(settings, e))?;
+                        }
+                        let Some(run) = &mut running else {
+                            // A CSV stream before its header: the stages start with it.
+                            continue;
+                        };
+                        run.lines
+                            .push_line(line_no, &line, &mut samples)
+                            .map_err(|e| LiveError::Stream(e.to_string()))?;
+                        feed(run, &mut samples, &mut per_sensor, &mut |pose: &Pose| {
+                            frames += 1;
+                            if let Some((socket, skeleton)) = &vmc_out {
+                                let _ = socket.send(&skeleton.frame(pose, &rig));
+                            }
+                            latencies.push(at.elapsed().as_secs_f64() * 1e3);
+                        });
+                    }
+                    if let Some(r) = &mut recorder {
+                        r.batch_done().map_err(|e| record_error(settings, e))?;
+                    }
+                }
+                Some(Event::Notice { source, text }) => {
+                    report(Report::Notice(format!(
+                        "{}: {text}",
+                        settings.sources[source]
+                    )));
+                }
+                Some(Event::Closed { source, error }) => {
+                    open[source] = false;
+                    report(Report::Notice(match error {
+                        None => format!("{}: ended", settings.sources[source]),
+                        Some(e) => format!("{}: ended: {e}", settings.sources[source]),
+                    }));
+                }
+                Some(Event::Calibrate { from }) => {
+                    pending_calibration = true;
+                    report(Report::Notice(format!("calibration asked for ({from})")));
+                }
+                None => {}
+            }
+            if pending_calibration {
+                pending_calibration = false;
+                if let Some(run) = &mut running {
+                    let t = run.poses.latest_s().max(0.0);
+                    match run.poses.recalibrate(t) {
+                        Ok(left) => {
+                            if let Some(r) = &mut recorder {
+                                r.line(format!("# calibrate t={t:.6}").as_bytes())
+                                    .map_err(|e| record_error(settings, e))?;
+                                line_no += 1;
+                            }
+                            report(Report::Notice(format!(
+                                "calibrating: hold the pose for {left:.1} s from t = {t:.3} s"
+                            )));
+                        }
+                        Err(e) => report(Report::Notice(format!("cannot calibrate now: {e}"))),
+                    }
+                }
+            }
+            if let Some(run) = &running {
+                for w in &run.poses.warnings()[warned.min(run.poses.warnings().len())..] {
+                    report(Report::Notice(format!("warning: {w}")));
+                }
+                warned = run.poses.warnings().len();
+            }
+            if let Some((socket, _)) = &vmc_out
+                && last_ok.elapsed() >= Duration::from_secs(1)
+            {
+                let state = match running.as_ref().map(|r| r.poses.status()) {
+                    Some(StreamStatus::Running { .. }) => vmc::CalibrationState::Calibrated,
+                    Some(StreamStatus::Calibrating { .. }) => vmc::CalibrationState::Calibrating,
+                    None => vmc::CalibrationState::WaitingForCalibrating,
+                };
+                let _ = socket.send(&vmc::ok_message(state));
+                last_ok = Instant::now();
+            }
+            if last_status.elapsed() >= Duration::from_millis(500) {
+                let period = last_status.elapsed().as_secs_f64();
+                last_status = Instant::now();
+                report(Report::Status(status(
+                    started,
+                    running.as_ref(),
+                    frames,
+                    line_no,
+                    &counters,
+                    &mut per_sensor,
+                    period,
+                    latencies.summary(),
+                )));
+            }
+        }
+        Ok(())
+    })();
+    stop.store(true, Ordering::Relaxed);
+    // The end: what the reorder buffer and the smoothers hold comes out, the recording closes.
+    let mut warnings = Vec::new();
+    let mut dropped = Vec::new();
+    if let Some(run) = &mut running {
+        let _ = run.lines.finish(&mut samples);
+        feed(run, &mut samples, &mut per_sensor, &mut |pose: &Pose| {
+            frames += 1;
+            if let Some((socket, skeleton)) = &vmc_out {
+                let _ = socket.send(&skeleton.frame(pose, &rig));
+            }
+        });
+        let vmc_frames = std::cell::Cell::new(0u64);
+        if let Err(e) = run.poses.finish(&mut |pose: &Pose| {
+            vmc_frames.set(vmc_frames.get() + 1);
+            if let Some((socket, skeleton)) = &vmc_out {
+                let _ = socket.send(&skeleton.frame(pose, &rig));
+            }
+        }) {
+            warnings.push(e.to_string());
+        }
+        frames += vmc_frames.get();
+        warnings.extend(run.poses.warnings().iter().cloned());
+        dropped.extend(run.lines.dropped_lines().iter().cloned());
+        if let Some(take) = run.lines.take() {
+            dropped.extend(take.dropped_lines().iter().cloned());
+        }
+    }
+    let recording = match recorder {
+        Some(r) => Some(r.finish().map_err(|e| record_error(settings, e))?),
+        None => None,
+    };
+    for t in threads {
+        let _ = t.join();
+    }
+    result?;
+    let overflowed = counters
+        .iter()
+        .map(|c| c.overflowed.load(Ordering::Relaxed))
+        .sum();
+    Ok(Summary {
+        frames,
+        lines: line_no,
+        dropped,
+        overflowed,
+        recording,
+        warnings,
+        latency_ms: latencies.summary(),
+    })
+}
+
+fn record_error(settings: &LiveSettings, e: std::io::Error) -> LiveError {
+    LiveError::Record {
+        path: settings.record.clone().unwrap_or_default(),
+        reason: e.to_string(),
+    }
+}
+
+/// The pose stream for `lines`, once the format has said the sensors' world (a CSV after its
+/// header); `None` until then.
+fn start_running(
+    lines: LineStream,
+    rig: &crate::rig::Rig,
+    mapping: &crate::mapping::Mapping,
+    mapping_file: &std::path::Path,
+    options: &crate::pipeline::PipelineOptions,
+    settings: &LiveSettings,
+) -> Result<Option<Running>, LiveError> {
+    let world = settings
+        .convert
+        .read
+        .world
+        .or(mapping.world)
+        .unwrap_or(lines.world());
+    let poses = PoseStream::from_mapping(rig, mapping, mapping_file, world, options)
+        .map_err(|e| LiveError::Stream(e.to_string()))?;
+    Ok(Some(Running {
+        lines,
+        poses,
+        index: Vec::new(),
+    }))
+}
+
+/// The samples a line let out, through the pose stream.
+fn feed(
+    run: &mut Running,
+    samples: &mut Vec<StreamSample>,
+    per_sensor: &mut Vec<(u64, f64)>,
+    on_pose: &mut impl FnMut(&Pose),
+) {
+    if samples.is_empty() {
+        return;
+    }
+    let Some(take) = run.lines.take() else {
+        samples.clear();
+        return;
+    };
+    let ids = take.sensor_ids();
+    for s in samples.drain(..) {
+        let k = s.sensor.index();
+        if k >= run.index.len() {
+            run.index.resize(k + 1, None);
+        }
+        let i = *run.index[k].get_or_insert_with(|| run.poses.sensor_index(&ids[k]));
+        if let Some(i) = i {
+            if i >= per_sensor.len() {
+                per_sensor.resize(i + 1, (0, f64::NEG_INFINITY));
+            }
+            per_sensor[i].0 += 1;
+            per_sensor[i].1 = s.t_s;
+            run.poses
+                .push(i, s.t_s, s.value.to_quaternion(), &mut *on_pose);
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn status(
+    started: Instant,
+    running: Option<&Running>,
+    frames: u64,
+    lines: u64,
+    counters: &[Arc<SourceCounters>],
+    per_sensor: &mut [(u64, f64)],
+    period_s: f64,
+    latency_ms: Option<(f64, f64)>,
+) -> Status {
+    let phase = match running.map(|r| r.poses.status()) {
+        None => Phase::Waiting,
+        Some(StreamStatus::Calibrating { left_s }) => Phase::Calibrating { left_s },
+        Some(StreamStatus::Running { .. }) => Phase::Running,
+    };
+    let mut sensors = Vec::new();
+    let mut dropped_lines = 0;
+    if let Some(run) = running {
+        let latest = run.poses.latest_s();
+        for (i, s) in run.poses.sensors().iter().enumerate() {
+            let (n, last) = per_sensor.get(i).copied().unwrap_or((0, f64::NEG_INFINITY));
+            sensors.push(SensorStatus {
+                id: s.sensor.clone(),
+                rate_hz: n as f64 / period_s,
+                silent_s: if last.is_finite() {
+                    (latest - last).max(0.0)
+                } else {
+                    f64::INFINITY
+                },
+            });
+        }
+        dropped_lines = run.lines.dropped_lines().len() as u64
+            + run
+                .lines
+                .take()
+                .map_or(0, |t| t.dropped_lines().len() as u64);
+    }
+    for p in per_sensor.iter_mut() {
+        p.0 = 0;
+    }
+    Status {
+        elapsed_s: started.elapsed().as_secs_f64(),
+        phase,
+        frames,
+        sensors,
+        lines,
+        dropped_lines,
+        overflowed: counters
+            .iter()
+            .map(|c| c.overflowed.load(Ordering::Relaxed) + c.too_long.load(Ordering::Relaxed))
+            .sum(),
+        latency_ms,
+    }
+}

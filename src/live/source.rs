@@ -1,0 +1,667 @@
+//! Where a live session's lines come from: `serial:`, `udp:`, `tcp:`, `stdin`, `file:`. Each
+//! source runs on a thread of its own and sends what it receives, split into lines, to the
+//! session over one bounded channel.
+
+use super::LiveError;
+use std::io::{BufRead, BufReader, Read};
+use std::net::{IpAddr, SocketAddr, TcpStream, UdpSocket};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError};
+use std::time::{Duration, Instant};
+
+/// The longest line kept (bytes); a longer one is dropped and counted.
+pub const MAX_LINE: usize = 64 * 1024;
+
+/// A source as given on the command line.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SourceSpec {
+    /// `serial:/dev/ttyUSB0[@115200]`.
+    Serial { path: PathBuf, baud: u32 },
+    /// `udp:[BIND_ADDR:]PORT` (the address defaults to 127.0.0.1): lines in datagrams.
+    Udp { bind: SocketAddr },
+    /// `tcp:HOST:PORT`: a client that connects, and reconnects.
+    Tcp { addr: String },
+    /// `stdin`.
+    Stdin,
+    /// `file:PATH[@SPEED]`: a capture replayed at its own pace × SPEED (default 1).
+    File { path: PathBuf, speed: f64 },
+}
+
+impl std::fmt::Display for SourceSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SourceSpec::Serial { path, baud } => write!(f, "serial:{}@{baud}", path.display()),
+            SourceSpec::Udp { bind } => write!(f, "udp:{bind}"),
+            SourceSpec::Tcp { addr } => write!(f, "tcp:{addr}"),
+            SourceSpec::Stdin => write!(f, "stdin"),
+            SourceSpec::File { path, speed } => write!(f, "file:{}@{speed}", path.display()),
+        }
+    }
+}
+
+/// `text@N` → (text, N) when N parses; else (text, None).
+fn at_suffix(s: &str) -> (&str, Option<&str>) {
+    match s.rsplit_once('@') {
+        Some((a, b)) if !b.is_empty() && b.chars().all(|c| c.is_ascii_digit() || c == '.') => {
+            (a, Some(b))
+        }
+        _ => (s, None),
+    }
+}
+
+impl std::str::FromStr for SourceSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<SourceSpec, String> {
+        let usage = "expected serial:PATH[@BAUD], udp:[ADDR:]PORT, tcp:HOST:PORT, stdin or file:PATH[@SPEED]";
+        if s == "stdin" || s == "-" {
+            return Ok(SourceSpec::Stdin);
+        }
+        let (kind, rest) = s.split_once(':').ok_or_else(|| format!("`{s}`: {usage}"))?;
+        match kind {
+            "serial" => {
+                let (path, baud) = at_suffix(rest);
+                let baud = match baud {
+                    None => 115_200,
+                    Some(b) => b
+                        .parse()
+                        .ok()
+                        .filter(|b| *b > 0)
+                        .ok_or_else(|| format!("`{s}`: `{b}` is not a baud rate"))?,
+                };
+                if path.is_empty() {
+                    return Err(format!("`{s}`: no port; {usage}"));
+                }
+                Ok(SourceSpec::Serial {
+                    path: path.into(),
+                    baud,
+                })
+            }
+            "udp" => {
+                let bind = match rest.parse::<u16>() {
+                    Ok(port) => SocketAddr::new(IpAddr::from([127, 0, 0, 1]), port),
+                    Err(_) => rest
+                        .parse()
+                        .map_err(|_| format!("`{s}`: `{rest}` is not ADDR:PORT or PORT"))?,
+                };
+                Ok(SourceSpec::Udp { bind })
+            }
+            "tcp" => {
+                if !rest.contains(':') {
+                    return Err(format!("`{s}`: expected tcp:HOST:PORT"));
+                }
+                Ok(SourceSpec::Tcp { addr: rest.into() })
+            }
+            "file" => {
+                let (path, speed) = at_suffix(rest);
+                let speed = match speed {
+                    None => 1.0,
+                    Some(v) => v
+                        .parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite() && *v > 0.0)
+                        .ok_or_else(|| format!("`{s}`: `{v}` is not a speed above 0"))?,
+                };
+                if path.is_empty() {
+                    return Err(format!("`{s}`: no file; {usage}"));
+                }
+                Ok(SourceSpec::File {
+                    path: path.into(),
+                    speed,
+                })
+            }
+            _ => Err(format!("`{s}`: {usage}")),
+        }
+    }
+}
+
+/// What a source thread tells the session.
+#[derive(Debug)]
+pub enum Event {
+    /// Complete lines (without their endings), received together at `at`.
+    Lines {
+        source: usize,
+        lines: Vec<Vec<u8>>,
+        at: Instant,
+    },
+    /// Something worth a line on the terminal (a reconnection, a datagram refused).
+    Notice { source: usize, text: String },
+    /// The source has ended (a file or stdin at its end); `None` when it ended cleanly.
+    Closed {
+        source: usize,
+        error: Option<String>,
+    },
+    /// A calibration was asked for (a key, or VMC's `/VMC/Ext/Set/Calib/Exec`).
+    Calibrate { from: String },
+}
+
+/// Bytes → lines, keeping the partial line between reads; a line longer than [`MAX_LINE`] is
+/// dropped (counted in `too_long`).
+#[derive(Debug, Default)]
+pub struct LineSplitter {
+    partial: Vec<u8>,
+    skipping: bool,
+    pub too_long: u64,
+}
+
+impl LineSplitter {
+    /// Splits `bytes` onto the pending partial line; complete lines go to `out`.
+    pub fn push(&mut self, bytes: &[u8], out: &mut Vec<Vec<u8>>) {
+        for piece in bytes.split_inclusive(|&b| b == b'\n') {
+            let complete = piece.last() == Some(&b'\n');
+            let body = if complete {
+                &piece[..piece.len() - 1]
+            } else {
+                piece
+            };
+            if !self.skipping {
+                if self.partial.len() + body.len() > MAX_LINE {
+                    self.partial.clear();
+                    self.skipping = true;
+                    self.too_long += 1;
+                } else {
+                    self.partial.extend_from_slice(body);
+                }
+            }
+            if complete {
+                if !self.skipping {
+                    let mut line = std::mem::take(&mut self.partial);
+                    if line.last() == Some(&b'\r') {
+                        line.pop();
+                    }
+                    out.push(line);
+                }
+                self.skipping = false;
+            }
+        }
+    }
+
+    /// The last line, when the stream ends without a line ending.
+    pub fn finish(&mut self, out: &mut Vec<Vec<u8>>) {
+        if !self.skipping && !self.partial.is_empty() {
+            let mut line = std::mem::take(&mut self.partial);
+            if line.last() == Some(&b'\r') {
+                line.pop();
+            }
+            out.push(line);
+        }
+        self.skipping = false;
+    }
+}
+
+/// Which senders a network source accepts (`--allow ADDR[/PREFIX],…`); empty: any.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Allow(pub Vec<(IpAddr, u8)>);
+
+impl std::str::FromStr for Allow {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Allow, String> {
+        let mut out = Vec::new();
+        for item in s.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+            let (addr, prefix) = match item.split_once('/') {
+                Some((a, p)) => (a, Some(p)),
+                None => (item, None),
+            };
+            let addr: IpAddr = addr
+                .parse()
+                .map_err(|_| format!("`{item}`: not an IP address"))?;
+            let max = if addr.is_ipv4() { 32 } else { 128 };
+            let prefix = match prefix {
+                None => max,
+                Some(p) => p
+                    .parse::<u8>()
+                    .ok()
+                    .filter(|p| *p <= max)
+                    .ok_or_else(|| format!("`{item}`: prefix beyond /{max}"))?,
+            };
+            out.push((addr, prefix));
+        }
+        Ok(Allow(out))
+    }
+}
+
+impl Allow {
+    pub fn admits(&self, ip: IpAddr) -> bool {
+        if self.0.is_empty() {
+            return true;
+        }
+        let bits = |ip: IpAddr| -> (u128, u8) {
+            match ip {
+                IpAddr::V4(v) => (u32::from(v) as u128, 32),
+                IpAddr::V6(v) => match v.to_ipv4_mapped() {
+                    Some(v4) => (u32::from(v4) as u128, 32),
+                    None => (u128::from(v), 128),
+                },
+            }
+        };
+        let (x, width) = bits(ip);
+        self.0.iter().any(|&(net, prefix)| {
+            let (n, w) = bits(net);
+            if w != width {
+                return false;
+            }
+            let shift = (width - prefix.min(width)) as u32;
+            let mask = if shift >= 128 { 0 } else { u128::MAX << shift };
+            (x & mask) == (n & mask)
+        })
+    }
+}
+
+/// Counters a source thread keeps for the status line.
+#[derive(Debug, Default)]
+pub struct SourceCounters {
+    /// Datagrams or lines the session could not keep up with (dropped at the channel).
+    pub overflowed: AtomicU64,
+    /// Datagrams refused by `--allow`.
+    pub refused: AtomicU64,
+    /// Lines longer than [`MAX_LINE`].
+    pub too_long: AtomicU64,
+}
+
+/// What every source thread has: its index, where to send, when to stop.
+#[derive(Clone)]
+pub struct Link {
+    pub source: usize,
+    pub tx: SyncSender<Event>,
+    pub stop: Arc<AtomicBool>,
+    pub counters: Arc<SourceCounters>,
+}
+
+impl Link {
+    fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    /// Sends lines, waiting when the session is behind (streams whose sender can wait).
+    fn send(&self, lines: Vec<Vec<u8>>) -> bool {
+        if lines.is_empty() {
+            return true;
+        }
+        self.tx
+            .send(Event::Lines {
+                source: self.source,
+                lines,
+                at: Instant::now(),
+            })
+            .is_ok()
+    }
+
+    /// Sends lines without waiting: a burst the session cannot keep up with is dropped and
+    /// counted, so memory stays bounded (datagrams).
+    fn offer(&self, lines: Vec<Vec<u8>>) -> bool {
+        if lines.is_empty() {
+            return true;
+        }
+        let n = lines.len() as u64;
+        match self.tx.try_send(Event::Lines {
+            source: self.source,
+            lines,
+            at: Instant::now(),
+        }) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_)) => {
+                self.counters.overflowed.fetch_add(n, Ordering::Relaxed);
+                true
+            }
+            Err(TrySendError::Disconnected(_)) => false,
+        }
+    }
+
+    fn notice(&self, text: String) {
+        let _ = self.tx.send(Event::Notice {
+            source: self.source,
+            text,
+        });
+    }
+
+    fn closed(&self, error: Option<String>) {
+        let _ = self.tx.send(Event::Closed {
+            source: self.source,
+            error,
+        });
+    }
+}
+
+/// Starts the thread of one source. Errors that stop it before it starts (a file that cannot
+/// be opened, a port already bound) come back at once.
+pub fn start(
+    spec: &SourceSpec,
+    link: Link,
+    allow: Allow,
+) -> Result<std::thread::JoinHandle<()>, LiveError> {
+    let name = spec.to_string();
+    let io = |e: std::io::Error| LiveError::Source {
+        source_name: name.clone(),
+        reason: e.to_string(),
+    };
+    let handle = match spec.clone() {
+        SourceSpec::File { path, speed } => {
+            let file = std::fs::File::open(&path).map_err(io)?;
+            std::thread::spawn(move || replay(BufReader::new(file), speed, &link))
+        }
+        SourceSpec::Stdin => std::thread::spawn(move || {
+            let stdin = std::io::stdin();
+            read_stream(stdin.lock(), &link);
+        }),
+        SourceSpec::Udp { bind } => {
+            let socket = UdpSocket::bind(bind).map_err(io)?;
+            socket
+                .set_read_timeout(Some(Duration::from_millis(100)))
+                .map_err(io)?;
+            std::thread::spawn(move || udp(socket, &link, &allow))
+        }
+        SourceSpec::Tcp { addr } => std::thread::spawn(move || tcp(&addr, &link, &allow)),
+        SourceSpec::Serial { path, baud } => std::thread::spawn(move || serial(&path, baud, &link)),
+    };
+    Ok(handle)
+}
+
+/// A byte stream until its end (or the session's stop).
+fn read_stream(mut reader: impl Read, link: &Link) {
+    let mut split = LineSplitter::default();
+    let mut buf = vec![0u8; 64 * 1024];
+    loop {
+        if link.stopped() {
+            return;
+        }
+        match reader.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => {
+                let mut lines = Vec::new();
+                split.push(&buf[..n], &mut lines);
+                if !link.send(lines) {
+                    return;
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => {
+                link.closed(Some(e.to_string()));
+                return;
+            }
+        }
+    }
+    let mut lines = Vec::new();
+    split.finish(&mut lines);
+    link.counters
+        .too_long
+        .fetch_add(split.too_long, Ordering::Relaxed);
+    link.send(lines);
+    link.closed(None);
+}
+
+/// A capture replayed at its own pace × `speed`: each data line is sent when its time (since the
+/// first data line's) has come, by the same line parsers the session uses.
+fn replay(reader: impl BufRead, speed: f64, link: &Link) {
+    let mut clock = crate::read::stream::LineClock::default();
+    let start = Instant::now();
+    let mut first: Option<f64> = None;
+    for line in reader.split(b'\n') {
+        if link.stopped() {
+            return;
+        }
+        let mut line = match line {
+            Ok(l) => l,
+            Err(e) => {
+                link.closed(Some(e.to_string()));
+                return;
+            }
+        };
+        if line.last() == Some(&b'\r') {
+            line.pop();
+        }
+        if let Some(t) = clock.time_s(&line) {
+            let t0 = *first.get_or_insert(t);
+            let due = Duration::from_secs_f64(((t - t0) / speed).max(0.0));
+            let now = start.elapsed();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+        }
+        if !link.send(vec![line]) {
+            return;
+        }
+    }
+    link.closed(None);
+}
+
+fn udp(socket: UdpSocket, link: &Link, allow: &Allow) {
+    let mut buf = vec![0u8; 65_536];
+    while !link.stopped() {
+        match socket.recv_from(&mut buf) {
+            Ok((n, from)) => {
+                if !allow.admits(from.ip()) {
+                    link.counters.refused.fetch_add(1, Ordering::Relaxed);
+                    continue;
+                }
+                // A datagram holds whole lines.
+                let mut split = LineSplitter::default();
+                let mut lines = Vec::new();
+                split.push(&buf[..n], &mut lines);
+                split.finish(&mut lines);
+                link.counters
+                    .too_long
+                    .fetch_add(split.too_long, Ordering::Relaxed);
+                if !link.offer(lines) {
+                    return;
+                }
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::Interrupted
+                ) => {}
+            Err(e) => {
+                link.notice(format!("receive failed: {e}"));
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
+    }
+}
+
+/// Waits `delay` unless the session stops first; the next delay (doubling, at most 5 s).
+fn back_off(delay: Duration, link: &Link) -> Duration {
+    let until = Instant::now() + delay;
+    while Instant::now() < until && !link.stopped() {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    (delay * 2).min(Duration::from_secs(5))
+}
+
+fn tcp(addr: &str, link: &Link, allow: &Allow) {
+    let mut delay = Duration::from_millis(200);
+    let mut announced = false;
+    while !link.stopped() {
+        let stream = std::net::ToSocketAddrs::to_socket_addrs(addr)
+            .ok()
+            .and_then(|mut a| a.next())
+            .ok_or_else(|| std::io::Error::other("no such address"))
+            .and_then(|a| {
+                if !allow.admits(a.ip()) {
+                    return Err(std::io::Error::other("refused by --allow"));
+                }
+                TcpStream::connect_timeout(&a, Duration::from_secs(2))
+            });
+        let mut stream = match stream {
+            Ok(s) => s,
+            Err(e) => {
+                if !announced {
+                    link.notice(format!("cannot connect ({e}); retrying"));
+                    announced = true;
+                }
+                delay = back_off(delay, link);
+                continue;
+            }
+        };
+        link.notice("connected".into());
+        announced = false;
+        delay = Duration::from_millis(200);
+        let _ = stream.set_read_timeout(Some(Duration::from_millis(100)));
+        let mut split = LineSplitter::default();
+        let mut buf = vec![0u8; 64 * 1024];
+        loop {
+            if link.stopped() {
+                return;
+            }
+            match stream.read(&mut buf) {
+                Ok(0) => {
+                    link.notice("connection closed; reconnecting".into());
+                    break;
+                }
+                Ok(n) => {
+                    let mut lines = Vec::new();
+                    split.push(&buf[..n], &mut lines);
+                    if !link.send(lines) {
+                        return;
+                    }
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock
+                            | std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::Interrupted
+                    ) => {}
+                Err(e) => {
+                    link.notice(format!("connection lost ({e}); reconnecting"));
+                    break;
+                }
+            }
+        }
+        link.counters
+            .too_long
+            .fetch_add(split.too_long, Ordering::Relaxed);
+    }
+}
+
+fn serial(path: &std::path::Path, baud: u32, link: &Link) {
+    let mut delay = Duration::from_millis(200);
+    let mut announced = false;
+    while !link.stopped() {
+        let port = serialport::new(path.to_string_lossy(), baud)
+            .timeout(Duration::from_millis(100))
+            .open();
+        let mut port = match port {
+            Ok(p) => p,
+            Err(e) => {
+                if !announced {
+                    link.notice(format!("cannot open ({e}); retrying"));
+                    announced = true;
+                }
+                delay = back_off(delay, link);
+                continue;
+            }
+        };
+        if announced {
+            link.notice("reopened".into());
+        }
+        delay = Duration::from_millis(200);
+        let mut split = LineSplitter::default();
+        let mut buf = vec![0u8; 16 * 1024];
+        loop {
+            if link.stopped() {
+                return;
+            }
+            match port.read(&mut buf) {
+                Ok(0) => {}
+                Ok(n) => {
+                    let mut lines = Vec::new();
+                    split.push(&buf[..n], &mut lines);
+                    if !link.send(lines) {
+                        return;
+                    }
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock
+                            | std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::Interrupted
+                    ) => {}
+                Err(e) => {
+                    link.notice(format!("port lost ({e}); reopening"));
+                    announced = true;
+                    break;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specs_parse_and_bad_ones_say_why() {
+        assert_eq!(
+            "serial:/dev/ttyUSB0".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Serial {
+                path: "/dev/ttyUSB0".into(),
+                baud: 115_200
+            }
+        );
+        assert_eq!(
+            "serial:/dev/ttyACM1@9600".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Serial {
+                path: "/dev/ttyACM1".into(),
+                baud: 9600
+            }
+        );
+        assert_eq!(
+            "udp:9000".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Udp {
+                bind: "127.0.0.1:9000".parse().unwrap()
+            }
+        );
+        assert_eq!(
+            "udp:0.0.0.0:9000".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Udp {
+                bind: "0.0.0.0:9000".parse().unwrap()
+            }
+        );
+        assert_eq!(
+            "file:take@user.log@2.5".parse::<SourceSpec>().unwrap(),
+            SourceSpec::File {
+                path: "take@user.log".into(),
+                speed: 2.5
+            }
+        );
+        for bad in ["serial:", "udp:x", "tcp:host", "file:a@0", "nope:1", "x"] {
+            assert!(bad.parse::<SourceSpec>().is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn lines_split_across_reads_and_long_lines_are_dropped() {
+        let mut s = LineSplitter::default();
+        let mut out = Vec::new();
+        s.push(b"ab", &mut out);
+        s.push(b"c\r\nde\nf", &mut out);
+        assert_eq!(out, vec![b"abc".to_vec(), b"de".to_vec()]);
+        let long = vec![b'x'; MAX_LINE + 1];
+        s.push(&long, &mut out);
+        s.push(b"\nok\n", &mut out);
+        assert_eq!(out.last().unwrap(), b"ok");
+        assert_eq!(s.too_long, 1);
+        s.push(b"tail", &mut out);
+        s.finish(&mut out);
+        assert_eq!(out.last().unwrap(), b"tail");
+    }
+
+    #[test]
+    fn allow_lists_match_prefixes() {
+        let a: Allow = "192.168.1.0/24, 10.0.0.7".parse().unwrap();
+        assert!(a.admits("192.168.1.77".parse().unwrap()));
+        assert!(!a.admits("192.168.2.1".parse().unwrap()));
+        assert!(a.admits("10.0.0.7".parse().unwrap()));
+        assert!(!a.admits("10.0.0.8".parse().unwrap()));
+        assert!(a.admits("::ffff:10.0.0.7".parse().unwrap()));
+        assert!(Allow::default().admits("8.8.8.8".parse().unwrap()));
+        assert!("10.0.0.0/33".parse::<Allow>().is_err());
+        let zero: Allow = "0.0.0.0/0".parse().unwrap();
+        assert!(zero.admits("1.2.3.4".parse().unwrap()));
+    }
+}

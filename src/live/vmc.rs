@@ -1,0 +1,239 @@
+//! The VMC protocol out (<https://protocol.vmc.info>): OSC over UDP, one bundle per frame, as
+//! Virtual Motion Capture sends to VSeeFace, Warudo, Unity (EVMC4U), Unreal (VMC4UE) and Blender
+//! receivers.
+//!
+//! Each frame's bundle holds `/VMC/Ext/Root/Pos "root"` (at the origin, unrotated), one
+//! `/VMC/Ext/Bone/Pos <name> px py pz qx qy qz qw` per named bone — its local position (metres;
+//! the hips' is their position in the world, so the body moves) and local rotation, with Unity's
+//! humanoid bone names — then `/VMC/Ext/T <time>` (the frame's time on the take's clock,
+//! seconds). `/VMC/Ext/OK 1 <calibration state> 0` goes out once a second.
+//!
+//! # Axes
+//! Unity is left-handed: X right, Y up, Z forward. The rig world is right-handed with Y up, the
+//! character facing +Z and +X on its left; mirroring X maps one onto the other, a character
+//! facing +Z faces Unity's +Z. A position `(x, y, z)` becomes `(−x, y, z)`; a rotation
+//! `(w, x, y, z)` (the rotation `R` becomes `M R M`, `M = diag(−1, 1, 1)`) becomes
+//! `(w, x, −y, −z)`. At the rest pose every joint frame is parallel to the world, as a VRM's
+//! normalised bones are, so the local rotations apply to a VRM avatar as they are.
+
+use crate::anim::Pose;
+use crate::rig::Rig;
+use nalgebra::{UnitQuaternion, Vector3};
+use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
+
+/// Unity humanoid bone names for the built-in rigs' joints (Mixamo names, which many BVH
+/// skeletons share, and sou12's nodes). A rig file's `vmc_names:` adds to or overrides them.
+pub const BONE_NAMES: [(&str, &str); 34] = [
+    ("Hips", "Hips"),
+    ("Spine", "Spine"),
+    ("Spine1", "Chest"),
+    ("Spine2", "UpperChest"),
+    ("Neck", "Neck"),
+    ("Head", "Head"),
+    ("LeftShoulder", "LeftShoulder"),
+    ("LeftArm", "LeftUpperArm"),
+    ("LeftForeArm", "LeftLowerArm"),
+    ("LeftHand", "LeftHand"),
+    ("RightShoulder", "RightShoulder"),
+    ("RightArm", "RightUpperArm"),
+    ("RightForeArm", "RightLowerArm"),
+    ("RightHand", "RightHand"),
+    ("LeftUpLeg", "LeftUpperLeg"),
+    ("LeftLeg", "LeftLowerLeg"),
+    ("LeftFoot", "LeftFoot"),
+    ("LeftToeBase", "LeftToes"),
+    ("RightUpLeg", "RightUpperLeg"),
+    ("RightLeg", "RightLowerLeg"),
+    ("RightFoot", "RightFoot"),
+    ("RightToeBase", "RightToes"),
+    ("N0_0", "Hips"),
+    ("N0_1", "Spine"),
+    ("N1_0", "RightUpperArm"),
+    ("N1_1", "RightLowerArm"),
+    ("N2_0", "LeftUpperArm"),
+    ("N2_1", "LeftLowerArm"),
+    ("N3_0", "RightUpperLeg"),
+    ("N3_1", "RightLowerLeg"),
+    ("N4_0", "LeftUpperLeg"),
+    ("N4_1", "LeftLowerLeg"),
+    ("N5_0", "Neck"),
+    ("N5_1", "Head"),
+];
+
+/// A position in the rig world → Unity's axes.
+pub fn to_unity_position(p: Vector3<f64>) -> [f32; 3] {
+    [-p.x as f32, p.y as f32, p.z as f32]
+}
+
+/// A rotation in the rig world → Unity's axes, as VMC orders it: `[x, y, z, w]`.
+pub fn to_unity_rotation(q: &UnitQuaternion<f64>) -> [f32; 4] {
+    let q = q.quaternion();
+    [q.i as f32, -q.j as f32, -q.k as f32, q.w as f32]
+}
+
+/// What VMC says of the calibration (`/VMC/Ext/OK`'s second argument).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CalibrationState {
+    Uncalibrated = 0,
+    WaitingForCalibrating = 1,
+    Calibrating = 2,
+    Calibrated = 3,
+}
+
+/// The bones a rig sends: (joint index, Unity name), in rig order.
+#[derive(Debug, Clone)]
+pub struct VmcSkeleton {
+    bones: Vec<(usize, String)>,
+    /// Each bone's offset from its parent, metres, rig world.
+    offsets: Vec<Vector3<f64>>,
+    metres_per_unit: f64,
+}
+
+impl VmcSkeleton {
+    /// The bones of `rig` with a Unity name (its rig file's `vmc_names`, else [`BONE_NAMES`]).
+    /// `None` when the rig has no hips to send.
+    pub fn new(rig: &Rig) -> Option<VmcSkeleton> {
+        let m = rig.units().metres_per_unit();
+        let mut bones = Vec::new();
+        for (j, joint) in rig.joints().iter().enumerate() {
+            let bare = joint.name.rsplit(':').next().unwrap_or(&joint.name);
+            let name = rig.vmc_names().get(&joint.name).cloned().or_else(|| {
+                BONE_NAMES
+                    .iter()
+                    .find(|(ours, _)| *ours == bare)
+                    .map(|(_, unity)| unity.to_string())
+            });
+            if let Some(name) = name
+                && !bones.iter().any(|(_, n)| *n == name)
+            {
+                bones.push((j, name));
+            }
+        }
+        if !bones.iter().any(|(_, n)| n == "Hips") {
+            return None;
+        }
+        let offsets = rig.joints().iter().map(|j| j.offset * m).collect();
+        Some(VmcSkeleton {
+            bones,
+            offsets,
+            metres_per_unit: m,
+        })
+    }
+
+    /// The Unity names sent, in order.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.bones.iter().map(|(_, n)| n.as_str())
+    }
+
+    /// One frame's bundle, encoded.
+    pub fn frame(&self, pose: &Pose, rig: &Rig) -> Vec<u8> {
+        let mut content = Vec::with_capacity(self.bones.len() + 2);
+        let mut root_args = vec![OscType::String("root".into())];
+        root_args.extend(floats(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]));
+        content.push(OscPacket::Message(OscMessage {
+            addr: "/VMC/Ext/Root/Pos".into(),
+            args: root_args,
+        }));
+        for (j, name) in &self.bones {
+            // The hips (the root joint) carry the body's place; other bones their rig offset.
+            let position = if rig.joints()[*j].parent.is_none() {
+                pose.root * self.metres_per_unit
+            } else {
+                self.offsets[*j]
+            };
+            let mut args = vec![OscType::String(name.clone())];
+            args.extend(floats(&to_unity_position(position)));
+            args.extend(floats(&to_unity_rotation(&pose.local[*j])));
+            content.push(OscPacket::Message(OscMessage {
+                addr: "/VMC/Ext/Bone/Pos".into(),
+                args,
+            }));
+        }
+        content.push(OscPacket::Message(OscMessage {
+            addr: "/VMC/Ext/T".into(),
+            args: vec![OscType::Float(pose.time_s as f32)],
+        }));
+        encode(OscPacket::Bundle(OscBundle {
+            timetag: OscTime {
+                seconds: 0,
+                fractional: 1,
+            },
+            content,
+        }))
+    }
+}
+
+/// `/VMC/Ext/OK 1 <state> 0`: a model is loaded (bones are being sent), its calibration state,
+/// the normal calibration mode.
+pub fn ok_message(state: CalibrationState) -> Vec<u8> {
+    encode(OscPacket::Message(OscMessage {
+        addr: "/VMC/Ext/OK".into(),
+        args: vec![OscType::Int(1), OscType::Int(state as i32), OscType::Int(0)],
+    }))
+}
+
+fn floats(v: &[f32]) -> impl Iterator<Item = OscType> + '_ {
+    v.iter().map(|x| OscType::Float(*x))
+}
+
+fn encode(packet: OscPacket) -> Vec<u8> {
+    // Encoding an OSC packet into memory fails only for a string with a NUL, which names here
+    // cannot contain (rig names are checked); an empty datagram is sent then, never a panic.
+    rosc::encoder::encode(&packet).unwrap_or_default()
+}
+
+/// Whether a datagram received on `--listen` asks for a calibration
+/// (`/VMC/Ext/Set/Calib/Exec`, alone or in a bundle). Any bytes: never panics.
+pub fn is_calibration_request(datagram: &[u8]) -> bool {
+    fn any(p: &OscPacket) -> bool {
+        match p {
+            OscPacket::Message(m) => m.addr == "/VMC/Ext/Set/Calib/Exec",
+            OscPacket::Bundle(b) => b.content.iter().any(any),
+        }
+    }
+    rosc::decoder::decode_udp(datagram).is_ok_and(|(_, p)| any(&p))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rotating a vector in the rig world and then mirroring it is mirroring it and then
+    /// rotating it by the converted rotation.
+    #[test]
+    fn the_axis_conversion_mirrors_x() {
+        let q = UnitQuaternion::from_euler_angles(0.3, -0.7, 1.1);
+        let v = Vector3::new(0.2, -0.5, 0.9);
+        // Rotate in the rig world, then mirror; or mirror, then rotate by the converted q.
+        let rotated = to_unity_position(q * v);
+        let [x, y, z, w] = to_unity_rotation(&q);
+        let qu = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            w as f64, x as f64, y as f64, z as f64,
+        ));
+        let [a, b, c] = to_unity_position(v);
+        let mirrored_then_rotated = qu * Vector3::new(a as f64, b as f64, c as f64);
+        for i in 0..3 {
+            assert!((rotated[i] as f64 - mirrored_then_rotated[i]).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn mixamo_and_sou12_have_unity_names_and_calibration_requests_are_read() {
+        let rig = crate::rig::load_rig("mixamo").unwrap();
+        let s = VmcSkeleton::new(&rig).unwrap();
+        let names: Vec<&str> = s.names().collect();
+        assert_eq!(names.len(), 22);
+        assert!(names.contains(&"LeftUpperArm") && names.contains(&"RightToes"));
+        let sou = crate::rig::load_rig("sou12").unwrap();
+        assert_eq!(VmcSkeleton::new(&sou).unwrap().names().count(), 12);
+        let request = encode(OscPacket::Message(OscMessage {
+            addr: "/VMC/Ext/Set/Calib/Exec".into(),
+            args: vec![OscType::Int(0)],
+        }));
+        assert!(is_calibration_request(&request));
+        assert!(!is_calibration_request(&ok_message(
+            CalibrationState::Calibrated
+        )));
+        assert!(!is_calibration_request(b"garbage"));
+    }
+}
