@@ -619,3 +619,133 @@ fn a_tcp_source_reconnects() {
     );
     assert!(summary["frames"].as_u64().unwrap() > 600, "{summary}");
 }
+
+/// A calibration asked for over VMC (`/VMC/Ext/Set/Calib/Exec`, sent by python-osc) mid-take:
+/// the session holds the mapping's pose again from then, records `# calibrate t=…`, and the
+/// recording converts (causal, as the stream ran) to exactly the frames streamed — which follow
+/// the new calibration after its window, unlike the capture converted without it.
+#[test]
+fn a_calibration_request_recalibrates_and_the_recording_says_so() {
+    let Some(py) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let capture = repo_file("samples/walk.csv");
+    let mapping = repo_file("mappings/paper000_16imu_mixamo.json");
+    let receiver = Receiver::start(&py, dir.path(), 2.0);
+    let listen = free_port();
+    let record = dir.path().join("takes");
+    let child = Command::new(imubake_bin())
+        .arg("live")
+        .args([
+            "--source",
+            &format!("file:{}@2", capture.display()),
+            "--mapping",
+            mapping.to_str().unwrap(),
+            "--vmc",
+            &receiver.vmc(),
+            "--listen",
+            &format!("127.0.0.1:{listen}"),
+            "--record",
+            record.to_str().unwrap(),
+            "--json",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(2500));
+    run(Command::new(&py).args([
+        "-c",
+        &format!(
+            "from pythonosc.udp_client import SimpleUDPClient; \
+             SimpleUDPClient('127.0.0.1', {listen}).send_message('/VMC/Ext/Set/Calib/Exec', 0)"
+        ),
+    ]));
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("calibrating: hold the pose"), "{err}");
+    let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let recording = PathBuf::from(summary["recording"].as_str().unwrap());
+    let text = std::fs::read_to_string(&recording).unwrap();
+    let t: f64 = text
+        .lines()
+        .find_map(|l| l.strip_prefix("# calibrate t="))
+        .expect("the recalibration is recorded")
+        .parse()
+        .unwrap();
+    eprintln!("recalibrated at t = {t:.3} s");
+    assert!(t > 2.0 && t < 10.0, "{t}");
+    let vmc = receiver.finish();
+    let bundles = vmc["bundles"].as_array().unwrap();
+    let recorded = whole_take(&recording, &mapping);
+    let (worst, matched, _) = check(bundles, &recorded, &MIXAMO);
+    assert!(
+        worst < 1e-3,
+        "the recording converts to the frames streamed: {worst}°"
+    );
+    assert!(matched + 2 >= recorded.frames());
+    // Without the recalibration, the same frames until the new window ends, then others.
+    let plain = whole_take(&capture, &mapping);
+    let spine = plain.rig().joint_index("LeftUpLeg").unwrap();
+    let end_frame = ((t + 2.0) * 60.0).ceil() as usize + 1;
+    let differs = (end_frame..plain.frames())
+        .map(|n| {
+            plain.local(spine)[n]
+                .angle_to(&recorded.local(spine)[n])
+                .to_degrees()
+        })
+        .fold(0.0, f64::max);
+    let same = (0..((t * 60.0) as usize))
+        .map(|n| {
+            plain.local(spine)[n]
+                .angle_to(&recorded.local(spine)[n])
+                .to_degrees()
+        })
+        .fold(0.0, f64::max);
+    eprintln!("before the recalibration {same:.2e}°, after its window up to {differs:.2}°");
+    assert!(same < 1e-6, "{same}");
+    assert!(differs > 1.0, "{differs}");
+    // The whole-take (non-causal) conversion honours it too: no warning about it, other frames.
+    let sidecar = run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&recording)
+        .arg("--mapping")
+        .arg(&mapping)
+        .args(["--json", "--format", "bvh", "--out"])
+        .arg(dir.path().join("baked")));
+    let sidecar: Value = serde_json::from_slice(&sidecar.stdout).unwrap();
+    assert!(
+        !sidecar["warnings"].to_string().contains("recalibration"),
+        "{}",
+        sidecar["warnings"]
+    );
+    let whole = |input: &Path| {
+        let settings = ConvertSettings {
+            mapping: Some(mapping.clone()),
+            ..Default::default()
+        };
+        imubake::convert::animate(input, &settings).unwrap()
+    };
+    let (plain, baked) = (whole(&capture), whole(&recording));
+    let at_30 = |s: f64| (s * 30.0) as usize;
+    let same = (0..at_30(t - 1.0))
+        .map(|n| {
+            plain.local(spine)[n]
+                .angle_to(&baked.local(spine)[n])
+                .to_degrees()
+        })
+        .fold(0.0, f64::max);
+    let differs = (at_30(t + 2.0)..plain.frames())
+        .map(|n| {
+            plain.local(spine)[n]
+                .angle_to(&baked.local(spine)[n])
+                .to_degrees()
+        })
+        .fold(0.0, f64::max);
+    eprintln!("whole take: before {same:.2e}°, after up to {differs:.2}°");
+    assert!(same < 1e-6 && differs > 1.0, "{same} {differs}");
+}

@@ -23,6 +23,39 @@ pub fn bone_world(
         .collect()
 }
 
+/// [`bone_world`] for a take recalibrated live: `later` holds each recalibration's time from
+/// which it applies (its window's end, ascending) and its calibration; before the first of
+/// them, `calibration` applies.
+pub fn bone_world_recalibrated(
+    tracks: Vec<Track<UnitQuaternion<f64>>>,
+    calibration: &Calibration,
+    later: &[(f64, Calibration)],
+) -> Vec<Track<UnitQuaternion<f64>>> {
+    if later.is_empty() {
+        return bone_world(tracks, calibration);
+    }
+    tracks
+        .into_iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let values = t
+                .times_s()
+                .iter()
+                .zip(t.values())
+                .map(|(time, q)| {
+                    let c = later
+                        .iter()
+                        .rev()
+                        .find(|(from, _)| time >= from)
+                        .map_or(calibration, |(_, c)| c);
+                    c.heading * c.align[i] * q * c.mounts[i].inverse()
+                })
+                .collect();
+            Track::new(t.times_s().to_vec(), values).expect("the same times")
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

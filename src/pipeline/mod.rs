@@ -265,6 +265,29 @@ pub fn run(
         &file,
         &mut warnings,
     )?;
+    // A live session's recalibrations: the same pose held again, each solved on its own window
+    // and applying from the window's end.
+    let mut later = Vec::new();
+    for &t in take.recalibrations_s() {
+        let Some(again) = window.as_ref().map(|w| w.starting_at(t)) else {
+            break;
+        };
+        if again.end_s() > take.last_time_s() {
+            warnings.push(format!(
+                "the recalibration at {t:.3} s ends after the take; the calibration before it stays"
+            ));
+            continue;
+        }
+        let c = calibrate::calibrate(
+            rig,
+            &sources,
+            Some(&again),
+            take.last_time_s(),
+            &file,
+            &mut warnings,
+        )?;
+        later.push((again.end_s(), c));
+    }
     let Sources {
         sensors,
         tracks,
@@ -273,7 +296,7 @@ pub fn run(
     } = sources;
 
     // 3. Bone world orientations, on each sensor's own sample times.
-    let bone_tracks = bone_world::bone_world(tracks, &calibration);
+    let bone_tracks = bone_world::bone_world_recalibrated(tracks, &calibration, &later);
 
     // The frame grid, and what to say about it.
     let t_last = bone_tracks
@@ -423,7 +446,14 @@ fn run_causal(
             index: 0,
         })
         .collect();
+    // A live session's recalibrations, at the point of the stream where it made them.
+    let mut recalibrations = take.recalibrations_s().iter().copied().peekable();
     while let Some(head) = heads.pop() {
+        while let Some(t) = recalibrations.next_if(|&t| head.t > t) {
+            if let Err(why) = stream.recalibrate(t) {
+                warnings.push(format!("the recalibration at {t:.3} s: {why}"));
+            }
+        }
         let track = &sources.tracks[head.sensor];
         stream.push_rig(
             head.sensor,

@@ -366,6 +366,14 @@ fn read_sized(
             take.drop_line(line_no, "skipped by --skip-lines", line);
             continue;
         }
+        if let Some(comment) = line.trim_ascii().strip_prefix(b"#") {
+            match super::calibrate_directive(comment) {
+                Some(Ok(t)) => take.recalibrate_at(t),
+                Some(Err(reason)) => take.drop_line(line_no, reason, line),
+                None => {}
+            }
+            continue;
+        }
         let row = match parse_row(&layout, line) {
             Ok(Some(row)) => row,
             Ok(None) => continue,

@@ -548,6 +548,21 @@ pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> 
     }
 }
 
+/// A live session's recalibration as it records it, `# calibrate t=SECONDS` (the text after
+/// `#`): `None` for any other comment, `Err` for a malformed time.
+pub(crate) fn calibrate_directive(comment: &[u8]) -> Option<Result<f64, String>> {
+    let text = std::str::from_utf8(comment).ok()?.trim();
+    let rest = text.strip_prefix("calibrate")?.trim();
+    let value = rest.strip_prefix("t=")?.trim();
+    Some(
+        value
+            .parse::<f64>()
+            .ok()
+            .filter(|t| t.is_finite() && *t >= 0.0)
+            .ok_or_else(|| format!("`# calibrate t={value}`: expected seconds ≥ 0")),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -109,6 +109,15 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
         if line.trim_ascii().is_empty() {
             continue;
         }
+        // A live session's recording of a recalibration (any other line is the paper's to drop).
+        if let Some(Ok(t)) = line
+            .trim_ascii()
+            .strip_prefix(b"#")
+            .and_then(super::calibrate_directive)
+        {
+            take.recalibrate_at(t);
+            continue;
+        }
         let (timestamp, sou_id, angles) = match parse_line(line) {
             Ok(row) => row,
             Err(problem) => {

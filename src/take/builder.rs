@@ -280,6 +280,8 @@ pub struct TakeBuilder {
     warnings: Vec<String>,
     /// Scratch for what a push did besides keeping the row.
     events: Vec<Event>,
+    /// Recalibrations recorded by a live session, seconds since its first sample.
+    recalibrations: Vec<f64>,
 }
 
 /// Moves a stream's events into the dropped lines (late rows are reported when merged).
@@ -341,7 +343,14 @@ impl TakeBuilder {
             repaired: Vec::new(),
             warnings: Vec::new(),
             events: Vec::new(),
+            recalibrations: Vec::new(),
         }
+    }
+
+    /// A recalibration a live session recorded (`# calibrate t=…`): the mapping's pose held
+    /// again from `t_s`, seconds since the first sample.
+    pub fn recalibrate_at(&mut self, t_s: f64) {
+        self.recalibrations.push(t_s);
     }
 
     pub fn set_world(&mut self, world: World) {
@@ -479,6 +488,7 @@ impl TakeBuilder {
             mut repaired,
             mut warnings,
             mut events,
+            mut recalibrations,
             ..
         } = self;
         // Rows still held after a jump at the end of the source.
@@ -570,6 +580,10 @@ impl TakeBuilder {
                     s.shift_times(new_zero);
                 }
                 raw_start += new_zero / spu;
+                for t in &mut recalibrations {
+                    *t -= new_zero;
+                }
+                recalibrations.retain(|t| *t >= 0.0);
             }
         }
         if out.is_empty() {
@@ -586,6 +600,10 @@ impl TakeBuilder {
             dropped_lines: dropped,
             repaired_lines: repaired,
             warnings,
+            recalibrations_s: {
+                recalibrations.sort_by(f64::total_cmp);
+                recalibrations
+            },
         })
     }
 }

@@ -204,9 +204,16 @@ pub struct Take {
     dropped_lines: Vec<LineReport>,
     repaired_lines: Vec<LineReport>,
     warnings: Vec<String>,
+    /// When a live session was recalibrated (`# calibrate t=…` lines), seconds, ascending.
+    recalibrations_s: Vec<f64>,
 }
 
 impl Take {
+    /// When a live session recording this take was recalibrated: the mapping's calibration
+    /// pose held again from each of these times (seconds, ascending).
+    pub fn recalibrations_s(&self) -> &[f64] {
+        &self.recalibrations_s
+    }
     pub fn source(&self) -> &SourceInfo {
         &self.source
     }
