@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 use std::process::Command;
 
-const COMMANDS: [&str; 9] = [
+const COMMANDS: [&str; 10] = [
     "convert",
     "batch",
     "fuse",
@@ -16,6 +16,7 @@ const COMMANDS: [&str; 9] = [
     "simulate",
     "angles",
     "compare",
+    "live",
 ];
 
 fn docs(rel: &str) -> String {

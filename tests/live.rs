@@ -749,3 +749,56 @@ fn a_calibration_request_recalibrates_and_the_recording_says_so() {
     eprintln!("whole take: before {same:.2e}°, after up to {differs:.2}°");
     assert!(same < 1e-6 && differs > 1.0, "{same} {differs}");
 }
+
+/// A sensor that stops (its rows left out for 2 s of take time) is held at its last pose with a
+/// warning, the other bones go on moving, and it is picked up when it returns.
+#[test]
+fn a_silent_sensor_is_held_and_picked_up_again() {
+    let capture = repo_file("samples/walk.csv");
+    let mapping = repo_file("mappings/paper000_16imu_mixamo.json");
+    let port = free_port();
+    let child = live(&[
+        "--source",
+        &format!("udp:{port}"),
+        "--mapping",
+        mapping.to_str().unwrap(),
+        "--vmc",
+        "off",
+        "--json",
+    ])
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let target = format!("127.0.0.1:{port}");
+    let text = std::fs::read_to_string(&capture).unwrap();
+    let start = Instant::now();
+    let mut sent = 0;
+    for l in text.lines() {
+        let t = l.split(',').next().and_then(|t| t.parse::<f64>().ok());
+        if let Some(t) = t {
+            if (4.0..6.0).contains(&t) && l.contains(",left_hand,") {
+                continue;
+            }
+            let due = Duration::from_secs_f64(t / 4.0);
+            if let Some(wait) = due.checked_sub(start.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        socket.send_to(l.as_bytes(), &target).unwrap();
+        sent += 1;
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("sensor `left_hand` is silent"), "{err}");
+    assert!(err.contains("sensor `left_hand` is back"), "{err}");
+    let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(summary["lines"].as_u64().unwrap(), sent);
+    // 60 fps over the whole take: the frames went on through the silence.
+    assert!(summary["frames"].as_u64().unwrap() >= 700, "{summary}");
+}

@@ -33,6 +33,51 @@ proptest! {
         let _ = imubake_csv::read_from(&bytes[..], Path::new("fuzz.csv"), &ReadOptions::default());
     }
 
+    /// What a live session receives: any datagram or serial read is split into lines and fed to
+    /// a line stream of either format (after a header, for CSV) and to the VMC request check,
+    /// never panicking; the stream keeps its invariants (times increase per sensor).
+    #[test]
+    fn live_inputs_never_panic(
+        chunks in proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..300), 0..8),
+        text in proptest::string::string_regex(r"([0-9]{1,6},N[0-9],[-0-9., ]{0,40}\n|[0-9.]{1,5},s[0-9],[-0-9., ]{0,30}\n|# calibrate t=[-0-9.a]{0,6}\n){0,12}").unwrap(),
+        spec in ".{0,40}",
+    ) {
+        use imubake::live::source::{Allow, LineSplitter, SourceSpec};
+        use imubake::read::stream::{LineFormat, LineStream};
+        let _ = spec.parse::<SourceSpec>();
+        let _ = spec.parse::<Allow>();
+        for format in [LineFormat::Sou, LineFormat::ImubakeCsv] {
+            let mut stream = LineStream::new(format, "fuzz", None);
+            let mut samples = Vec::new();
+            let mut n = 0;
+            if format == LineFormat::ImubakeCsv {
+                stream.push_line(1, b"time_s,sensor,qw,qx,qy,qz", &mut samples).unwrap();
+                n = 1;
+            }
+            let mut split = LineSplitter::default();
+            let mut lines = Vec::new();
+            for c in chunks.iter().map(|c| c.as_slice()).chain(std::iter::once(text.as_bytes())) {
+                prop_assert!(!imubake::live::vmc::is_calibration_request(c) || c.starts_with(b"/VMC") || c.starts_with(b"#bundle"));
+                split.push(c, &mut lines);
+            }
+            split.finish(&mut lines);
+            for l in &lines {
+                n += 1;
+                prop_assert!(l.len() <= imubake::live::source::MAX_LINE);
+                // A clock reset is an error, anything else a sample or a dropped line.
+                let _ = stream.push_line(n, l, &mut samples);
+            }
+            let _ = stream.finish(&mut samples);
+            let mut last = std::collections::HashMap::new();
+            for s in &samples {
+                prop_assert!(s.t_s.is_finite());
+                if let Some(prev) = last.insert(s.sensor.index(), s.t_s) {
+                    prop_assert!(s.t_s > prev, "{} after {}", s.t_s, prev);
+                }
+            }
+        }
+    }
+
     /// `compare`'s angle tables: any text is a table or an error naming a line, never a panic.
     #[test]
     fn angle_table_reader_never_panics(

@@ -67,6 +67,9 @@ impl crate::diagnostic::Diagnostic for LiveError {
     }
 }
 
+/// A sensor silent this long (stream time, seconds) is said to be held at its last pose.
+const STALE_NOTICE_S: f64 = 0.5;
+
 /// Which clock data lines keep.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Clock {
@@ -336,6 +339,7 @@ pub fn run(
     let mut last_ok = Instant::now() - Duration::from_secs(2);
     let mut per_sensor: Vec<(u64, f64)> = Vec::new(); // samples this period, last time
     let mut pending_calibration = false;
+    let mut silent: Vec<bool> = Vec::new();
     let name = PathBuf::from("live");
 
     let result: Result<(), LiveError> = (|| {
@@ -482,7 +486,7 @@ pub fn run(
             if last_status.elapsed() >= Duration::from_millis(500) {
                 let period = last_status.elapsed().as_secs_f64();
                 last_status = Instant::now();
-                report(Report::Status(status(
+                let now = status(
                     started,
                     running.as_ref(),
                     frames,
@@ -491,7 +495,23 @@ pub fn run(
                     &mut per_sensor,
                     period,
                     latencies.summary(),
-                )));
+                );
+                // A sensor that stops is held at its last pose (the resampler's rule): say so
+                // once, and again when it returns.
+                silent.resize(now.sensors.len(), false);
+                for (s, was) in now.sensors.iter().zip(silent.iter_mut()) {
+                    let is = s.silent_s > STALE_NOTICE_S && s.silent_s.is_finite();
+                    if is && !*was {
+                        report(Report::Notice(format!(
+                            "warning: sensor `{}` is silent ({:.1} s): held at its last pose",
+                            s.id, s.silent_s
+                        )));
+                    } else if !is && *was {
+                        report(Report::Notice(format!("sensor `{}` is back", s.id)));
+                    }
+                    *was = is;
+                }
+                report(Report::Status(now));
             }
         }
         Ok(())
