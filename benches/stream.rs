@@ -110,10 +110,15 @@ fn main() {
                 index.resize(k + 1, None);
             }
             let i = *index[k].get_or_insert_with(|| poses.sensor_index(&ids[k]).expect("mapped"));
-            poses.push(i, s.t_s, s.value.to_quaternion(), &mut |p: &Pose| {
-                frames += 1;
-                checksum += p.local[3].w;
-            });
+            poses.push(
+                i,
+                s.t_s,
+                s.value.orientation().expect("quaternion rows"),
+                &mut |p: &Pose| {
+                    frames += 1;
+                    checksum += p.local[3].w;
+                },
+            );
         }
     }
     let streaming = warm_start.elapsed();

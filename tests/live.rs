@@ -802,3 +802,63 @@ fn a_silent_sensor_is_held_and_picked_up_again() {
     // 60 fps over the whole take: the frames went on through the silence.
     assert!(summary["frames"].as_u64().unwrap() >= 700, "{summary}");
 }
+
+/// Raw gyroscope, accelerometer and magnetometer rows (simulated from pymo's walk onto its own
+/// skeleton) streamed live: each sensor fused online as it arrives, the frames within 0.5° of
+/// the whole-take conversion in causal mode (which fuses each whole track with online VQF).
+#[test]
+fn raw_readings_are_fused_live() {
+    let (Some(py), Some(bvh)) = (python(), common::shared("bvh/pymo_walk.bvh")) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mapping = repo_file("tests/fixtures/mappings/pymo_16imu.json");
+    let raw = dir.path().join("raw.csv");
+    run(Command::new(imubake_bin())
+        .arg("simulate")
+        .arg(&bvh)
+        .arg("--mapping")
+        .arg(&mapping)
+        .arg("--rig")
+        .arg(&bvh)
+        .arg("--raw")
+        .arg("--output")
+        .arg(&raw));
+    let receiver = Receiver::start(&py, dir.path(), 2.0);
+    run(&mut live(&[
+        "--source",
+        &format!("file:{}@4", raw.display()),
+        "--mapping",
+        mapping.to_str().unwrap(),
+        "--rig",
+        bvh.to_str().unwrap(),
+        "--vmc",
+        &receiver.vmc(),
+    ]));
+    let vmc = receiver.finish();
+    let mut settings = ConvertSettings {
+        mapping: Some(mapping.clone()),
+        rig: Some(bvh.to_string_lossy().into_owned()),
+        ..Default::default()
+    };
+    settings.pipeline.fps = "60".parse().unwrap();
+    settings.pipeline.causal = true;
+    let anim = imubake::convert::animate(&raw, &settings).unwrap();
+    // The Unity names of the joints this skeleton shares with Mixamo's.
+    let names: Vec<(&str, &str)> = MIXAMO
+        .iter()
+        .copied()
+        .filter(|(_, joint)| anim.rig().joint_index(joint).is_some())
+        .collect();
+    let (worst, matched, _) = check(vmc["bundles"].as_array().unwrap(), &anim, &names);
+    eprintln!(
+        "raw: {matched} bundles of {}, worst bone {worst:.2e}°",
+        anim.frames()
+    );
+    assert!(
+        matched + 2 >= anim.frames(),
+        "{matched} of {}",
+        anim.frames()
+    );
+    assert!(worst < 0.5, "{worst}°");
+}

@@ -89,9 +89,12 @@ fn stream_frames(
         let ids = lines.take().unwrap().sensor_ids().to_vec();
         for s in samples.drain(..) {
             if let Some(i) = poses.sensor_index(&ids[s.sensor.index()]) {
-                poses.push(i, s.t_s, s.value.to_quaternion(), &mut |p: &Pose| {
-                    frames.push(p.clone())
-                });
+                poses.push(
+                    i,
+                    s.t_s,
+                    s.value.orientation().expect("orientation rows"),
+                    &mut |p: &Pose| frames.push(p.clone()),
+                );
             }
         }
     };

@@ -18,6 +18,7 @@ pub mod init;
 pub mod madgwick;
 pub mod mahony;
 pub mod offline;
+pub mod stream;
 pub mod trust;
 pub mod vqf;
 

@@ -149,6 +149,11 @@ impl SensorIntrinsics {
         }
     }
 
+    /// One magnetometer reading corrected (hard and soft iron).
+    pub fn correct_magnetometer(&self, m: &Vector3<f64>) -> Vector3<f64> {
+        self.magnetometer.as_ref().map_or(*m, |cal| cal.correct(m))
+    }
+
     /// A sensor's tracks corrected; each is borrowed as it is when nothing corrects it.
     #[allow(clippy::type_complexity)]
     pub fn apply<'a>(

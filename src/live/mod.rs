@@ -19,7 +19,7 @@ use crate::anim::Pose;
 use crate::convert::{ConvertError, ConvertSettings};
 use crate::pipeline::stream::{PoseStream, StreamStatus};
 use crate::read::stream::{LineClock, LineFormat, LineStream};
-use crate::take::{LineReport, StreamSample};
+use crate::take::{LineReport, StreamSample, StreamValue};
 use source::{Allow, Event, Link, SourceCounters, SourceSpec};
 use std::net::{SocketAddr, UdpSocket};
 use std::path::PathBuf;
@@ -200,6 +200,10 @@ struct Running {
     poses: PoseStream,
     /// LineStream sensor index → PoseStream index (`None`: not mapped).
     index: Vec<Option<Option<usize>>>,
+    /// Sensors whose raw readings could not be fused (left out).
+    refused: Vec<bool>,
+    /// What to say on the terminal (fusion's warnings and errors).
+    notices: Vec<String>,
 }
 
 /// Runs a session until `stop` is set or every source has ended; `report` hears the status and
@@ -466,11 +470,17 @@ pub fn run(
                     }
                 }
             }
-            if let Some(run) = &running {
+            if let Some(run) = &mut running {
                 for w in &run.poses.warnings()[warned.min(run.poses.warnings().len())..] {
                     report(Report::Notice(format!("warning: {w}")));
                 }
                 warned = run.poses.warnings().len();
+                for w in run.poses.take_fusion_warnings() {
+                    report(Report::Notice(format!("warning: {w}")));
+                }
+                for n in run.notices.drain(..) {
+                    report(Report::Notice(n));
+                }
             }
             if let Some((socket, _)) = &vmc_out
                 && last_ok.elapsed() >= Duration::from_secs(1)
@@ -596,6 +606,8 @@ fn start_running(
         lines,
         poses,
         index: Vec::new(),
+        refused: Vec::new(),
+        notices: Vec::new(),
     }))
 }
 
@@ -626,8 +638,25 @@ fn feed(
             }
             per_sensor[i].0 += 1;
             per_sensor[i].1 = s.t_s;
-            run.poses
-                .push(i, s.t_s, s.value.to_quaternion(), &mut *on_pose);
+            match s.value {
+                StreamValue::Raw { imu, mag } => {
+                    if run.refused.get(i).copied().unwrap_or(false) {
+                        continue;
+                    }
+                    if let Err(e) = run.poses.push_raw(i, s.t_s, imu, mag, &mut *on_pose) {
+                        // Readings in the wrong units: the sensor is left out, said once.
+                        run.refused.resize(run.poses.sensors().len(), false);
+                        run.refused[i] = true;
+                        run.notices
+                            .push(format!("error: {e}; its readings are left out"));
+                    }
+                }
+                value => {
+                    if let Some(q) = value.orientation() {
+                        run.poses.push(i, s.t_s, q, &mut *on_pose);
+                    }
+                }
+            }
         }
     }
 }

@@ -348,6 +348,12 @@ impl CalibrationCore {
         self.result.as_ref()
     }
 
+    /// Sensor `i` turns out to have no heading of its own (fused without a magnetometer): the
+    /// calibration aligns it, as [`calibrate`] does such sensors.
+    pub fn set_own_heading(&mut self, i: usize) {
+        self.sensors[i].own_heading = true;
+    }
+
     /// The calibration window, if there is one.
     pub fn window(&self) -> Option<&CalibrationWindow> {
         self.window.as_ref()

@@ -139,9 +139,27 @@ pub fn orientations(
                         .sensor_calibration
                         .as_ref()
                         .and_then(|c| c.sensors.get(sensor.id())),
-                    filter.estimates_gyro_bias(),
+                    // Causal: no look ahead at the opening stillness for the bias.
+                    filter.estimates_gyro_bias() || causal,
                 );
-                fusion::fuse(
+                // Causal mode fuses as a live stream does (the filter's period from the first
+                // readings), so a take converted causally gives the frames a session of it gave.
+                let mut prepared = prepared;
+                if causal && !filter.estimates_gyro_bias() {
+                    for c in &mut prepared.corrections {
+                        if c.starts_with("gyro-bias (estimated") {
+                            *c =
+                                "gyro-bias left in (causal: no look ahead at an opening stillness)"
+                                    .into();
+                        }
+                    }
+                }
+                let fuse = if causal {
+                    fusion::stream::fuse_as_stream
+                } else {
+                    fusion::fuse
+                };
+                fuse(
                     sensor.id(),
                     &prepared.inertial,
                     prepared.magnetometer.as_deref(),

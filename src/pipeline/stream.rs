@@ -32,8 +32,11 @@ use super::smoothing::CausalSmoother;
 use super::{PipelineError, PipelineOptions};
 use crate::anim::Pose;
 use crate::fps::Fps;
+use crate::fusion::stream::StreamFuser;
+use crate::fusion::{Fusion, FusionError};
 use crate::mapping::{CalibrationWindow, Mapping, ResolvedSensor};
 use crate::rig::Rig;
+use crate::take::ImuSample;
 use crate::world::World;
 use nalgebra::{UnitQuaternion, Vector3};
 use std::path::Path;
@@ -73,6 +76,13 @@ pub struct PoseStream {
     pose: Pose,
     /// A recalibration under way.
     recalibration: Option<Recalibration>,
+    /// Raw readings fused as they come, per sensor (created on its first raw reading).
+    fusers: Vec<Option<StreamFuser>>,
+    fusion: Fusion,
+    corrections: Option<std::sync::Arc<crate::intrinsics::SensorCalibration>>,
+    /// `q_rig_enu`: fused orientations are in ENU whatever the stream's world.
+    enu_to_rig: UnitQuaternion<f64>,
+    fused: Vec<(f64, UnitQuaternion<f64>)>,
 }
 
 /// A calibration being solved again while the one in force goes on.
@@ -149,6 +159,14 @@ impl PoseStream {
                 airborne: false,
             },
             recalibration: None,
+            fusers: (0..n).map(|_| None).collect(),
+            fusion: options
+                .fusion
+                .clone()
+                .unwrap_or_else(Fusion::online_default),
+            corrections: options.sensor_calibration.clone(),
+            enu_to_rig: World::Enu.to_rig(),
+            fused: Vec::new(),
         })
     }
 
@@ -225,6 +243,68 @@ impl PoseStream {
         self.push_rig(sensor, t, q, on_pose);
     }
 
+    /// Raw readings of sensor `sensor` at `t` seconds (gyroscope rad/s, accelerometer m/s², the
+    /// magnetometer when the row has one, sensor frame), fused online
+    /// ([`crate::fusion::stream::StreamFuser`], corrected first by the sensor calibration file
+    /// when it has the sensor); the orientations go on as [`PoseStream::push`]'s, in ENU.
+    pub fn push_raw(
+        &mut self,
+        sensor: usize,
+        t: f64,
+        imu: ImuSample,
+        mag: Option<Vector3<f64>>,
+        on_pose: &mut impl FnMut(&Pose),
+    ) -> Result<(), FusionError> {
+        let id = &self.sensors[sensor].sensor;
+        let (imu, mag) = match self.corrections.as_ref().and_then(|c| c.sensors.get(id)) {
+            Some(c) => (
+                c.correct_inertial(&imu),
+                mag.map(|m| c.correct_magnetometer(&m)),
+            ),
+            None => (imu, mag),
+        };
+        let fusion = &self.fusion;
+        let fuser = self.fusers[sensor].get_or_insert_with(|| StreamFuser::new(id, fusion));
+        let mut fused = std::mem::take(&mut self.fused);
+        fused.clear();
+        let result = fuser.push(t, imu, mag, &mut fused);
+        self.after_fusing(sensor, &mut fused, on_pose);
+        self.fused = fused;
+        result
+    }
+
+    /// Orientations a fuser let out, into the stages; a sensor fused without a magnetometer has
+    /// no heading of its own, which calibration then aligns.
+    fn after_fusing(
+        &mut self,
+        sensor: usize,
+        fused: &mut Vec<(f64, UnitQuaternion<f64>)>,
+        on_pose: &mut impl FnMut(&Pose),
+    ) {
+        if fused.is_empty() {
+            return;
+        }
+        let six_d = self.fusers[sensor].as_ref().is_some_and(|f| !f.nine_d());
+        if six_d && !self.sensors[sensor].own_heading {
+            self.sensors[sensor].own_heading = true;
+            self.calibration.set_own_heading(sensor);
+        }
+        for &(t, q) in fused.iter() {
+            let q = self.enu_to_rig * q;
+            self.push_rig(sensor, t, q, on_pose);
+        }
+        fused.clear();
+    }
+
+    /// What the fusers have had to say, drained.
+    pub fn take_fusion_warnings(&mut self) -> Vec<String> {
+        self.fusers
+            .iter_mut()
+            .flatten()
+            .flat_map(|f| std::mem::take(&mut f.warnings))
+            .collect()
+    }
+
     /// [`PoseStream::push`] for a sample already in the rig world (`q_rig_sensor`, stage 1 done).
     pub fn push_rig(
         &mut self,
@@ -260,6 +340,14 @@ impl PoseStream {
     /// The end of the stream: the calibration solved with what there is, every sensor's last
     /// samples smoothed, and the frames up to the latest sample's (floor(t_last · fps)) out.
     pub fn finish(&mut self, on_pose: &mut impl FnMut(&Pose)) -> Result<(), PipelineError> {
+        // Fusers still warming up start with what they have.
+        for sensor in 0..self.fusers.len() {
+            let mut fused = Vec::new();
+            if let Some(f) = self.fusers[sensor].as_mut() {
+                f.finish(&mut fused)?;
+            }
+            self.after_fusing(sensor, &mut fused, on_pose);
+        }
         if self.calibration.result().is_none() {
             self.calibration
                 .finish(&self.mapping_file, &mut self.warnings)?;

@@ -253,11 +253,12 @@ impl LineStream {
                 return Ok(());
             }
         };
-        let value = match (row.quaternion, row.ypr) {
-            (Some((q, _)), _) => StreamValue::Quaternion(q),
-            (None, Some(ypr)) => StreamValue::YawPitchRoll(ypr),
-            // Raw readings wait for fusion on streams.
-            (None, None) => return Ok(()),
+        let value = match (row.quaternion, row.ypr, row.imu) {
+            (Some((q, _)), _, _) => StreamValue::Quaternion(q),
+            (None, Some(ypr), _) => StreamValue::YawPitchRoll(ypr),
+            // Raw readings, fused by the pose stream.
+            (None, None, Some(imu)) => StreamValue::Raw { imu, mag: row.mag },
+            (None, None, None) => return Ok(()),
         };
         let take = self.take.as_mut().expect("the header set the clock");
         let sensor = match self.ids.get(row.id) {

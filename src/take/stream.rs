@@ -20,29 +20,35 @@
 
 use super::builder::{BuildError, CLOCK_RESET_S, ClockUnit, clock_reset, dropped_report};
 use super::sequence::{Dropped, Held, Sequencer, Sink};
-use super::{LineReport, SensorIdx, YawPitchRollDeg};
-use nalgebra::UnitQuaternion;
+use super::{ImuSample, LineReport, SensorIdx, YawPitchRollDeg};
+use nalgebra::{UnitQuaternion, Vector3};
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
 
 /// The default length of the reorder buffer, seconds of stream time.
 pub const DEFAULT_REORDER_S: f64 = 0.25;
 
-/// One orientation sample as a stream carries it.
+/// One sample as a stream carries it: an orientation, or raw readings to fuse.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum StreamValue {
     /// `q_world_sensor`.
     Quaternion(UnitQuaternion<f64>),
     /// Yaw, pitch, roll in degrees, intrinsic Z-Y-X (SOU nodes).
     YawPitchRoll(YawPitchRollDeg),
+    /// Gyroscope and accelerometer readings, and the magnetometer's when the row has one.
+    Raw {
+        imu: ImuSample,
+        mag: Option<Vector3<f64>>,
+    },
 }
 
 impl StreamValue {
-    /// The orientation as a quaternion `q_world_sensor`.
-    pub fn to_quaternion(self) -> UnitQuaternion<f64> {
+    /// The orientation as a quaternion `q_world_sensor`; `None` for raw readings.
+    pub fn orientation(self) -> Option<UnitQuaternion<f64>> {
         match self {
-            StreamValue::Quaternion(q) => q,
-            StreamValue::YawPitchRoll(ypr) => ypr.to_quaternion(),
+            StreamValue::Quaternion(q) => Some(q),
+            StreamValue::YawPitchRoll(ypr) => Some(ypr.to_quaternion()),
+            StreamValue::Raw { .. } => None,
         }
     }
 }
@@ -315,7 +321,7 @@ mod tests {
         samples
             .iter()
             .map(|s| {
-                let angle = s.value.to_quaternion().angle().to_degrees();
+                let angle = s.value.orientation().unwrap().angle().to_degrees();
                 (
                     stream.sensor_ids()[s.sensor.index()].clone(),
                     (s.t_s * 1e6).round() / 1e6,
