@@ -366,6 +366,40 @@ fn udp_datagrams_stream_the_same_frames() {
     assert!(worst < 0.5, "{worst}°");
 }
 
+/// A pseudo-terminal: its master (what the test writes) and its slave's fd and path (the
+/// "serial port").
+fn openpty() -> (std::fs::File, (i32, String)) {
+    let (mut m, mut s) = (0, 0);
+    let mut name = [0 as libc::c_char; 128];
+    let rc = unsafe {
+        libc::openpty(
+            &mut m,
+            &mut s,
+            name.as_mut_ptr(),
+            std::ptr::null(),
+            std::ptr::null(),
+        )
+    };
+    assert_eq!(rc, 0);
+    // Not inherited by the imubake child (it would keep the device alive after an "unplug").
+    unsafe {
+        libc::fcntl(m, libc::F_SETFD, libc::FD_CLOEXEC);
+        libc::fcntl(s, libc::F_SETFD, libc::FD_CLOEXEC);
+    }
+    // Raw, as a USB-serial adapter is (no echo, no line editing) before anyone opens it.
+    unsafe {
+        let mut t: libc::termios = std::mem::zeroed();
+        libc::tcgetattr(s, &mut t);
+        libc::cfmakeraw(&mut t);
+        libc::tcsetattr(s, libc::TCSANOW, &t);
+    }
+    let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
+        .to_string_lossy()
+        .into_owned();
+    use std::os::fd::FromRawFd;
+    (unsafe { std::fs::File::from_raw_fd(m) }, (s, path))
+}
+
 /// Paper 002's SOU log (debug text, corrupted lines) written through a pseudo-terminal at its
 /// own pace, as an Arduino would over USB serial: the frames are those of the whole-take
 /// conversion of the log; the corrupted lines are reported dropped.
@@ -375,25 +409,7 @@ fn a_serial_port_streams_a_sou_log() {
     let dir = tempfile::tempdir().unwrap();
     let log = repo_file("samples/sou_wave.log");
     let mapping = repo_file("samples/sou_wave.mapping.json");
-    let (mut master, slave) = {
-        let (mut m, mut s) = (0, 0);
-        let mut name = [0 as libc::c_char; 128];
-        let rc = unsafe {
-            libc::openpty(
-                &mut m,
-                &mut s,
-                name.as_mut_ptr(),
-                std::ptr::null(),
-                std::ptr::null(),
-            )
-        };
-        assert_eq!(rc, 0);
-        let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
-            .to_string_lossy()
-            .into_owned();
-        use std::os::fd::FromRawFd;
-        (unsafe { std::fs::File::from_raw_fd(m) }, (s, path))
-    };
+    let (mut master, slave) = openpty();
     let receiver = Receiver::start(&py, dir.path(), 2.0);
     let child = live(&[
         "--source",
@@ -861,4 +877,162 @@ fn raw_readings_are_fused_live() {
         anim.frames()
     );
     assert!(worst < 0.5, "{worst}°");
+}
+
+/// SOU nodes that send no timestamp of their own, on stdin: each line is stamped with the host's
+/// clock in ms when it arrives (as paper 002's driver does), the character moves, the session
+/// ends with the input, and the recording holds the stamped lines, which convert.
+#[test]
+fn untimed_lines_on_stdin_get_the_hosts_clock() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = repo_file("samples/sou_wave.log");
+    let mapping = repo_file("samples/sou_wave.mapping.json");
+    let record = dir.path().join("takes");
+    let mut child = live(&[
+        "--source",
+        "stdin",
+        "--mapping",
+        mapping.to_str().unwrap(),
+        "--vmc",
+        "off",
+        "--record",
+        record.to_str().unwrap(),
+        "--json",
+    ])
+    .stdin(Stdio::piped())
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
+    let text = std::fs::read_to_string(&log).unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let start = Instant::now();
+    let (mut t0, mut sent, mut last_ms) = (None, 0usize, 0u64);
+    for line in text.lines() {
+        let fields: Vec<&str> = line.split(',').collect();
+        let Some(ms) = fields[0].parse::<u64>().ok().filter(|_| fields.len() == 8) else {
+            continue;
+        };
+        let t0 = *t0.get_or_insert(ms);
+        // Six seconds of the log, at its own pace.
+        if ms - t0 > 6000 {
+            break;
+        }
+        last_ms = ms - t0;
+        if let Some(wait) = Duration::from_millis(ms - t0).checked_sub(start.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        writeln!(stdin, "{}", fields[1..].join(",")).unwrap();
+        sent += 1;
+    }
+    drop(stdin);
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(summary["lines"].as_u64().unwrap() as usize, sent);
+    assert!(
+        summary["dropped_lines"].as_array().unwrap().is_empty(),
+        "{summary}"
+    );
+    // 60 fps over the seconds sent.
+    let frames = summary["frames"].as_u64().unwrap() as f64;
+    let expected = last_ms as f64 / 1000.0 * 60.0;
+    assert!(
+        (frames - expected).abs() < 0.1 * expected,
+        "{frames} frames, {expected} expected"
+    );
+    let recording = PathBuf::from(summary["recording"].as_str().unwrap());
+    let recorded = std::fs::read_to_string(&recording).unwrap();
+    let stamps: Vec<u64> = recorded
+        .lines()
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(stamps.len(), sent);
+    assert!(
+        stamps.windows(2).all(|w| w[0] <= w[1]),
+        "host clock stamps increase"
+    );
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&recording)
+        .arg("--mapping")
+        .arg(&mapping)
+        .args(["--format", "bvh", "--out"])
+        .arg(dir.path().join("baked")));
+}
+
+/// A serial port that disappears (the adapter unplugged: the pty closed) is reopened with
+/// backoff when it is back (a new pty behind the same path), and the lines of both make one take.
+#[test]
+fn a_serial_port_that_disappears_is_reopened() {
+    let dir = tempfile::tempdir().unwrap();
+    let capture = repo_file("samples/walk.csv");
+    let mapping = repo_file("mappings/paper000_16imu_mixamo.json");
+    let port = dir.path().join("ttyUSB0");
+    let (mut master, slave) = openpty();
+    std::os::unix::fs::symlink(&slave.1, &port).unwrap();
+    let child = live(&[
+        "--source",
+        &format!("serial:{}", port.display()),
+        "--mapping",
+        mapping.to_str().unwrap(),
+        "--vmc",
+        "off",
+        "--json",
+    ])
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let text = std::fs::read_to_string(&capture).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let half = lines.len() / 2;
+    let write = |master: &mut std::fs::File, part: &[&str]| {
+        for chunk in part.chunks(64) {
+            for l in chunk {
+                master.write_all(l.as_bytes()).unwrap();
+                master.write_all(b"\n").unwrap();
+            }
+            master.flush().unwrap();
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    };
+    write(&mut master, &lines[..half]);
+    std::thread::sleep(Duration::from_millis(500));
+    // Unplugged: both ends closed.
+    drop(master);
+    unsafe { libc::close(slave.0) };
+    std::thread::sleep(Duration::from_millis(700));
+    // Plugged in again: a new device behind the same path.
+    let (mut master, slave) = openpty();
+    std::fs::remove_file(&port).unwrap();
+    std::os::unix::fs::symlink(&slave.1, &port).unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    write(&mut master, &lines[half..]);
+    std::thread::sleep(Duration::from_millis(800));
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let out = child.wait_with_output().unwrap();
+    unsafe { libc::close(slave.0) };
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("reopening") && err.contains("reopened"),
+        "{err}"
+    );
+    let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        summary["lines"].as_u64().unwrap() as usize,
+        lines.len(),
+        "{summary}"
+    );
+    assert!(summary["frames"].as_u64().unwrap() > 600, "{summary}");
 }

@@ -18,7 +18,7 @@ pub mod vmc;
 use crate::anim::Pose;
 use crate::convert::{ConvertError, ConvertSettings};
 use crate::pipeline::stream::{PoseStream, StreamStatus};
-use crate::read::stream::{LineClock, LineFormat, LineStream};
+use crate::read::stream::{self as read_stream, LineClock, LineFormat, LineStream};
 use crate::take::{LineReport, StreamSample, StreamValue};
 use source::{Allow, Event, Link, SourceCounters, SourceSpec};
 use std::net::{SocketAddr, UdpSocket};
@@ -356,6 +356,14 @@ pub fn run(
             match event {
                 Some(Event::Lines { source, lines, at }) => {
                     for line in lines {
+                        // A SOU line without a timestamp gets the host's, in ms, on arrival.
+                        let line = match read_stream::stamp_untimed_sou(
+                            &line,
+                            started.elapsed().as_millis() as u64,
+                        ) {
+                            Some(stamped) => stamped,
+                            None => line,
+                        };
                         let line = match clock {
                             Clock::Source => line,
                             Clock::Host => clocks[source]

@@ -565,7 +565,13 @@ fn serial(path: &std::path::Path, baud: u32, link: &Link) {
                 return;
             }
             match port.read(&mut buf) {
-                Ok(0) => {}
+                // A port with a timeout says "no data" as TimedOut; 0 bytes is its end (the
+                // device gone, a pty whose other side closed).
+                Ok(0) => {
+                    link.notice("port closed; reopening".into());
+                    announced = true;
+                    break;
+                }
                 Ok(n) => {
                     let mut lines = Vec::new();
                     split.push(&buf[..n], &mut lines);

@@ -39,6 +39,19 @@ impl LineFormat {
     }
 }
 
+/// A SOU line without a timestamp of its own (`N0,yaw1,pitch1,roll1,yaw2,pitch2,roll2`, as some
+/// node firmware sends), stamped with `ms` as paper 002's driver stamps it on arrival; `None`
+/// for any other line.
+pub fn stamp_untimed_sou(line: &[u8], ms: u64) -> Option<Vec<u8>> {
+    let t = line.trim_ascii();
+    if t.is_empty() || t[0].is_ascii_digit() {
+        return None;
+    }
+    let mut stamped = format!("{ms},").into_bytes();
+    stamped.extend_from_slice(t);
+    sou::format_problem(&stamped).is_none().then_some(stamped)
+}
+
 /// Each data line's time, read by the same parsers as [`LineStream`] (for pacing a replayed
 /// capture), and data lines restamped with another time (a live session's host clock).
 #[derive(Debug, Default)]
@@ -328,5 +341,17 @@ mod tests {
             b"1500.000000,a,1,0,0,0"
         );
         assert_eq!(csv.restamp(b"# a comment", 1.5), None);
+        assert_eq!(
+            stamp_untimed_sou(b"N1,1.0,2.0,3.0,4.0,5.0,6.0", 1042).unwrap(),
+            b"1042,N1,1.0,2.0,3.0,4.0,5.0,6.0"
+        );
+        assert_eq!(
+            stamp_untimed_sou(b"1042,N1,1.0,2.0,3.0,4.0,5.0,6.0", 7),
+            None
+        );
+        assert_eq!(
+            stamp_untimed_sou(b"Calibrating gyro... keep still", 7),
+            None
+        );
     }
 }
