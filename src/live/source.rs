@@ -357,37 +357,98 @@ pub fn start(
     Ok(handle)
 }
 
-/// A byte stream until its end (or the session's stop).
-fn read_stream(mut reader: impl Read, link: &Link) {
+/// How reading a source ended.
+enum Pumped {
+    /// The session stopped.
+    Stopped,
+    /// The stream's end (0 bytes read).
+    Ended,
+    /// A read failed.
+    Lost(std::io::Error),
+}
+
+/// A read error that only means "nothing yet" (a timeout) or "try again".
+fn transient(e: &std::io::Error) -> bool {
+    matches!(
+        e.kind(),
+        std::io::ErrorKind::WouldBlock
+            | std::io::ErrorKind::TimedOut
+            | std::io::ErrorKind::Interrupted
+    )
+}
+
+/// Reads until the end, a failure or the session's stop, sending complete lines as they come
+/// (and the last, unfinished one at the end: the parsers judge it).
+fn pump(reader: &mut impl Read, link: &Link) -> Pumped {
     let mut split = LineSplitter::default();
     let mut buf = vec![0u8; 64 * 1024];
-    loop {
+    let how = loop {
         if link.stopped() {
-            return;
+            break Pumped::Stopped;
         }
         match reader.read(&mut buf) {
-            Ok(0) => break,
+            Ok(0) => break Pumped::Ended,
             Ok(n) => {
                 let mut lines = Vec::new();
                 split.push(&buf[..n], &mut lines);
                 if !link.send(lines) {
-                    return;
+                    break Pumped::Stopped;
                 }
             }
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            Err(e) => {
-                link.closed(Some(e.to_string()));
-                return;
-            }
+            Err(e) if transient(&e) => {}
+            Err(e) => break Pumped::Lost(e),
         }
-    }
+    };
     let mut lines = Vec::new();
     split.finish(&mut lines);
+    link.send(lines);
     link.counters
         .too_long
         .fetch_add(split.too_long, Ordering::Relaxed);
-    link.send(lines);
-    link.closed(None);
+    how
+}
+
+/// A byte stream until its end (or the session's stop).
+fn read_stream(mut reader: impl Read, link: &Link) {
+    match pump(&mut reader, link) {
+        Pumped::Stopped => {}
+        Pumped::Ended => link.closed(None),
+        Pumped::Lost(e) => link.closed(Some(e.to_string())),
+    }
+}
+
+/// A device or a server, opened and read, and opened again with a backoff (up to 5 s) whenever
+/// it goes away, until the session stops. `again` and `back` are the words for both (a TCP
+/// source reconnects, a serial port is reopened).
+fn reopening<R: Read>(
+    link: &Link,
+    mut open: impl FnMut() -> std::io::Result<R>,
+    again: &str,
+    back: &str,
+) {
+    let mut delay = Duration::from_millis(200);
+    let mut down = false;
+    while !link.stopped() {
+        let mut reader = match open() {
+            Ok(r) => r,
+            Err(e) => {
+                if !down {
+                    link.notice(format!("cannot open ({e}); retrying"));
+                    down = true;
+                }
+                delay = back_off(delay, link);
+                continue;
+            }
+        };
+        link.notice(back.into());
+        down = true;
+        delay = Duration::from_millis(200);
+        match pump(&mut reader, link) {
+            Pumped::Stopped => return,
+            Pumped::Ended => link.notice(format!("closed; {again}")),
+            Pumped::Lost(e) => link.notice(format!("lost ({e}); {again}")),
+        }
+    }
 }
 
 /// A capture replayed at its own pace × `speed`: each data line is sent when its time (since the
@@ -471,129 +532,30 @@ fn back_off(delay: Duration, link: &Link) -> Duration {
 }
 
 fn tcp(addr: &str, link: &Link, allow: &Allow) {
-    let mut delay = Duration::from_millis(200);
-    let mut announced = false;
-    while !link.stopped() {
-        let stream = std::net::ToSocketAddrs::to_socket_addrs(addr)
-            .ok()
-            .and_then(|mut a| a.next())
-            .ok_or_else(|| std::io::Error::other("no such address"))
-            .and_then(|a| {
-                if !allow.admits(a.ip()) {
-                    return Err(std::io::Error::other("refused by --allow"));
-                }
-                TcpStream::connect_timeout(&a, Duration::from_secs(2))
-            });
-        let mut stream = match stream {
-            Ok(s) => s,
-            Err(e) => {
-                if !announced {
-                    link.notice(format!("cannot connect ({e}); retrying"));
-                    announced = true;
-                }
-                delay = back_off(delay, link);
-                continue;
-            }
-        };
-        link.notice("connected".into());
-        announced = false;
-        delay = Duration::from_millis(200);
-        let _ = stream.set_read_timeout(Some(Duration::from_millis(100)));
-        let mut split = LineSplitter::default();
-        let mut buf = vec![0u8; 64 * 1024];
-        loop {
-            if link.stopped() {
-                return;
-            }
-            match stream.read(&mut buf) {
-                Ok(0) => {
-                    link.notice("connection closed; reconnecting".into());
-                    break;
-                }
-                Ok(n) => {
-                    let mut lines = Vec::new();
-                    split.push(&buf[..n], &mut lines);
-                    if !link.send(lines) {
-                        return;
-                    }
-                }
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock
-                            | std::io::ErrorKind::TimedOut
-                            | std::io::ErrorKind::Interrupted
-                    ) => {}
-                Err(e) => {
-                    link.notice(format!("connection lost ({e}); reconnecting"));
-                    break;
-                }
-            }
+    let open = || {
+        let a = std::net::ToSocketAddrs::to_socket_addrs(addr)?
+            .next()
+            .ok_or_else(|| std::io::Error::other("no such address"))?;
+        if !allow.admits(a.ip()) {
+            return Err(std::io::Error::other("refused by --allow"));
         }
-        link.counters
-            .too_long
-            .fetch_add(split.too_long, Ordering::Relaxed);
-    }
+        let stream = TcpStream::connect_timeout(&a, Duration::from_secs(2))?;
+        stream.set_read_timeout(Some(Duration::from_millis(100)))?;
+        Ok(stream)
+    };
+    reopening(link, open, "reconnecting", "connected");
 }
 
 fn serial(path: &std::path::Path, baud: u32, link: &Link) {
-    let mut delay = Duration::from_millis(200);
-    let mut announced = false;
-    while !link.stopped() {
-        let port = serialport::new(path.to_string_lossy(), baud)
+    // A port with a timeout says "no data yet" as TimedOut; 0 bytes is its end (the device
+    // gone, a pty whose other side closed).
+    let open = || {
+        serialport::new(path.to_string_lossy(), baud)
             .timeout(Duration::from_millis(100))
-            .open();
-        let mut port = match port {
-            Ok(p) => p,
-            Err(e) => {
-                if !announced {
-                    link.notice(format!("cannot open ({e}); retrying"));
-                    announced = true;
-                }
-                delay = back_off(delay, link);
-                continue;
-            }
-        };
-        if announced {
-            link.notice("reopened".into());
-        }
-        delay = Duration::from_millis(200);
-        let mut split = LineSplitter::default();
-        let mut buf = vec![0u8; 16 * 1024];
-        loop {
-            if link.stopped() {
-                return;
-            }
-            match port.read(&mut buf) {
-                // A port with a timeout says "no data" as TimedOut; 0 bytes is its end (the
-                // device gone, a pty whose other side closed).
-                Ok(0) => {
-                    link.notice("port closed; reopening".into());
-                    announced = true;
-                    break;
-                }
-                Ok(n) => {
-                    let mut lines = Vec::new();
-                    split.push(&buf[..n], &mut lines);
-                    if !link.send(lines) {
-                        return;
-                    }
-                }
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock
-                            | std::io::ErrorKind::TimedOut
-                            | std::io::ErrorKind::Interrupted
-                    ) => {}
-                Err(e) => {
-                    link.notice(format!("port lost ({e}); reopening"));
-                    announced = true;
-                    break;
-                }
-            }
-        }
-    }
+            .open()
+            .map_err(std::io::Error::from)
+    };
+    reopening(link, open, "reopening", "opened");
 }
 
 #[cfg(test)]

@@ -37,40 +37,10 @@ import warnings
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from bvh_positions import parse  # the suite's own minimal BVH parser (numpy, no imubake)
+
 SIDES = ("Left", "Right")
 JOINTS = ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")
-
-
-def parse(path):
-    tokens = open(path).read().split()
-    joints, stack, i = [], [], 0
-    while tokens[i] != "MOTION":
-        t = tokens[i]
-        if t in ("ROOT", "JOINT", "End"):
-            name = tokens[i + 1] if t != "End" else None
-            joints.append({"name": name, "parent": stack[-1] if stack else None,
-                           "channels": [], "offset": np.zeros(3)})
-            i += 2
-        elif t == "{":
-            stack.append(len(joints) - 1)
-            i += 1
-        elif t == "}":
-            stack.pop()
-            i += 1
-        elif t == "OFFSET":
-            joints[-1]["offset"] = np.array([float(v) for v in tokens[i + 1:i + 4]])
-            i += 4
-        elif t == "CHANNELS":
-            n = int(tokens[i + 1])
-            joints[-1]["channels"] = tokens[i + 2:i + 2 + n]
-            i += 2 + n
-        else:
-            i += 1
-    # MOTION Frames: N Frame Time: dt values...
-    frames = int(tokens[i + 2])
-    frame_time = float(tokens[i + 5])
-    values = np.array([float(v) for v in tokens[i + 6:]]).reshape(frames, -1)
-    return joints, values, frame_time
 
 
 def forward(joints, values, channels=True):
