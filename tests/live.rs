@@ -213,6 +213,22 @@ fn check(bundles: &[Value], anim: &Animation, names: &[(&str, &str)]) -> (f64, u
     (worst, matched, worst_pos)
 }
 
+/// The bundles streamed are the animation's frames: all of them (but at most two at the end),
+/// every bone within 0.5°.
+fn assert_streamed(label: &str, bundles: &Value, anim: &Animation, names: &[(&str, &str)]) {
+    let (worst, matched, _) = check(bundles.as_array().unwrap(), anim, names);
+    eprintln!(
+        "{label}: {matched} bundles of {}, worst bone {worst:.2e}°",
+        anim.frames()
+    );
+    assert!(
+        matched + 2 >= anim.frames(),
+        "{matched} of {}",
+        anim.frames()
+    );
+    assert!(worst < 0.5, "{worst}°");
+}
+
 fn run(cmd: &mut Command) -> std::process::Output {
     let out = cmd.output().unwrap();
     assert!(
@@ -372,14 +388,7 @@ fn udp_datagrams_stream_the_same_frames() {
     );
     let vmc = receiver.finish();
     let anim = whole_take(&capture, &mapping);
-    let (worst, matched, _) = check(vmc["bundles"].as_array().unwrap(), &anim, &MIXAMO);
-    eprintln!("UDP: {matched} bundles, worst bone {worst:.2e}°");
-    assert!(
-        matched + 2 >= anim.frames(),
-        "{matched} of {}",
-        anim.frames()
-    );
-    assert!(worst < 0.5, "{worst}°");
+    assert_streamed("UDP", &vmc["bundles"], &anim, &MIXAMO);
 }
 
 /// A pseudo-terminal: its master (what the test writes) and its slave's fd and path (the
@@ -494,17 +503,7 @@ fn a_serial_port_streams_a_sou_log() {
         "the same lines dropped live as from the file"
     );
     assert_eq!(lines(&summary["dropped_lines"]).len(), 7);
-    let (worst, matched, _) = check(vmc["bundles"].as_array().unwrap(), &anim, &MIXAMO);
-    eprintln!(
-        "serial: {matched} bundles of {}, worst bone {worst:.2e}°",
-        anim.frames()
-    );
-    assert!(
-        matched + 2 >= anim.frames(),
-        "{matched} of {}",
-        anim.frames()
-    );
-    assert!(worst < 0.5, "{worst}°");
+    assert_streamed("serial", &vmc["bundles"], &anim, &MIXAMO);
 }
 
 /// A session killed outright leaves `.part` holding every line received up to the last fsync
@@ -867,17 +866,7 @@ fn raw_readings_are_fused_live() {
         .copied()
         .filter(|(_, joint)| anim.rig().joint_index(joint).is_some())
         .collect();
-    let (worst, matched, _) = check(vmc["bundles"].as_array().unwrap(), &anim, &names);
-    eprintln!(
-        "raw: {matched} bundles of {}, worst bone {worst:.2e}°",
-        anim.frames()
-    );
-    assert!(
-        matched + 2 >= anim.frames(),
-        "{matched} of {}",
-        anim.frames()
-    );
-    assert!(worst < 0.5, "{worst}°");
+    assert_streamed("raw", &vmc["bundles"], &anim, &names);
 }
 
 /// SOU nodes that send no timestamp of their own, on stdin: each line is stamped with the host's
