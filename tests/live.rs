@@ -1021,3 +1021,75 @@ fn a_serial_port_that_disappears_is_reopened() {
     );
     assert!(summary["frames"].as_u64().unwrap() > 600, "{summary}");
 }
+
+/// Ctrl-C (SIGTERM) while a long capture pours in as fast as it can be read: the session ends
+/// within seconds, mid-capture, with its recording in place and every line it read in it.
+#[test]
+fn a_session_stops_promptly_under_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("long.csv");
+    let mut text = String::from("time_s,sensor,qw,qx,qy,qz\n");
+    let sensors = [
+        "pelvis",
+        "sternum",
+        "left_thigh",
+        "left_shank",
+        "right_thigh",
+        "right_shank",
+    ];
+    // 40 minutes at 100 Hz: more than a session reads in the time allowed here.
+    let ticks = 240_000;
+    for i in 0..ticks {
+        for (k, s) in sensors.iter().enumerate() {
+            let a = 0.001 * i as f64 + k as f64;
+            text.push_str(&format!(
+                "{:.4},{s},{:.6},{:.6},0,0\n",
+                i as f64 / 100.0,
+                (a / 2.0).cos(),
+                (a / 2.0).sin()
+            ));
+        }
+    }
+    std::fs::write(&capture, text).unwrap();
+    let record = dir.path().join("takes");
+    let mut child = spawn_live(&[
+        "--source",
+        &format!("file:{}@1000000", capture.display()),
+        "--mapping",
+        repo_file("mappings/paper000_16imu_mixamo.json")
+            .to_str()
+            .unwrap(),
+        "--vmc",
+        "off",
+        "--record",
+        record.to_str().unwrap(),
+        "--json",
+    ]);
+    std::thread::sleep(Duration::from_millis(1500));
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let asked = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if asked.elapsed() > Duration::from_secs(10) {
+            child.kill().unwrap();
+            panic!("the session did not stop within 10 s of SIGTERM");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let lines = summary["lines"].as_u64().unwrap();
+    assert!(
+        lines > 0 && lines < (ticks * sensors.len()) as u64,
+        "stopped mid-capture: {summary}"
+    );
+    let recording = PathBuf::from(summary["recording"].as_str().unwrap());
+    assert_eq!(
+        std::fs::read_to_string(recording).unwrap().lines().count() as u64,
+        lines
+    );
+}

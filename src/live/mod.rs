@@ -67,6 +67,9 @@ impl crate::diagnostic::Diagnostic for LiveError {
     }
 }
 
+/// Lines kept before the format is known (a device's boot messages); more are not kept.
+const MAX_EARLY_LINES: usize = 10_000;
+
 /// A sensor silent this long (stream time, seconds) is said to be held at its last pose.
 const STALE_NOTICE_S: f64 = 0.5;
 
@@ -329,6 +332,7 @@ pub fn run(
     let mut format: Option<LineFormat> = None;
     // Lines before the format is known (a SOU log's debug text), bounded.
     let mut early: Vec<Vec<u8>> = Vec::new();
+    let mut early_full = false;
     let mut recorder: Option<record::Recorder> = None;
     let mut running: Option<Running> = None;
     let mut line_no: u64 = 0;
@@ -410,8 +414,14 @@ pub fn run(
                                     continue;
                                 }
                                 None => {
-                                    if early.len() < 10_000 {
+                                    if early.len() < MAX_EARLY_LINES {
                                         early.push(line);
+                                    } else if !early_full {
+                                        early_full = true;
+                                        report(Report::Notice(format!(
+                                            "warning: {MAX_EARLY_LINES} lines and no SOU line or imubake CSV header yet: \
+                                             later lines are neither read nor recorded until one comes"
+                                        )));
                                     }
                                     continue;
                                 }
@@ -535,6 +545,9 @@ pub fn run(
         Ok(())
     })();
     stop.store(true, Ordering::Relaxed);
+    // A source blocked sending into a full channel gets an error now, instead of waiting forever
+    // for a session that has stopped reading.
+    drop(rx);
     // The end: what the reorder buffer and the smoothers hold comes out, the recording closes.
     let mut warnings = Vec::new();
     let mut dropped = Vec::new();
