@@ -261,6 +261,12 @@ def _align_limbs(tgt, basis0, source, bone_map, part_of_pair, to_target):
             want = to_target @ (b.tail_local - b.head_local)
             if want.length > 1e-9:
                 aligned[t] = want.normalized()
+    return align_to(tgt, basis0, aligned)
+
+
+def align_to(tgt, basis0, aligned):
+    """The reference pose (from `basis0`) with the bones of `aligned` ({target bone: direction in
+    the target's armature space}) turned to point that way; `basis0` becomes that pose."""
     pose, desired_rot, basis = {}, {}, {}
     # Parents first: each bone's direction is measured after its parents have turned.
     for n in tgt.order:

@@ -3,10 +3,10 @@
 import os
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty, PointerProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
-from . import names, retarget, watch
+from . import live_view, names, retarget, watch
 from .take_import import TakeError, import_take
 
 _REFERENCE_ITEMS = (
@@ -136,12 +136,130 @@ class IMUBAKE_PT_watch(bpy.types.Panel):
                 layout.label(text="%s: %s" % (name, message))
 
 
+_LIVE_REFERENCE_ITEMS = (
+    ("AUTO", "T-pose alignment", "Turn the character's arms and legs to the performer's T-pose first"),
+    ("REST", "Rest pose", "The character's rest pose matches the performer's T-pose"),
+    ("CURRENT", "Current pose", "The character's current pose matches the performer's T-pose"),
+)
+
+
+class IMUBAKE_OT_live_start(bpy.types.Operator):
+    """Show the VMC stream (imubake live, or any VMC performer) on the character"""
+
+    bl_idname = "imubake.live_start"
+    bl_label = "Start live view"
+
+    def execute(self, context):
+        scene = context.scene
+        target = scene.imubake_live_target
+        if target is None or target.type != "ARMATURE":
+            self.report({"ERROR"}, "choose the character (an armature) first")
+            return {"CANCELLED"}
+        host, _, port = scene.imubake_live_performer.rpartition(":")
+        try:
+            live_view.start(target, scene.imubake_live_port, scene.imubake_live_reference,
+                            (host or "127.0.0.1", int(port)))
+        except (OSError, ValueError, retarget.RetargetError) as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class IMUBAKE_OT_live_stop(bpy.types.Operator):
+    """Stop the live view (a recording under way ends, its action kept)"""
+
+    bl_idname = "imubake.live_stop"
+    bl_label = "Stop live view"
+
+    def execute(self, context):
+        s = live_view.current()
+        if s is not None and s.recording is not None:
+            s.stop_recording()
+        live_view.stop()
+        return {"FINISHED"}
+
+
+class IMUBAKE_OT_live_record(bpy.types.Operator):
+    """Record what the live view shows into a new action (again: stop recording)"""
+
+    bl_idname = "imubake.live_record"
+    bl_label = "Record"
+
+    def execute(self, context):
+        s = live_view.current()
+        if s is None:
+            self.report({"ERROR"}, "start the live view first")
+            return {"CANCELLED"}
+        if s.recording is None:
+            s.start_recording(context)
+        else:
+            action = s.stop_recording()
+            self.report({"INFO"}, "recorded %s" % action.name)
+        return {"FINISHED"}
+
+
+class IMUBAKE_OT_live_recalibrate(bpy.types.Operator):
+    """Ask imubake live to calibrate again (hold the mapping's pose)"""
+
+    bl_idname = "imubake.live_recalibrate"
+    bl_label = "Recalibrate"
+
+    def execute(self, context):
+        s = live_view.current()
+        if s is None:
+            self.report({"ERROR"}, "start the live view first")
+            return {"CANCELLED"}
+        try:
+            s.recalibrate()
+        except OSError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class IMUBAKE_PT_live(bpy.types.Panel):
+    bl_label = "imubake live"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "imubake"
+
+    def draw(self, context):
+        layout = self.layout
+        scene = context.scene
+        s = live_view.current()
+        col = layout.column()
+        col.enabled = s is None
+        col.prop(scene, "imubake_live_port", text="UDP port")
+        col.prop(scene, "imubake_live_target", text="Character")
+        col.prop(scene, "imubake_live_reference", text="Reference")
+        col.prop(scene, "imubake_live_performer", text="Performer")
+        if s is None:
+            layout.operator(IMUBAKE_OT_live_start.bl_idname, icon="PLAY")
+            return
+        row = layout.row()
+        row.operator(IMUBAKE_OT_live_stop.bl_idname, icon="PAUSE")
+        row.operator(IMUBAKE_OT_live_record.bl_idname,
+                     text="Stop recording" if s.recording else "Record", icon="REC")
+        layout.operator(IMUBAKE_OT_live_recalibrate.bl_idname, icon="ARMATURE_DATA")
+        last = "–" if s.last_t is None else "%.2f s" % s.last_t
+        layout.label(text="%.0f packets/s · last frame %s · %d bad" % (
+            s.packets_per_second(), last, s.receiver.bad))
+        layout.label(text="bones matched %d, unmatched %d" % (
+            len(s.view.matched), len(s.view.unmatched)))
+        if s.recording is not None:
+            layout.label(text="recording: %d keys" % s.keys)
+        if s.error:
+            layout.label(text=s.error, icon="ERROR")
+
+
 def _menu_import(self, _context):
     self.layout.operator(IMUBAKE_OT_import_take.bl_idname,
                          text="imubake take (.imubake.json / .bvh / .glb)")
 
 
-_CLASSES = (IMUBAKE_OT_import_take, IMUBAKE_OT_watch_start, IMUBAKE_OT_watch_stop, IMUBAKE_PT_watch)
+_CLASSES = (IMUBAKE_OT_import_take, IMUBAKE_OT_watch_start, IMUBAKE_OT_watch_stop, IMUBAKE_PT_watch,
+            IMUBAKE_OT_live_start, IMUBAKE_OT_live_stop, IMUBAKE_OT_live_record, IMUBAKE_OT_live_recalibrate,
+            IMUBAKE_PT_live)
 
 
 def register():
@@ -155,9 +273,23 @@ def register():
         description="Armature to retarget new takes onto (none: import the take's own armature)")
     bpy.types.Scene.imubake_watch_reference = EnumProperty(
         name="Reference pose", items=_REFERENCE_ITEMS, default="AUTO")
+    bpy.types.Scene.imubake_live_port = IntProperty(
+        name="UDP port", default=39539, min=1, max=65535,
+        description="Where VMC arrives (imubake live --vmc; the VMC Marionette's port)")
+    bpy.types.Scene.imubake_live_target = PointerProperty(
+        name="Character", type=bpy.types.Object, poll=_is_armature,
+        description="The armature the live view poses")
+    bpy.types.Scene.imubake_live_reference = EnumProperty(
+        name="Reference pose", items=_LIVE_REFERENCE_ITEMS, default="AUTO")
+    bpy.types.Scene.imubake_live_performer = StringProperty(
+        name="Performer", default="127.0.0.1:39540",
+        description="Where Recalibrate sends VMC's calibration request (imubake live --listen)")
 
 
 def unregister():
+    live_view.stop()
+    for prop in ("imubake_live_performer", "imubake_live_reference", "imubake_live_target", "imubake_live_port"):
+        delattr(bpy.types.Scene, prop)
     watch.stop()
     del bpy.types.Scene.imubake_watch_reference
     del bpy.types.Scene.imubake_watch_target
