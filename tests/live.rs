@@ -1093,3 +1093,79 @@ fn a_session_stops_promptly_under_load() {
         lines
     );
 }
+
+/// A device whose clock restarts mid-session (an Arduino reset: its millis start again): the
+/// session says so and carries its lines on from where they were, the character keeps moving,
+/// and the recording — restamped — converts without a clock-reset error.
+#[test]
+fn a_device_clock_restart_carries_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = repo_file("samples/sou_wave.log");
+    let mapping = repo_file("samples/sou_wave.mapping.json");
+    let record = dir.path().join("takes");
+    let port = free_port();
+    let child = spawn_live(&[
+        "--source",
+        &format!("udp:{port}"),
+        "--mapping",
+        mapping.to_str().unwrap(),
+        "--vmc",
+        "off",
+        "--record",
+        record.to_str().unwrap(),
+        "--json",
+    ]);
+    std::thread::sleep(Duration::from_millis(500));
+    let text = std::fs::read_to_string(&log).unwrap();
+    let data: Vec<(u64, String)> = text
+        .lines()
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let ms = f[0].parse::<u64>().ok().filter(|_| f.len() == 8)?;
+            Some((ms, f[1..].join(",")))
+        })
+        .collect();
+    let t0 = data[0].0;
+    let last = data.last().unwrap().0 - t0;
+    // The first half as recorded; then the device resets: its clock restarts at 200 ms.
+    let half = data.len() / 2;
+    let restart = data[half].0;
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let start = Instant::now();
+    for (i, (ms, rest)) in data.iter().enumerate() {
+        let stamp = if i < half { *ms } else { ms - restart + 200 };
+        if let Some(wait) = Duration::from_millis((ms - t0) / 4).checked_sub(start.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        socket
+            .send_to(
+                format!("{stamp},{rest}").as_bytes(),
+                format!("127.0.0.1:{port}"),
+            )
+            .unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(600));
+    let out = stop(child);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("the device's clock restarted"), "{err}");
+    let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(
+        summary["dropped_lines"].as_array().unwrap().is_empty(),
+        "{summary}"
+    );
+    // Frames over the whole log's span at 60 fps: nothing was lost at the restart.
+    let frames = summary["frames"].as_u64().unwrap() as f64;
+    let expected = last as f64 / 1000.0 * 60.0;
+    assert!(
+        frames > 0.95 * expected,
+        "{frames} frames, {expected:.0} expected"
+    );
+    let recording = PathBuf::from(summary["recording"].as_str().unwrap());
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&recording)
+        .arg("--mapping")
+        .arg(&mapping)
+        .args(["--format", "bvh", "--out"])
+        .arg(dir.path().join("baked")));
+}

@@ -329,6 +329,11 @@ pub fn run(
         .iter()
         .map(|_| LineClock::default())
         .collect();
+    let mut continuing: Vec<Continuing> = settings
+        .sources
+        .iter()
+        .map(|_| Continuing::default())
+        .collect();
     let mut format: Option<LineFormat> = None;
     // Lines before the format is known (a SOU log's debug text), bounded.
     let mut early: Vec<Vec<u8>> = Vec::new();
@@ -369,7 +374,12 @@ pub fn run(
                             None => line,
                         };
                         let line = match clock {
-                            Clock::Source => line,
+                            Clock::Source => continuing[source].line(
+                                &mut clocks[source],
+                                line,
+                                &settings.sources[source],
+                                &mut report,
+                            ),
                             Clock::Host => clocks[source]
                                 .restamp(&line, started.elapsed().as_secs_f64())
                                 .unwrap_or(line),
@@ -596,6 +606,52 @@ pub fn run(
         warnings,
         latency_ms: latencies.summary(),
     })
+}
+
+/// A source's own clock kept going when its device restarts (an Arduino reset): a data line
+/// more than [`CLOCK_RESTART_S`] before the source's latest is taken as its clock starting
+/// again, and it and the source's later lines are restamped to carry on from the latest (one
+/// nominal step on, [`RESTART_STEP_S`]), said once per restart. The stream and the recording get
+/// the restamped lines, so the take converts as it was shown.
+#[derive(Debug, Default)]
+struct Continuing {
+    offset_s: f64,
+    latest_s: Option<f64>,
+}
+
+/// A jump back this long is a clock restart, not a late line (the readers' rule for files).
+const CLOCK_RESTART_S: f64 = 1.0;
+/// Where a restarted clock carries on from: the latest time plus this.
+const RESTART_STEP_S: f64 = 0.01;
+
+impl Continuing {
+    fn line(
+        &mut self,
+        clock: &mut LineClock,
+        line: Vec<u8>,
+        source: &SourceSpec,
+        report: &mut impl FnMut(Report),
+    ) -> Vec<u8> {
+        let Some(raw) = clock.time_s(&line) else {
+            return line;
+        };
+        let mut t = raw + self.offset_s;
+        if let Some(latest) = self.latest_s
+            && t < latest - CLOCK_RESTART_S
+        {
+            self.offset_s += latest + RESTART_STEP_S - t;
+            t = raw + self.offset_s;
+            report(Report::Notice(format!(
+                "warning: {source}: the device's clock restarted ({raw:.3} s after {latest:.3} s); \
+                 its lines carry on from {t:.3} s"
+            )));
+        }
+        self.latest_s = Some(self.latest_s.map_or(t, |l| l.max(t)));
+        if self.offset_s == 0.0 {
+            return line;
+        }
+        clock.restamp(&line, t).unwrap_or(line)
+    }
 }
 
 fn record_error(settings: &LiveSettings, e: std::io::Error) -> LiveError {
