@@ -481,6 +481,69 @@ fn magnetometer_works(mag: &Track<Vector3<f64>>) -> bool {
 /// Gaps longer than this many missing samples are not filled (the rotation in them is unknown).
 pub const MAX_FILLED_STEPS: usize = 50;
 
+/// What [`steps_for`] did about the gap before a reading.
+pub(crate) struct Gap {
+    /// Readings filled in.
+    pub filled: usize,
+    /// A gap too long to fill (seconds): the filter carried on from before it.
+    pub long_s: Option<f64>,
+}
+
+/// The filter steps one reading at `t` makes, given the one before it (`prev`): over a gap of up
+/// to [`MAX_FILLED_STEPS`] missing samples at `nominal_dt`, readings interpolated linearly at the
+/// nominal rate first (so the rotation over the gap follows the rates at both ends and the
+/// filters' low-pass stages keep their steady rate); over a longer gap one nominal step (the
+/// rotation in it is unknown); the first reading one nominal step. `step(gyr, acc, dt, real)`
+/// takes each, `real` for the reading itself. Shared by whole tracks ([`fuse`]) and streams
+/// ([`stream::StreamFuser`]), so both step a filter alike.
+pub(crate) fn steps_for(
+    prev: Option<(f64, &ImuSample)>,
+    t: f64,
+    s: &ImuSample,
+    nominal_dt: f64,
+    mut step: impl FnMut(Vector3<f64>, Vector3<f64>, f64, bool),
+) -> Gap {
+    let mut gap = Gap {
+        filled: 0,
+        long_s: None,
+    };
+    let Some((t_prev, prev)) = prev else {
+        step(s.gyro_rad_s, s.accel_m_s2, nominal_dt, true);
+        return gap;
+    };
+    let dt = t - t_prev;
+    let count = (dt / nominal_dt).round();
+    if count >= 2.0 && count <= MAX_FILLED_STEPS as f64 + 1.0 {
+        let count = count as usize;
+        let step_dt = dt / count as f64;
+        for j in 1..count {
+            let u = j as f64 / count as f64;
+            step(
+                prev.gyro_rad_s.lerp(&s.gyro_rad_s, u),
+                prev.accel_m_s2.lerp(&s.accel_m_s2, u),
+                step_dt,
+                false,
+            );
+        }
+        gap.filled = count - 1;
+        step(s.gyro_rad_s, s.accel_m_s2, step_dt, true);
+    } else if count >= 2.0 {
+        gap.long_s = Some(dt);
+        step(s.gyro_rad_s, s.accel_m_s2, nominal_dt, true);
+    } else {
+        step(s.gyro_rad_s, s.accel_m_s2, dt, true);
+    }
+    gap
+}
+
+/// The warning for a gap [`steps_for`] could not fill.
+pub(crate) fn long_gap_warning(sensor: &str, dt: f64, t: f64) -> String {
+    format!(
+        "sensor `{sensor}`: no reading for {dt:.2} s before {t:.3} s; fusion carried on from the \
+         orientation before the gap"
+    )
+}
+
 /// Fuses one sensor's whole track with `fusion`: inertial samples (gyro and accelerometer at the
 /// same instants) with the latest magnetometer sample at or before each (magnetometers often run
 /// slower), each step's `dt` from the samples' own times; over a gap of up to
@@ -527,45 +590,20 @@ pub fn fuse(
     let mut filled = 0usize;
     for (i, (t, s)) in inertial.iter().enumerate() {
         let m = mag_at(t, &mut mag_index);
-        let step = |gyr, acc, dt| offline::Step {
-            gyr,
-            acc,
-            mag: m,
-            dt,
-        };
-        let dt = if i == 0 { nominal_dt } else { t - times[i - 1] };
-        let count = (dt / nominal_dt).round();
-        if i > 0 && count >= 2.0 {
-            let prev = &inertial.values()[i - 1];
-            if count <= MAX_FILLED_STEPS as f64 + 1.0 {
-                // Missing samples: readings interpolated at the nominal rate, so the rotation
-                // over the gap follows the rates at both ends and the filters' low-pass stages
-                // keep their steady rate.
-                let count = count as usize;
-                let step_dt = dt / count as f64;
-                for j in 1..count {
-                    let u = j as f64 / count as f64;
-                    steps.push(step(
-                        prev.gyro_rad_s.lerp(&s.gyro_rad_s, u),
-                        prev.accel_m_s2.lerp(&s.accel_m_s2, u),
-                        step_dt,
-                    ));
-                    real.push(false);
-                }
-                filled += count - 1;
-                steps.push(step(s.gyro_rad_s, s.accel_m_s2, step_dt));
-            } else {
-                // A long gap: the rotation in it is unknown; carry on from where it stopped.
-                steps.push(step(s.gyro_rad_s, s.accel_m_s2, nominal_dt));
-                warnings.push(format!(
-                    "sensor `{sensor}`: no reading for {dt:.2} s before {t:.3} s; fusion carried on \
-                     from the orientation before the gap"
-                ));
-            }
-        } else {
-            steps.push(step(s.gyro_rad_s, s.accel_m_s2, dt));
+        let prev = (i > 0).then(|| (times[i - 1], &inertial.values()[i - 1]));
+        let gap = steps_for(prev, t, s, nominal_dt, |gyr, acc, dt, is_real| {
+            steps.push(offline::Step {
+                gyr,
+                acc,
+                mag: m,
+                dt,
+            });
+            real.push(is_real);
+        });
+        filled += gap.filled;
+        if let Some(dt) = gap.long_s {
+            warnings.push(long_gap_warning(sensor, dt, t));
         }
-        real.push(true);
     }
     let run = match &fusion.filter {
         Filter::Offline {

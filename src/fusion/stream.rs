@@ -1,14 +1,14 @@
 //! Raw readings fused sample by sample, as a live stream delivers them: the online filters'
-//! cores stepped exactly as [`super::fuse`] steps them over a whole track (each step's `dt` from
-//! the samples' times, gaps of up to [`super::MAX_FILLED_STEPS`] missing samples filled with
-//! readings interpolated at the nominal rate, the first step from the first readings' attitude).
+//! cores stepped by the same rule as [`super::fuse`] steps them over a whole track
+//! (`steps_for`: each step's `dt` from the samples' times, short gaps filled at the nominal rate;
+//! the first step from the first readings' attitude).
 //!
 //! What a whole track knows in advance a stream learns from its first [`WARM_SAMPLES`] readings,
 //! which come out together once they are in: the nominal period (their median step, where `fuse`
 //! takes the whole track's), the units check, and whether the magnetometer carries a field. A
 //! regularly sampled sensor therefore fuses to the same orientations either way (tested).
 
-use super::{Ahrs, Fusion, FusionError, MAX_FILLED_STEPS, init, median};
+use super::{Ahrs, Fusion, FusionError, init, median};
 use crate::take::ImuSample;
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -140,38 +140,15 @@ impl StreamFuser {
         out: &mut Vec<(f64, UnitQuaternion<f64>)>,
     ) {
         let mag = mag.filter(|_| self.nine_d);
-        let nominal = self.period_s;
         let core = self.core.as_mut().expect("started");
-        match self.last {
-            None => core.update(&imu.gyro_rad_s, &imu.accel_m_s2, mag.as_ref(), nominal),
-            Some((t_prev, prev)) => {
-                let dt = t - t_prev;
-                let count = (dt / nominal).round();
-                if count >= 2.0 && count <= MAX_FILLED_STEPS as f64 + 1.0 {
-                    let count = count as usize;
-                    let step_dt = dt / count as f64;
-                    for j in 1..count {
-                        let u = j as f64 / count as f64;
-                        core.update(
-                            &prev.gyro_rad_s.lerp(&imu.gyro_rad_s, u),
-                            &prev.accel_m_s2.lerp(&imu.accel_m_s2, u),
-                            mag.as_ref(),
-                            step_dt,
-                        );
-                    }
-                    self.filled += count - 1;
-                    core.update(&imu.gyro_rad_s, &imu.accel_m_s2, mag.as_ref(), step_dt);
-                } else if count >= 2.0 {
-                    self.warnings.push(format!(
-                        "sensor `{}`: no reading for {dt:.2} s before {t:.3} s; fusion carried on \
-                         from the orientation before the gap",
-                        self.sensor
-                    ));
-                    core.update(&imu.gyro_rad_s, &imu.accel_m_s2, mag.as_ref(), nominal);
-                } else {
-                    core.update(&imu.gyro_rad_s, &imu.accel_m_s2, mag.as_ref(), dt);
-                }
-            }
+        let prev = self.last.as_ref().map(|(t, s)| (*t, s));
+        let gap = super::steps_for(prev, t, &imu, self.period_s, |gyr, acc, dt, _| {
+            core.update(&gyr, &acc, mag.as_ref(), dt);
+        });
+        self.filled += gap.filled;
+        if let Some(dt) = gap.long_s {
+            self.warnings
+                .push(super::long_gap_warning(&self.sensor, dt, t));
         }
         self.last = Some((t, imu));
         let rejected = core.rejected();
