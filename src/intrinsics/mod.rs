@@ -284,12 +284,23 @@ pub struct Prepared<'a> {
     pub warnings: Vec<String>,
 }
 
+/// Where the gyro bias comes from when the calibration file gives none.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BiasFallback {
+    /// The filter estimates it itself (VQF, Mahony, the offline fusion).
+    Filter,
+    /// Read over the take's opening stillness.
+    OpeningStillness,
+    /// Left in: a causal run cannot look ahead at an opening stillness.
+    LeftIn,
+}
+
 pub fn prepare<'a>(
     sensor: &str,
     inertial: &'a Track<ImuSample>,
     magnetometer: Option<&'a Track<Vector3<f64>>>,
     calibration: Option<&SensorIntrinsics>,
-    filter_estimates_bias: bool,
+    fallback: BiasFallback,
 ) -> Prepared<'a> {
     let mut corrections: Vec<String> = calibration
         .map(|c| {
@@ -302,26 +313,31 @@ pub fn prepare<'a>(
     let mut warnings = Vec::new();
     let mut intrinsics = calibration.cloned().unwrap_or_default();
     if intrinsics.gyro_bias.is_none() {
-        if filter_estimates_bias {
-            corrections.push("gyro-bias (estimated by the filter)".into());
-        } else {
-            let opening = still::still_stretches(inertial, &still::StillOptions::default())
-                .into_iter()
-                .next()
-                .filter(|s| s.start_s <= inertial.times_s()[0] + 1.0);
-            match opening {
-                Some(s) => {
-                    let b = gyro_bias::bias_over(inertial, s.samples.clone());
-                    corrections.push(format!(
-                        "gyro-bias (opening stillness {:.2}–{:.2} s)",
-                        b.window_s[0], b.window_s[1]
-                    ));
-                    intrinsics.gyro_bias = Some(b);
+        match fallback {
+            BiasFallback::Filter => {
+                corrections.push("gyro-bias (estimated by the filter)".into());
+            }
+            BiasFallback::LeftIn => corrections
+                .push("gyro-bias left in (causal: no look ahead at an opening stillness)".into()),
+            BiasFallback::OpeningStillness => {
+                let opening = still::still_stretches(inertial, &still::StillOptions::default())
+                    .into_iter()
+                    .next()
+                    .filter(|s| s.start_s <= inertial.times_s()[0] + 1.0);
+                match opening {
+                    Some(s) => {
+                        let b = gyro_bias::bias_over(inertial, s.samples.clone());
+                        corrections.push(format!(
+                            "gyro-bias (opening stillness {:.2}–{:.2} s)",
+                            b.window_s[0], b.window_s[1]
+                        ));
+                        intrinsics.gyro_bias = Some(b);
+                    }
+                    None => warnings.push(format!(
+                        "sensor `{sensor}`: the take does not open with 2 s of stillness, and the filter does not \
+                         estimate the gyro bias: it is left in (record a still start, or give a calibration file)"
+                    )),
                 }
-                None => warnings.push(format!(
-                    "sensor `{sensor}`: the take does not open with 2 s of stillness, and the filter does not \
-                     estimate the gyro bias: it is left in (record a still start, or give a calibration file)"
-                )),
             }
         }
     }
@@ -552,7 +568,7 @@ mod tests {
             })
             .collect();
         let track = Track::new((0..500).map(|i| i as f64 / 100.0).collect(), samples).unwrap();
-        let p = prepare("s", &track, None, None, false);
+        let p = prepare("s", &track, None, None, BiasFallback::OpeningStillness);
         assert_eq!(p.corrections.len(), 1);
         assert!(
             p.corrections[0].starts_with("gyro-bias (opening stillness 0.00–"),
@@ -561,7 +577,7 @@ mod tests {
         );
         assert!(p.inertial.values()[0].gyro_rad_s.norm() < 1e-12);
         assert!((p.inertial.values()[400].gyro_rad_s - Vector3::x()).norm() < 1e-12);
-        let p = prepare("s", &track, None, None, true);
+        let p = prepare("s", &track, None, None, BiasFallback::Filter);
         assert_eq!(p.corrections, ["gyro-bias (estimated by the filter)"]);
         assert_eq!(p.inertial.values()[0].gyro_rad_s, b);
         // Turning from the start: nothing to read the bias from, and a warning says so.
@@ -569,7 +585,7 @@ mod tests {
             gyro_rad_s: s.gyro_rad_s + Vector3::new(0.0, 1.0, 0.0),
             ..*s
         });
-        let p = prepare("s", &moving, None, None, false);
+        let p = prepare("s", &moving, None, None, BiasFallback::OpeningStillness);
         assert!(
             p.corrections.is_empty() && p.warnings[0].contains("does not open"),
             "{:?}",

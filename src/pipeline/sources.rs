@@ -9,6 +9,7 @@
 
 use super::{PipelineError, parallel_map};
 use crate::fusion::{self, Fusion, FusionStats};
+use crate::intrinsics::BiasFallback;
 use crate::mapping::{Mapping, ResolvedSensor};
 use crate::rig::Rig;
 use crate::take::{Sensor, Take, Track};
@@ -139,8 +140,13 @@ pub fn orientations(
                         .sensor_calibration
                         .as_ref()
                         .and_then(|c| c.sensors.get(sensor.id())),
-                    // Causal: no look ahead at the opening stillness for the bias.
-                    filter.estimates_gyro_bias() || causal,
+                    if filter.estimates_gyro_bias() {
+                        BiasFallback::Filter
+                    } else if causal {
+                        BiasFallback::LeftIn
+                    } else {
+                        BiasFallback::OpeningStillness
+                    },
                 );
                 // Causal mode fuses as a live stream does (the filter's period from the first
                 // readings), so a take converted causally gives the frames a session of it gave.
