@@ -562,23 +562,17 @@ pub fn run(
     let mut warnings = Vec::new();
     let mut dropped = Vec::new();
     if let Some(run) = &mut running {
-        let _ = run.lines.finish(&mut samples);
-        feed(run, &mut samples, &mut per_sensor, &mut |pose: &Pose| {
+        let mut send = |pose: &Pose| {
             frames += 1;
             if let Some((socket, skeleton)) = &vmc_out {
                 let _ = socket.send(&skeleton.frame(pose, &rig));
             }
-        });
-        let vmc_frames = std::cell::Cell::new(0u64);
-        if let Err(e) = run.poses.finish(&mut |pose: &Pose| {
-            vmc_frames.set(vmc_frames.get() + 1);
-            if let Some((socket, skeleton)) = &vmc_out {
-                let _ = socket.send(&skeleton.frame(pose, &rig));
-            }
-        }) {
+        };
+        let _ = run.lines.finish(&mut samples);
+        feed(run, &mut samples, &mut per_sensor, &mut send);
+        if let Err(e) = run.poses.finish(&mut send) {
             warnings.push(e.to_string());
         }
-        frames += vmc_frames.get();
         warnings.extend(run.poses.warnings().iter().cloned());
         dropped.extend(run.lines.dropped_lines().iter().cloned());
         if let Some(take) = run.lines.take() {
