@@ -46,32 +46,64 @@ def parse(path):
     return joints, values, frame_time
 
 
-def positions(joints, values, channels=True):
-    """Positions per frame. A position channel replaces its OFFSET component (Blender's reading,
-    and conventions.md's rule for the root); `channels=False` keeps the OFFSETs (the rest pose)."""
+def local_rotations(joints, values):
+    """Each joint's local rotation per frame (a Rotation stack): its rotation channels composed as
+    intrinsic Euler angles in channel order."""
     n = len(values)
-    start, world, pos = 0, [], []
+    out, start = [], 0
     for j in joints:
         ch = j["channels"]
         rot = [c for c in ch if c.endswith("rotation")]
         if rot:
             idx = [start + ch.index(c) for c in rot]
-            local = Rotation.from_euler("".join(c[0] for c in rot), values[:, idx], degrees=True)
+            out.append(Rotation.from_euler("".join(c[0] for c in rot), values[:, idx], degrees=True))
         else:
-            local = Rotation.identity(n)
-        translation = np.tile(j["offset"], (n, 1))
+            out.append(Rotation.identity(n))
+        start += len(ch)
+    return out
+
+
+def translations(joints, values, channels=True):
+    """Each joint's translation from its parent per frame ((n, 3)): its OFFSET, a position channel
+    replacing its component (the root's channels are its world position); `channels=False` keeps
+    the OFFSETs (the rest pose)."""
+    n = len(values)
+    out, start = [], 0
+    for j in joints:
+        ch = j["channels"]
+        t = np.tile(j["offset"], (n, 1))
         for axis, name in enumerate(("Xposition", "Yposition", "Zposition")):
             if channels and name in ch:
-                translation[:, axis] = values[:, start + ch.index(name)]
+                t[:, axis] = values[:, start + ch.index(name)]
+        out.append(t)
         start += len(ch)
-        if j["parent"] is None:
-            world.append(local)
-            pos.append(translation)
+    return out
+
+
+def compose(joints, local, translation):
+    """World rotations and positions down the hierarchy: R = R_parent · R_local,
+    p = p_parent + R_parent · translation."""
+    world, pos = [], []
+    for i, j in enumerate(joints):
+        p = j["parent"]
+        if p is None:
+            world.append(local[i])
+            pos.append(translation[i])
         else:
-            p = j["parent"]
-            world.append(world[p] * local)
-            pos.append(pos[p] + world[p].apply(translation))
-    return pos
+            world.append(world[p] * local[i])
+            pos.append(pos[p] + world[p].apply(translation[i]))
+    return world, pos
+
+
+def forward(joints, values, channels=True):
+    """World rotations (Rotation stacks) and positions ((n, 3)) of every joint and End Site."""
+    return compose(joints, local_rotations(joints, values), translations(joints, values, channels))
+
+
+def positions(joints, values, channels=True):
+    """Positions per frame. A position channel replaces its OFFSET component (Blender's reading,
+    and conventions.md's rule for the root); `channels=False` keeps the OFFSETs (the rest pose)."""
+    return forward(joints, values, channels)[1]
 
 
 def main():

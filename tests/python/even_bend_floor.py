@@ -17,7 +17,7 @@ import sys
 import numpy as np
 from scipy.spatial.transform import Rotation as R
 
-from bvh_positions import parse
+from bvh_positions import compose, local_rotations, parse, translations
 
 
 def main():
@@ -26,28 +26,11 @@ def main():
     names = [j["name"] for j in joints]
     idx = {n: i for i, n in enumerate(names) if n}
     n = len(values)
-    local, start = [], 0
-    for j in joints:
-        ch = j["channels"]
-        rot = [c for c in ch if c.endswith("rotation")]
-        if rot:
-            ids = [start + ch.index(c) for c in rot]
-            local.append(R.from_euler("".join(c[0] for c in rot), values[:, ids], degrees=True))
-        else:
-            local.append(R.identity(n))
-        start += len(ch)
+    local = local_rotations(joints, values)
+    offsets = translations(joints, values, channels=False)
 
     def fk(loc):
-        world, pos = [], []
-        for i, j in enumerate(joints):
-            p = j["parent"]
-            if p is None:
-                world.append(loc[i])
-                pos.append(np.zeros((n, 3)))
-            else:
-                world.append(world[p] * loc[i])
-                pos.append(pos[p] + world[p].apply(j["offset"]))
-        return world, pos
+        return compose(joints, loc, offsets)
 
     world, pos = fk(local)
 

@@ -37,38 +37,10 @@ import warnings
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from bvh_positions import parse  # the suite's own minimal BVH parser (numpy, no imubake)
+from bvh_positions import forward, parse  # the suite's own minimal BVH reader (numpy, no imubake)
 
 SIDES = ("Left", "Right")
 JOINTS = ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")
-
-
-def forward(joints, values, channels=True):
-    """World rotations (Rotation stacks) and positions ((n, 3) arrays) of every joint and End Site.
-    `channels=False` keeps the OFFSETs instead of position channels (the rest pose)."""
-    n = len(values)
-    start, world, pos = 0, [], []
-    for j in joints:
-        ch = j["channels"]
-        rot = [c for c in ch if c.endswith("rotation")]
-        if rot:
-            idx = [start + ch.index(c) for c in rot]
-            local = Rotation.from_euler("".join(c[0].upper() for c in rot), values[:, idx], degrees=True)
-        else:
-            local = Rotation.identity(n)
-        translation = np.tile(j["offset"], (n, 1))
-        for axis, name in enumerate(("Xposition", "Yposition", "Zposition")):
-            if channels and name in ch:
-                translation[:, axis] = values[:, start + ch.index(name)]
-        start += len(ch)
-        if j["parent"] is None:
-            world.append(local)
-            pos.append(translation)
-        else:
-            p = j["parent"]
-            world.append(world[p] * local)
-            pos.append(pos[p] + world[p].apply(translation))
-    return world, pos
 
 
 def unit(v):
