@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{imubake_bin, python, shared};
+use common::{imubake_bin, python, run, shared};
 use imubake::pipeline::calibrate::mean_rotation;
 use imubake::rotation::angle_between;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -15,17 +15,6 @@ use std::process::Command;
 
 const MAPPING: &str = "mappings/paper000_16imu_mixamo.json";
 const OUT_FPS: f64 = 60.0;
-
-fn run(cmd: &mut Command) {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{:?}\n{}{}",
-        cmd,
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 struct Loop {
     /// RMS error per bone, degrees.

@@ -4,21 +4,11 @@
 
 mod common;
 
-use common::{imubake_bin, python, repo_file, shared};
+use common::{imubake_bin, python, repo_file, run, shared};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
-
-fn run(cmd: &mut Command) -> Vec<u8> {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd:?}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out.stdout
-}
 
 /// A CSV table: header and columns.
 fn read_table(path: &Path) -> BTreeMap<String, Vec<f64>> {
@@ -142,7 +132,7 @@ fn a_simulated_capture_compares_with_its_source() {
             .arg(b)
             .arg("--json")
             .args(extra));
-        serde_json::from_slice(&out).unwrap()
+        serde_json::from_slice(&out.stdout).unwrap()
     };
     let stats = |c: &Value, angle: &str| -> (f64, f64) {
         let s = c["angles"]
@@ -199,12 +189,15 @@ fn a_simulated_capture_compares_with_its_source() {
     for extra in [&[][..], &["--remove-offset"][..]] {
         let ours = compare(&d.join("source.csv"), &d.join("converted.csv"), extra);
         let lag = ours["lag_s"].as_f64().unwrap();
-        let theirs: Value = serde_json::from_slice(&run(Command::new(&py)
-            .arg(repo_file("tests/python/compare_reference.py"))
-            .arg(d.join("source.csv"))
-            .arg(d.join("converted.csv"))
-            .arg(lag.to_string())
-            .args(extra)))
+        let theirs: Value = serde_json::from_slice(
+            &run(Command::new(&py)
+                .arg(repo_file("tests/python/compare_reference.py"))
+                .arg(d.join("source.csv"))
+                .arg(d.join("converted.csv"))
+                .arg(lag.to_string())
+                .args(extra))
+            .stdout,
+        )
         .unwrap();
         let ours = ours["angles"].as_array().unwrap();
         assert_eq!(ours.len(), theirs.as_object().unwrap().len());
@@ -265,12 +258,12 @@ fn compare_finds_a_known_shift_and_prints_table_1() {
                 "left_knee_flexion",
                 "--json",
             ]));
-        let c: Value = serde_json::from_slice(&out).unwrap();
+        let c: Value = serde_json::from_slice(&out.stdout).unwrap();
         let lag = c["lag_s"].as_f64().unwrap();
         assert!((lag - 1.25).abs() < 1e-3, "{sync}: {lag}");
     }
     let out = run(Command::new(imubake_bin()).arg("compare").arg(&a).arg(&b));
-    let text = String::from_utf8(out).unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
     assert!(
         text.contains("joint                left RMSE  left r right RMSE right r"),
         "{text}"

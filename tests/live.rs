@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{imubake_bin, python, repo_file};
+use common::{imubake_bin, python, repo_file, run};
 use imubake::anim::Animation;
 use imubake::convert::ConvertSettings;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -227,16 +227,6 @@ fn assert_streamed(label: &str, bundles: &Value, anim: &Animation, names: &[(&st
         anim.frames()
     );
     assert!(worst < 0.5, "{worst}°");
-}
-
-fn run(cmd: &mut Command) -> std::process::Output {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd:?}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
 }
 
 /// The bundled 16-sensor walk replayed at twice its pace: every frame arrives as a VMC bundle

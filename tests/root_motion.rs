@@ -5,21 +5,11 @@
 
 mod common;
 
-use common::{imubake_bin, python, repo_file, shared};
+use common::{imubake_bin, python, repo_file, run, shared};
 use nalgebra::{Matrix2, Vector2, Vector3};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-fn run(cmd: &mut Command) -> Vec<u8> {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd:?}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out.stdout
-}
 
 /// Converts the bundled walk into `dir/out` with `extra` flags; the output folder.
 fn convert_walk(dir: &Path, out: &str, extra: &[&str]) -> PathBuf {
@@ -48,7 +38,7 @@ fn positions(py: &Path, bvh: &Path, joints: &[&str]) -> Positions {
         .arg(repo_file("tests/python/bvh_positions.py"))
         .arg(bvh)
         .arg(joints.join(",")));
-    let v: Value = serde_json::from_slice(&out).unwrap();
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
     let f = |x: &Value| x.as_f64().unwrap();
     Positions {
         joints: joints
