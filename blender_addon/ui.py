@@ -179,6 +179,14 @@ class IMUBAKE_OT_live_stop(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _live_session(op):
+    """The live view under way, or None after telling the user to start it."""
+    s = live_view.current()
+    if s is None:
+        op.report({"ERROR"}, "start the live view first")
+    return s
+
+
 class IMUBAKE_OT_live_record(bpy.types.Operator):
     """Record what the live view shows into a new action (again: stop recording)"""
 
@@ -186,9 +194,8 @@ class IMUBAKE_OT_live_record(bpy.types.Operator):
     bl_label = "Record"
 
     def execute(self, context):
-        s = live_view.current()
+        s = _live_session(self)
         if s is None:
-            self.report({"ERROR"}, "start the live view first")
             return {"CANCELLED"}
         if s.recording is None:
             s.start_recording(context)
@@ -205,9 +212,8 @@ class IMUBAKE_OT_live_recalibrate(bpy.types.Operator):
     bl_label = "Recalibrate"
 
     def execute(self, context):
-        s = live_view.current()
+        s = _live_session(self)
         if s is None:
-            self.report({"ERROR"}, "start the live view first")
             return {"CANCELLED"}
         try:
             s.recalibrate()
