@@ -107,6 +107,8 @@ pub enum AnimationError {
     },
     #[error("{0} holds a value that is not finite")]
     NonFinite(String),
+    #[error("its skeleton is not a rig: {0}")]
+    Rig(String),
 }
 
 impl Animation {
@@ -270,6 +272,104 @@ impl Animation {
         self
     }
 
+    /// A BVH file's motion as an animation on its own skeleton (`Bvh::to_rig`, rest = every
+    /// channel zero): each joint's rotation channels as its local rotation, the root's position
+    /// channels as the root position, other joints' position channels as animated translations.
+    /// `units` is the unit the file's numbers are in, `fps` its rate (the sidecar's exact one, or
+    /// [`Fps::from_frame_time_s`]).
+    pub fn from_bvh(
+        bvh: &crate::bvh::Bvh,
+        name: &str,
+        units: crate::rig::LengthUnit,
+        fps: Fps,
+    ) -> Result<Animation, AnimationError> {
+        let last = bvh
+            .frame_count()
+            .checked_sub(1)
+            .ok_or(AnimationError::NoFrames)?;
+        Animation::from_bvh_window(bvh, name, units, fps, 0..=last)
+    }
+
+    /// [`from_bvh`](Animation::from_bvh) of the file's frames `window` only (its first frame
+    /// becomes frame 0): a time window of a long take without the whole take in memory twice.
+    /// Fails with `NoFrames` when the window is empty or runs past the file's frames.
+    pub fn from_bvh_window(
+        bvh: &crate::bvh::Bvh,
+        name: &str,
+        units: crate::rig::LengthUnit,
+        fps: Fps,
+        window: std::ops::RangeInclusive<usize>,
+    ) -> Result<Animation, AnimationError> {
+        let rig = bvh
+            .to_rig(name, units)
+            .map_err(|e| AnimationError::Rig(e.to_string()))?;
+        if window.is_empty() || *window.end() >= bvh.frame_count() {
+            return Err(AnimationError::NoFrames);
+        }
+        let joints = bvh.joints();
+        let frames = window.clone().count();
+        let mut local = vec![Vec::with_capacity(frames); joints.len()];
+        let mut roots = Vec::with_capacity(frames);
+        let moved: Vec<usize> = (1..joints.len())
+            .filter(|&j| joints[j].has_position_channels())
+            .collect();
+        let mut translations: Vec<(usize, Vec<Vector3<f64>>)> = moved
+            .iter()
+            .map(|&j| (j, Vec::with_capacity(frames)))
+            .collect();
+        for n in window {
+            for (track, q) in local.iter_mut().zip(bvh.local_rotations(n)) {
+                track.push(q);
+            }
+            let t = bvh.joint_translations(n);
+            roots.push(t[0]);
+            for (j, track) in &mut translations {
+                track.push(t[*j]);
+            }
+        }
+        let animated = joints.iter().map(|j| j.has_rotation_channels()).collect();
+        let mut out = Animation::new(rig, fps, local, animated, roots)?;
+        if let Some((j, _)) = translations
+            .iter()
+            .find(|(_, t)| !t.iter().all(|p| p.iter().all(|v| v.is_finite())))
+        {
+            return Err(AnimationError::NonFinite(format!(
+                "translations of `{}`",
+                joints[*j].name
+            )));
+        }
+        out.translations = translations;
+        Ok(out)
+    }
+
+    /// Frames `start ..= end` as an animation of their own (frame `start` becomes frame 0), with
+    /// their contacts and translations: a time window of a long take. `None` when the window is
+    /// empty or outside the take.
+    pub fn window(&self, start: usize, end: usize) -> Option<Animation> {
+        if start > end || end >= self.frames {
+            return None;
+        }
+        let range = start..end + 1;
+        Some(Animation {
+            rig: self.rig.clone(),
+            fps: self.fps,
+            frames: range.len(),
+            local: self
+                .local
+                .iter()
+                .map(|t| t[range.clone()].to_vec())
+                .collect(),
+            animated: self.animated.clone(),
+            contacts: self.contacts.as_ref().map(|c| c[range.clone()].to_vec()),
+            translations: self
+                .translations
+                .iter()
+                .map(|(j, t)| (*j, t[range.clone()].to_vec()))
+                .collect(),
+            root_positions: self.root_positions[range].to_vec(),
+        })
+    }
+
     pub fn rig(&self) -> &Rig {
         &self.rig
     }
@@ -302,5 +402,51 @@ impl Animation {
     /// World rotations of every joint at one frame.
     pub fn world_at(&self, frame: usize) -> Vec<UnitQuaternion<f64>> {
         self.rig.world_rotations(&self.pose_at(frame))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rig::LengthUnit;
+
+    /// Two joints; the hips move and turn, the child has position channels too.
+    const BVH: &str = "HIERARCHY\nROOT Hips\n{\n OFFSET 0 90 0\n CHANNELS 6 Xposition Yposition \
+        Zposition Zrotation Xrotation Yrotation\n JOINT Spine\n {\n  OFFSET 0 10 0\n  CHANNELS 6 \
+        Xposition Yposition Zposition Zrotation Xrotation Yrotation\n  End Site\n  {\n   OFFSET 0 \
+        5 0\n  }\n }\n}\nMOTION\nFrames: 3\nFrame Time: 0.0333333\n\
+        0 90 0 0 0 0 0 10 0 0 0 0\n\
+        1 91 2 0 0 90 0 12 0 0 0 0\n\
+        2 92 4 30 0 0 0 14 0 0 0 0\n";
+
+    #[test]
+    fn a_bvh_motion_is_its_channels_and_a_window_keeps_its_frames() {
+        let bvh = crate::bvh::parse(BVH.as_bytes()).unwrap();
+        let fps = Fps::from_frame_time_s(bvh.frame_time_s()).unwrap();
+        assert_eq!((fps.num(), fps.den()), (30, 1));
+        let anim = Animation::from_bvh(&bvh, "t", LengthUnit::Centimetres, fps).unwrap();
+        assert_eq!(anim.frames(), 3);
+        assert_eq!(anim.root_positions()[1], Vector3::new(1.0, 91.0, 2.0));
+        // Frame 1: Yrotation 90° (by hand: the hips' +Z turns to +X).
+        let z = anim.local(0)[1] * Vector3::z();
+        assert!((z - Vector3::x()).norm() < 1e-12, "{z}");
+        // Frame 2: Zrotation 30°.
+        assert!((anim.local(0)[2].angle() - 30f64.to_radians()).abs() < 1e-12);
+        assert_eq!(anim.translations().len(), 1);
+        assert_eq!(anim.translations()[0].1[2], Vector3::new(0.0, 14.0, 0.0));
+
+        let w = anim.window(1, 2).unwrap();
+        assert_eq!(w.frames(), 2);
+        assert_eq!(w.root_positions()[0], anim.root_positions()[1]);
+        assert_eq!(w.local(0)[1], anim.local(0)[2]);
+        assert_eq!(w.translations()[0].1[1], Vector3::new(0.0, 14.0, 0.0));
+        assert!(anim.window(2, 3).is_none());
+        assert!(anim.window(2, 1).is_none());
+        assert_eq!(anim.window(2, 2).unwrap().frames(), 1);
+        let tail = Animation::from_bvh_window(&bvh, "t", LengthUnit::Centimetres, fps, 1..=2);
+        assert_eq!(tail.unwrap(), w);
+        assert!(
+            Animation::from_bvh_window(&bvh, "t", LengthUnit::Centimetres, fps, 2..=3).is_err()
+        );
     }
 }

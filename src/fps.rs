@@ -78,6 +78,26 @@ impl Fps {
         (f >= 0.0).then_some(f as u64)
     }
 
+    /// The rate a BVH file's `Frame Time:` (seconds per frame) stands for: a whole rate or an
+    /// NTSC one (n·1000/1001) whose frame time agrees to 1 part in 10⁴ (files write 6 decimals,
+    /// `0.033333` is 30 fps, `0.033367` 29.97), else the frame time's own decimal value.
+    /// `None` when the frame time is not a positive number of a rate [`Fps::new`] accepts.
+    pub fn from_frame_time_s(frame_time_s: f64) -> Option<Fps> {
+        if !(frame_time_s.is_finite() && frame_time_s > 0.0) {
+            return None;
+        }
+        let rate = 1.0 / frame_time_s;
+        let close = |fps: Fps| (fps.frame_time_s() - frame_time_s).abs() <= 1e-4 * frame_time_s;
+        let whole = Fps::new(rate.round().max(1.0) as u64, 1);
+        let ntsc = Fps::new((rate * 1.001).round().max(1.0) as u64 * 1000, 1001);
+        // The whole rate first: 1e-4 cannot mistake 30 for 29.97 (they differ by 1e-3).
+        [whole, ntsc]
+            .into_iter()
+            .flatten()
+            .find(|&f| close(f))
+            .or_else(|| Fps::new((rate * 1e6).round() as u64, 1_000_000))
+    }
+
     /// Frames on the grid from t = 0 to `last_s` inclusive: floor(last_s · fps) + 1.
     pub fn frame_count(self, last_s: f64) -> u64 {
         if !(last_s.is_finite() && last_s > 0.0) {
@@ -202,6 +222,24 @@ impl<'de> serde::Deserialize<'de> for Fps {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn frame_times_of_bvh_files_give_their_rates() {
+        use super::Fps;
+        let rate = |ft: f64| Fps::from_frame_time_s(ft).map(|f| (f.num(), f.den()));
+        assert_eq!(rate(0.033333), Some((30, 1)));
+        assert_eq!(rate(1.0 / 30.0), Some((30, 1)));
+        assert_eq!(rate(0.033367), Some((30000, 1001)));
+        assert_eq!(rate(0.03336666666666667), Some((30000, 1001)));
+        assert_eq!(rate(0.008333), Some((120, 1)));
+        assert_eq!(rate(0.0083333), Some((120, 1)));
+        assert_eq!(rate(0.016683), Some((60000, 1001)));
+        // 1 / 0.0123 = 81.30…: neither whole nor NTSC, kept as its decimal.
+        assert_eq!(rate(0.0123), Some((81_300_813, 1_000_000)));
+        assert_eq!(rate(0.0), None);
+        assert_eq!(rate(f64::NAN), None);
+        assert_eq!(rate(-1.0), None);
+    }
+
     use super::*;
 
     fn fps(s: &str) -> (u64, u64) {

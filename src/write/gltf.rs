@@ -52,7 +52,18 @@ pub enum GltfWriteError {
 /// The animation as a binary glTF (`.glb`): header, JSON chunk (padded with spaces), BIN chunk
 /// (padded with zeros).
 pub fn to_glb(anim: &Animation, name: &str) -> Result<Vec<u8>, GltfWriteError> {
-    let (doc, bin) = document(anim, name, None)?;
+    to_glb_from(anim, name, 0)
+}
+
+/// [`to_glb`] for a time window of a longer take: the animation's frame 0 is the take's frame
+/// `first_frame`, so its keys stand at n · den / num for n = `first_frame` … (the viewer's
+/// chunks; `Animation::window` makes the window).
+pub fn to_glb_from(
+    anim: &Animation,
+    name: &str,
+    first_frame: u64,
+) -> Result<Vec<u8>, GltfWriteError> {
+    let (doc, bin) = document(anim, name, None, first_frame)?;
     let mut json = serde_json::to_vec(&doc)?;
     pad_to_4(&mut json, b' ');
     let mut chunk = bin;
@@ -91,7 +102,7 @@ pub fn to_gltf(
     name: &str,
     bin_file_name: &str,
 ) -> Result<(String, Vec<u8>), GltfWriteError> {
-    let (doc, bin) = document(anim, name, Some(uri_encode(bin_file_name)))?;
+    let (doc, bin) = document(anim, name, Some(uri_encode(bin_file_name)), 0)?;
     let mut json = serde_json::to_string_pretty(&doc)?;
     json.push('\n');
     Ok((json, bin))
@@ -299,11 +310,11 @@ fn bone_mesh(anim: &Animation, rest: &[Vector3<f64>], metres: f64) -> BoneMesh {
     mesh
 }
 
-/// Frame times n · den / num as f32, refused when two frames fall on the same f32 (glTF wants
-/// strictly increasing key times).
-fn key_times(anim: &Animation) -> Result<Vec<f32>, GltfWriteError> {
-    let times: Vec<f32> = (0..anim.frames())
-        .map(|n| anim.fps().frame_time_of(n as u64) as f32)
+/// Frame times n · den / num (n from `first_frame`) as f32, refused when two frames fall on the
+/// same f32 (glTF wants strictly increasing key times).
+fn key_times(anim: &Animation, first_frame: u64) -> Result<Vec<f32>, GltfWriteError> {
+    let times: Vec<f32> = (0..anim.frames() as u64)
+        .map(|n| anim.fps().frame_time_of(first_frame + n) as f32)
         .collect();
     strictly_increasing(&times)?;
     Ok(times)
@@ -325,6 +336,7 @@ fn document(
     anim: &Animation,
     name: &str,
     buffer_uri: Option<String>,
+    first_frame: u64,
 ) -> Result<(json::Root, Vec<u8>), GltfWriteError> {
     use json::accessor::{ComponentType as C, Type as T};
     use json::buffer::Target;
@@ -337,7 +349,7 @@ fn document(
     let metres = rig.units().metres_per_unit();
     let rest: Vec<Vector3<f64>> = rig.rest_positions().iter().map(|p| p * metres).collect();
 
-    let times = key_times(anim)?;
+    let times = key_times(anim, first_frame)?;
 
     let mut root = json::Root {
         asset: json::Asset {
@@ -585,15 +597,18 @@ fn document(
             T::Vec4,
         );
     }
-    // Foot contacts as per-frame 0/1 curves on the animation's own frames (frame n at n / fps),
-    // for engines and IK setups that pin feet.
+    // Foot contacts as per-frame 0/1 curves on the animation's own frames (frame n at n / fps,
+    // from `first_frame` when not 0), for engines and IK setups that pin feet.
     let extras = anim.contacts().map(|c| {
         let curve = |side: usize| c.iter().map(|f| u8::from(f[side])).collect::<Vec<_>>();
-        let value = serde_json::json!({"imubake": {"contacts": {
+        let mut value = serde_json::json!({"imubake": {"contacts": {
             "fps": anim.fps().as_f64(),
             "left": curve(0),
             "right": curve(1),
         }}});
+        if first_frame > 0 {
+            value["imubake"]["contacts"]["first_frame"] = first_frame.into();
+        }
         serde_json::value::to_raw_value(&value).expect("plain JSON")
     });
     root.push(json::Animation {
