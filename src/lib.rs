@@ -26,6 +26,7 @@ pub mod rotation;
 pub mod simulate;
 pub mod smooth;
 pub mod take;
+pub mod view;
 pub mod watch;
 pub mod world;
 pub mod write;

@@ -16,7 +16,7 @@ const LAYERS: [&[&str]; 11] = [
     &["pipeline", "analysis"],
     &["write"],
     &["convert", "simulate"],
-    &["config", "ledger"],
+    &["config", "ledger", "view"],
     &["batch", "live"],
     &["watch"],
 ];

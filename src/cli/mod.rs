@@ -9,6 +9,7 @@ mod fuse;
 mod inspect;
 mod live;
 mod simulate;
+mod view;
 mod watch;
 
 use anyhow::Context;
@@ -55,6 +56,8 @@ enum Command {
     /// RMSE and Pearson's r per joint angle of two takes after synchronising them (paper 000's
     /// Table 1).
     Compare(compare::CompareArgs),
+    /// A take in the browser: the character in 3D, play, scrub, sensors' axes, foot contacts.
+    View(view::ViewArgs),
 }
 
 /// Flags shared by every command that reads captures.
@@ -136,5 +139,6 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Live(args) => live::run(args),
         Command::Angles(args) => angles::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::View(args) => view::run(args),
     }
 }
