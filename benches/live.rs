@@ -68,6 +68,7 @@ fn main() {
         allow: Default::default(),
         clock: None,
         keys: false,
+        preview: None,
     };
     let stop = Arc::new(AtomicBool::new(false));
     let stopper = Arc::clone(&stop);

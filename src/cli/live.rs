@@ -33,6 +33,10 @@ pub struct LiveArgs {
     /// source for one source, host for several]
     #[arg(long, value_name = "CLOCK")]
     clock: Option<Clock>,
+    /// Show the pose in the browser: serve `imubake view`'s page on loopback at PORT [default:
+    /// a free one, printed]
+    #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "0")]
+    preview: Option<u16>,
     /// Print the session's summary as JSON at the end.
     #[arg(long)]
     json: bool,
@@ -86,6 +90,29 @@ fn status_line(s: &Status) -> String {
     line
 }
 
+/// The browser preview: the rig at rest on `imubake view`'s page, served on loopback beside the
+/// session until it stops; its URL printed.
+fn start_preview(
+    convert: &imubake::convert::ConvertSettings,
+    port: u16,
+    stop: &std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> anyhow::Result<std::sync::Arc<imubake::view::Preview>> {
+    use imubake::view::{Preview, ServeOptions, Server, ViewTake};
+    let (rig, _, _, options) = imubake::convert::stream_setup(convert)?;
+    let preview = Preview::new(rig.units().metres_per_unit());
+    let server = Server::bind(
+        ViewTake::live(rig, options.fps, Vec::new()),
+        &ServeOptions {
+            listen: SocketAddr::from(([127, 0, 0, 1], port)),
+        },
+        Some(std::sync::Arc::clone(&preview)),
+    )?;
+    eprintln!("preview: {}", server.url());
+    let stop = std::sync::Arc::clone(stop);
+    std::thread::spawn(move || server.run(&stop));
+    Ok(preview)
+}
+
 pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
     let mut convert = args.settings.settings()?;
     if !args.settings.fps_given()? {
@@ -111,6 +138,11 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
             ignored.join(", ")
         );
     }
+    let stop = super::stop_on_signals()?;
+    let preview = match args.preview {
+        Some(port) => Some(start_preview(&convert, port, &stop)?),
+        None => None,
+    };
     let settings = LiveSettings {
         sources: args.sources.clone(),
         convert,
@@ -124,8 +156,8 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
         allow: args.allow.clone().unwrap_or_default(),
         clock: args.clock,
         keys: std::io::stdin().is_terminal() && !args.sources.contains(&SourceSpec::Stdin),
+        preview,
     };
-    let stop = super::stop_on_signals()?;
     let terminal = std::io::stderr().is_terminal();
     if settings.keys {
         eprintln!("press c and Enter to calibrate again; Ctrl-C ends the session");

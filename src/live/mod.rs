@@ -109,6 +109,8 @@ pub struct LiveSettings {
     pub clock: Option<Clock>,
     /// Read lines from the terminal: `c` asks for a calibration.
     pub keys: bool,
+    /// The browser preview's poses and status (`--preview`; its server runs beside the session).
+    pub preview: Option<Arc<crate::view::Preview>>,
 }
 
 /// One sensor's figures on the status line.
@@ -453,6 +455,9 @@ pub fn run(
                             if let Some((socket, skeleton)) = &vmc_out {
                                 let _ = socket.send(&skeleton.frame(pose, &rig));
                             }
+                            if let Some(preview) = &settings.preview {
+                                preview.pose(pose);
+                            }
                             latencies.push(at.elapsed().as_secs_f64() * 1e3);
                         });
                     }
@@ -549,6 +554,9 @@ pub fn run(
                     }
                     *was = is;
                 }
+                if let Some(preview) = &settings.preview {
+                    preview_status(preview, &now);
+                }
                 report(Report::Status(now));
             }
         }
@@ -566,6 +574,9 @@ pub fn run(
             frames += 1;
             if let Some((socket, skeleton)) = &vmc_out {
                 let _ = socket.send(&skeleton.frame(pose, &rig));
+            }
+            if let Some(preview) = &settings.preview {
+                preview.pose(pose);
             }
         };
         let _ = run.lines.finish(&mut samples);
@@ -730,6 +741,25 @@ fn feed(
             }
         }
     }
+}
+
+/// The status line, for the browser preview's panel.
+fn preview_status(preview: &crate::view::Preview, s: &Status) {
+    let (phase, left) = match s.phase {
+        Phase::Waiting => ("waiting", None),
+        Phase::Calibrating { left_s } => ("calibrating", Some(left_s)),
+        Phase::Running => ("running", None),
+    };
+    let sensors: Vec<crate::view::live::SensorLine<'_>> = s
+        .sensors
+        .iter()
+        .map(|x| crate::view::live::SensorLine {
+            id: &x.id,
+            rate_hz: x.rate_hz,
+            silent_s: x.silent_s,
+        })
+        .collect();
+    preview.status(phase, left, s.frames, &sensors);
 }
 
 #[allow(clippy::too_many_arguments)]
