@@ -33,14 +33,29 @@ install_venv venv-blender42 scripts/test-requirements-blender42.txt
 "$CACHE/venv/bin/python" -c 'import bpy, numpy, scipy, h5py, vqf, ahrs, pythonosc; print("venv: Blender", bpy.app.version_string, "numpy", numpy.__version__, "scipy", scipy.__version__)'
 "$CACHE/venv-blender42/bin/python" -c 'import bpy; print("venv-blender42: Blender", bpy.app.version_string)'
 
-# Khronos glTF-Validator (npm package; run through scripts/gltf_validate.mjs).
+# Node packages: the Khronos glTF-Validator (run through scripts/gltf_validate.mjs) and
+# playwright-core, which drives Chromium for the viewer's tests (tests/browser/view.mjs).
 VALIDATOR_VERSION="2.0.0-dev.3.10"
+PLAYWRIGHT_VERSION="1.65.1"
 if [ ! -f "$CACHE/node/node_modules/gltf-validator/package.json" ] \
-   || ! grep -q "\"version\": \"$VALIDATOR_VERSION\"" "$CACHE/node/node_modules/gltf-validator/package.json"; then
-  step "installing gltf-validator $VALIDATOR_VERSION into $CACHE/node"
+   || ! grep -q "\"version\": \"$VALIDATOR_VERSION\"" "$CACHE/node/node_modules/gltf-validator/package.json" \
+   || ! grep -q "\"version\": \"$PLAYWRIGHT_VERSION\"" "$CACHE/node/node_modules/playwright-core/package.json" 2>/dev/null; then
+  step "installing gltf-validator $VALIDATOR_VERSION and playwright-core $PLAYWRIGHT_VERSION into $CACHE/node"
   mkdir -p "$CACHE/node"
-  npm install --silent --no-audit --no-fund --prefix "$CACHE/node" "gltf-validator@$VALIDATOR_VERSION" >/dev/null
+  npm install --silent --no-audit --no-fund --prefix "$CACHE/node" \
+    "gltf-validator@$VALIDATOR_VERSION" "playwright-core@$PLAYWRIGHT_VERSION" >/dev/null
 fi
+
+# Debian's Chromium: the viewer's page runs in it, headless, WebGL through SwiftShader. A system
+# package (apt), installed once; playwright's own browser download does not work here.
+if [ ! -x /usr/bin/chromium ]; then
+  step "installing Debian's chromium (apt)"
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
+fi
+/usr/bin/chromium --version
 
 # mdBook, to build the reference in docs/ (a broken book fails the run).
 MDBOOK_VERSION="0.5.4"
