@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 use std::process::Command;
 
-const COMMANDS: [&str; 10] = [
+const COMMANDS: [&str; 11] = [
     "convert",
     "batch",
     "fuse",
@@ -17,6 +17,7 @@ const COMMANDS: [&str; 10] = [
     "angles",
     "compare",
     "live",
+    "view",
 ];
 
 fn docs(rel: &str) -> String {
