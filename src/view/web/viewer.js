@@ -198,7 +198,9 @@ async function main() {
     const height = Math.max(box.max.y - box.min.y, 0.5);
     target.y = box.min.y + height * 0.5;
     controls.target.copy(target);
-    camera.position.set(target.x + height * 1.2, target.y + height * 0.6, target.z + height * 3.4);
+    // Closer when following; a still camera stands back to keep more of the path in view.
+    const away = follow ? 2.2 : 3.4;
+    camera.position.set(target.x + height * away * 0.35, target.y + height * 0.45, target.z + height * away);
     controls.update();
   }
   let follow = params().follow !== '0';
