@@ -114,12 +114,25 @@ async function main() {
     axes.quaternion.set(x, y, z, w);
     axes.visible = false;
     axes.name = `sensor ${s.sensor}`;
+    axes.userData = { sensor: s.sensor, bone: s.bone };
     bone.add(axes);
     sensorAxes.push(axes);
   }
+  // One switch for all, and one per sensor (listed under it).
   $('show-sensors').disabled = sensorAxes.length === 0;
+  const list = $('sensor-list');
+  const boxes = sensorAxes.map((axes) => {
+    const label = document.createElement('label');
+    const box = document.createElement('input');
+    box.type = 'checkbox';
+    box.addEventListener('change', () => { axes.visible = box.checked; });
+    label.append(box, ` ${axes.userData.sensor} → ${axes.userData.bone}`);
+    list.appendChild(label);
+    return box;
+  });
   $('show-sensors').addEventListener('change', (e) => {
-    for (const a of sensorAxes) a.visible = e.target.checked;
+    sensorAxes.forEach((a, i) => { a.visible = e.target.checked; boxes[i].checked = e.target.checked; });
+    list.hidden = !e.target.checked;
   });
 
   // Foot contacts: a disc under each planted foot, and the timeline's strip.
