@@ -399,7 +399,10 @@ fn convert_unclean(
         None => None,
     };
     let subject = subject.as_ref();
-    let conversion = conversion(input, &take, settings, subject)?;
+    let mut conversion = conversion(input, &take, settings, subject)?;
+    conversion.vendor_contacts = take
+        .vendor_contacts()
+        .map(|v| vendor_contacts_record(v, &conversion));
     let source = SourceRecord {
         path: input.to_string_lossy().into_owned(),
         sha256,
@@ -509,6 +512,8 @@ struct Conversion {
     contacts: Option<pipeline::root::Contacts>,
     /// The sensors' world, and where it came from.
     world: (World, WorldFrom),
+    /// The capture system's own foot contacts on the animation's frames.
+    vendor_contacts: Option<crate::write::sidecar::VendorContactsRecord>,
     warnings: Vec<String>,
 }
 
@@ -557,6 +562,45 @@ impl Conversion {
         }
         self.pipeline.bind_frame = true;
         self
+    }
+}
+
+/// A capture system's contacts on the written frames: frame n stands at take time
+/// (n − bind + first) / fps, where `first` is the grid frame `--trim` made frame 0 and `bind` is 1
+/// with `--bind-frame` (whose frame 0, the rest pose, has no contact).
+fn vendor_contacts_record(
+    v: &crate::take::VendorContacts,
+    conversion: &Conversion,
+) -> crate::write::sidecar::VendorContactsRecord {
+    let fps = conversion.animation.fps();
+    let first = conversion
+        .pipeline
+        .trim
+        .as_ref()
+        .map_or(0, |t| t.first_frame);
+    let bind = usize::from(conversion.pipeline.bind_frame);
+    let planted: Vec<[bool; 2]> = (0..conversion.animation.frames())
+        .map(|n| match n.checked_sub(bind) {
+            Some(k) => v.at(fps.frame_time_of((k + first) as u64)),
+            None => [false; 2],
+        })
+        .collect();
+    let runs = |side: usize| {
+        let mut out: Vec<[usize; 2]> = Vec::new();
+        for (n, p) in planted.iter().enumerate() {
+            if p[side] {
+                match out.last_mut() {
+                    Some(last) if last[1] + 1 == n => last[1] = n,
+                    _ => out.push([n, n]),
+                }
+            }
+        }
+        out
+    };
+    crate::write::sidecar::VendorContactsRecord {
+        vendor: v.vendor,
+        left: runs(0),
+        right: runs(1),
     }
 }
 
@@ -623,6 +667,7 @@ fn quaternion_mode(
         },
         contacts: converted.contacts,
         world: (converted.world, world_from),
+        vendor_contacts: None,
         unsmoothed: converted.unsmoothed,
         warnings: converted.warnings,
         animation: converted.animation,
@@ -683,6 +728,7 @@ fn legacy_mode(
         ),
         contacts: legacy.contacts,
         world,
+        vendor_contacts: None,
         unsmoothed: None,
         warnings: legacy.warnings,
         euler_deg: legacy.euler_deg,
@@ -847,6 +893,7 @@ fn write_take(
         mapping: conversion.mapping,
         pipeline: conversion.pipeline,
         contacts: conversion.contacts,
+        vendor_contacts: conversion.vendor_contacts,
         outputs,
         sensors: sensor_summaries,
         dropped_lines,

@@ -17,10 +17,18 @@ pub enum World {
     Nwu,
     /// OpenSim ground: y up (OpenSense `.sto` files).
     Opensim,
+    /// The rig world itself: y up, facing +z, +x left (BVH motion).
+    Rig,
 }
 
 impl World {
-    pub const ALL: [World; 4] = [World::Enu, World::Ned, World::Nwu, World::Opensim];
+    pub const ALL: [World; 5] = [
+        World::Enu,
+        World::Ned,
+        World::Nwu,
+        World::Opensim,
+        World::Rig,
+    ];
 
     /// `q_rig_world`: takes vectors from this world into the rig world (Y up, facing +Z, +X
     /// left), keeping the sensors' heading: north → +Z, up → +Y, west → +X. OpenSim ground has no
@@ -34,6 +42,7 @@ impl World {
             // x north → +Z, y west → +X, z up → +Y
             World::Nwu => ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
             World::Opensim => ([0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]),
+            World::Rig => ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
         };
         let m = Matrix3::from_columns(&[Vector3::from(x), Vector3::from(y), Vector3::from(z)]);
         UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m))
@@ -45,6 +54,7 @@ impl World {
             World::Ned => "ned",
             World::Nwu => "nwu",
             World::Opensim => "opensim",
+            World::Rig => "rig",
         }
     }
 }
@@ -67,7 +77,7 @@ pub enum WorldFrom {
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown world frame `{0}`; expected one of enu, ned, nwu, opensim")]
+#[error("unknown world frame `{0}`; expected one of enu, ned, nwu, opensim, rig")]
 pub struct UnknownWorld(pub String);
 
 impl FromStr for World {

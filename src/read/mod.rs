@@ -11,6 +11,7 @@ pub mod xio_fusion_csv;
 pub mod xio_session;
 pub mod xsens_dot;
 pub mod xsens_mtw;
+pub mod xsens_mvnx;
 
 pub use crate::take::InputFormat;
 use crate::take::{BuildError, Take, TakeBuilder};
@@ -188,7 +189,11 @@ fn unknown_format(path: &Path) -> ReadError {
 
 /// Detects a single-file format from its first bytes.
 pub fn detect_bytes(head: &[u8]) -> Option<InputFormat> {
-    if opensense_sto::looks_like(head) {
+    if xsens_mvnx::looks_like(head) {
+        Some(InputFormat::XsensMvnx)
+    } else if head.trim_ascii_start().starts_with(b"HIERARCHY") {
+        Some(InputFormat::Bvh)
+    } else if opensense_sto::looks_like(head) {
         Some(InputFormat::OpensenseSto)
     } else if xsens_mtw::looks_like(head) {
         Some(InputFormat::XsensMtw)
@@ -521,10 +526,12 @@ pub fn read_take_from_bytes(
         InputFormat::XsensDot => xsens_dot::read_from(bytes, path, options),
         InputFormat::XsensMtw => xsens_mtw::read_from(bytes, path, options),
         InputFormat::XioFusionCsv => xio_fusion_csv::read_from(bytes, path, options),
+        InputFormat::XsensMvnx => xsens_mvnx::read_from(bytes, path, options),
         InputFormat::XioSession => Err(ReadError::format(
             path,
             "an x-IMU3 session is a folder; a stream cannot hold one. Hint: pass the session folder",
         )),
+        InputFormat::Bvh => Err(bvh_is_motion(path)),
     }
 }
 
@@ -545,7 +552,18 @@ pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> 
         InputFormat::XsensMtw => xsens_mtw::read(path, options),
         InputFormat::XioSession => xio_session::read(path, options),
         InputFormat::XioFusionCsv => xio_fusion_csv::read(path, options),
+        InputFormat::XsensMvnx => xsens_mvnx::read(path, options),
+        InputFormat::Bvh => Err(bvh_is_motion(path)),
     }
+}
+
+/// A BVH file is motion on a skeleton, not sensor readings: only `convert` takes it.
+fn bvh_is_motion(path: &Path) -> ReadError {
+    ReadError::format(
+        path,
+        "a BVH file is motion on a skeleton, not a sensor capture: `imubake convert` retargets it \
+         onto the rig (`--rig`, `--bone-map`)",
+    )
 }
 
 /// A live session's recalibration as it records it, `# calibrate t=SECONDS` (the text after

@@ -265,6 +265,9 @@ struct SensorStreams {
     magnetometer: Stream<Vector3<f64>>,
 }
 
+/// A raw time and whether the left and right foot are planted then.
+pub type ContactSample = (f64, [bool; 2]);
+
 /// Builds a [`Take`] from rows pushed in file order.
 pub struct TakeBuilder {
     path: PathBuf,
@@ -282,6 +285,8 @@ pub struct TakeBuilder {
     events: Vec<Event>,
     /// Recalibrations recorded by a live session, seconds since its first sample.
     recalibrations: Vec<f64>,
+    /// A capture system's own foot contacts: who, and (raw time, [left, right] planted).
+    vendor_contacts: Option<(&'static str, Vec<ContactSample>)>,
 }
 
 /// Moves a stream's events into the dropped lines (late rows are reported when merged).
@@ -344,11 +349,17 @@ impl TakeBuilder {
             warnings: Vec::new(),
             events: Vec::new(),
             recalibrations: Vec::new(),
+            vendor_contacts: None,
         }
     }
 
     /// A recalibration a live session recorded (`# calibrate t=…`): the mapping's pose held
     /// again from `t_s`, seconds since the first sample.
+    /// The capture system's own foot contacts, at raw times in the take's clock unit.
+    pub fn set_vendor_contacts(&mut self, vendor: &'static str, samples: Vec<ContactSample>) {
+        self.vendor_contacts = Some((vendor, samples));
+    }
+
     pub fn recalibrate_at(&mut self, t_s: f64) {
         self.recalibrations.push(t_s);
     }
@@ -489,6 +500,7 @@ impl TakeBuilder {
             mut warnings,
             mut events,
             mut recalibrations,
+            vendor_contacts,
             ..
         } = self;
         // Rows still held after a jump at the end of the source.
@@ -589,6 +601,20 @@ impl TakeBuilder {
         if out.is_empty() {
             return Err(BuildError::Empty { dropped });
         }
+        // On the take's clock (t = 0 at the earliest kept sample), in time order, from t = 0.
+        let vendor_contacts = vendor_contacts.and_then(|(vendor, mut samples)| {
+            samples.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let (times_s, planted): (Vec<f64>, Vec<[bool; 2]>) = samples
+                .into_iter()
+                .map(|(raw, p)| ((raw - raw_start) * spu, p))
+                .filter(|(t, _)| t.is_finite() && *t >= -1e-9)
+                .unzip();
+            (!times_s.is_empty()).then_some(crate::take::VendorContacts {
+                vendor,
+                times_s,
+                planted,
+            })
+        });
         Ok(Take {
             source: SourceInfo {
                 path,
@@ -604,6 +630,7 @@ impl TakeBuilder {
                 recalibrations.sort_by(f64::total_cmp);
                 recalibrations
             },
+            vendor_contacts,
         })
     }
 }

@@ -23,10 +23,14 @@ pub enum InputFormat {
     XioSession,
     /// x-io Fusion's raw-readings CSV (`Time (s),Gyroscope X (deg/s),…`): one sensor.
     XioFusionCsv,
+    /// Xsens MVN's MVNX export (XML): each sensor's orientation, Xsens's foot contacts.
+    XsensMvnx,
+    /// A BVH file's motion: not a sensor capture; `convert` retargets it onto the rig.
+    Bvh,
 }
 
 impl InputFormat {
-    pub const ALL: [InputFormat; 7] = [
+    pub const ALL: [InputFormat; 9] = [
         InputFormat::Sou,
         InputFormat::ImubakeCsv,
         InputFormat::OpensenseSto,
@@ -34,6 +38,8 @@ impl InputFormat {
         InputFormat::XsensMtw,
         InputFormat::XioSession,
         InputFormat::XioFusionCsv,
+        InputFormat::XsensMvnx,
+        InputFormat::Bvh,
     ];
 
     pub fn name(self) -> &'static str {
@@ -45,6 +51,8 @@ impl InputFormat {
             InputFormat::XsensMtw => "xsens-mtw",
             InputFormat::XioSession => "xio-session",
             InputFormat::XioFusionCsv => "xio-fusion-csv",
+            InputFormat::XsensMvnx => "xsens-mvnx",
+            InputFormat::Bvh => "bvh",
         }
     }
 
@@ -58,6 +66,8 @@ impl InputFormat {
             InputFormat::XsensMtw => "Xsens MTw .txt export",
             InputFormat::XioSession => "x-io x-IMU3 session",
             InputFormat::XioFusionCsv => "x-io Fusion raw-readings CSV",
+            InputFormat::XsensMvnx => "Xsens MVN .mvnx export",
+            InputFormat::Bvh => "BVH motion",
         }
     }
 }

@@ -206,6 +206,28 @@ pub struct Take {
     warnings: Vec<String>,
     /// When a live session was recalibrated (`# calibrate t=…` lines), seconds, ascending.
     recalibrations_s: Vec<f64>,
+    /// The foot contacts the capture system found itself (Xsens MVN's), when the file has them.
+    vendor_contacts: Option<VendorContacts>,
+}
+
+/// A capture system's own foot contacts: at each time (seconds, the take's clock), whether the
+/// left and right foot are planted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VendorContacts {
+    /// Whose: `xsens`.
+    pub vendor: &'static str,
+    pub times_s: Vec<f64>,
+    pub planted: Vec<[bool; 2]>,
+}
+
+impl VendorContacts {
+    /// Planted at `t_s`: the latest sample at or before it (the first before the first).
+    pub fn at(&self, t_s: f64) -> [bool; 2] {
+        let i = self.times_s.partition_point(|&t| t <= t_s + 1e-9);
+        self.planted[i
+            .saturating_sub(1)
+            .min(self.planted.len().saturating_sub(1))]
+    }
 }
 
 impl Take {
@@ -216,6 +238,10 @@ impl Take {
     }
     pub fn source(&self) -> &SourceInfo {
         &self.source
+    }
+    /// The capture system's own foot contacts, when the file has them.
+    pub fn vendor_contacts(&self) -> Option<&VendorContacts> {
+        self.vendor_contacts.as_ref()
     }
     /// Sensors in the order they first appear in the source.
     pub fn sensors(&self) -> &[Sensor] {

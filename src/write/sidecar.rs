@@ -21,11 +21,26 @@ pub struct Sidecar {
     /// Foot contacts and airborne stretches as frame intervals `[start, end]` (inclusive), in
     /// `feet` root mode; `null` otherwise.
     pub contacts: Option<crate::pipeline::root::Contacts>,
+    /// The capture system's own foot contacts (Xsens MVN's `footContacts`), on the same frames,
+    /// for comparison with `contacts`; absent when the source has none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vendor_contacts: Option<VendorContactsRecord>,
     pub outputs: Vec<OutputRecord>,
     pub sensors: SensorSummaries,
     pub dropped_lines: Vec<LineReport>,
     pub repaired_lines: Vec<LineReport>,
     pub warnings: Vec<String>,
+}
+
+/// A capture system's own foot contacts as frame intervals `[start, end]` (inclusive) of the
+/// written animation: a foot is planted at frame n when the system said so at its latest sample
+/// at or before frame n's time.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct VendorContactsRecord {
+    /// Whose: `xsens`.
+    pub vendor: &'static str,
+    pub left: Vec<[usize; 2]>,
+    pub right: Vec<[usize; 2]>,
 }
 
 #[derive(Debug, Clone, Serialize)]

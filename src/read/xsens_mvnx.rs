@@ -1,0 +1,305 @@
+//! Xsens MVN's MVNX export (XML, namespace `http://www.xsens.com/mvn/mvnx`, version 4), read as
+//! it streams (`quick-xml`): a long take runs to gigabytes and is never held whole.
+//!
+//! ```text
+//! <mvnx version="4"><subject frameRate="60" configuration="FullBody" …>
+//!   <segments><segment label="Pelvis" id="1">…</segment>…</segments>
+//!   <sensors><sensor label="Pelvis"/><sensor label="T8"/>…</sensors>
+//!   <footContactDefinition><contactDefinition label="LeftFoot_Heel" index="0"/>…
+//!   <frames …>
+//!     <frame type="identity"|"tpose"|"tpose-isb" …>  (calibration: segments only, skipped)
+//!     <frame time="17" index="1" tc="…" ms="1542082631859" type="normal">
+//!       <orientation>w x y z …</orientation> … <footContacts>1 0 1 0</footContacts> …
+//!       <sensorOrientation>w x y z …</sensorOrientation> …
+//! ```
+//!
+//! - The sensors are the `<sensors>` list (each named after its segment: `Pelvis`, `T8`,
+//!   `RightUpperArm`, …); each normal frame's `sensorOrientation` holds one w-first quaternion
+//!   per sensor in that order: q_global_sensor.
+//! - The world is MVN's global frame: x north (forward at MVN's calibration), y west, z up —
+//!   `nwu`.
+//! - Time: frame `index` / `frameRate` (the index keeps the original frame number, so a dropped
+//!   frame leaves its gap), else `time` (milliseconds from the first frame).
+//! - `footContacts` (LeftFoot_Heel, LeftFoot_Toe, RightFoot_Heel, RightFoot_Toe, 0 or 1) are kept
+//!   as the take's vendor contacts: a foot is planted when its heel or toe is.
+//! - Not read: segment kinematics, joint angles, `sensorFreeAcceleration` (global, gravity
+//!   removed: not what an accelerometer measures) and `sensorMagneticField` (arbitrary units).
+//!
+//! A frame whose `sensorOrientation` is missing, short or holds a bad number is dropped and
+//! reported with its line; a zero quaternion drops that sensor's sample. Malformed XML fails
+//! with its line.
+
+use super::{InputFormat, ReadError, ReadOptions, read_single_file, unit_quaternion};
+use crate::take::{ClockUnit, SensorIdx, Take, TakeBuilder};
+use crate::world::World;
+use nalgebra::Quaternion;
+use quick_xml::events::{BytesStart, Event};
+use std::io::{BufRead, BufReader, Read};
+use std::path::Path;
+
+/// The namespace every MVNX element is in.
+pub const NAMESPACE: &str = "http://www.xsens.com/mvn/mvnx";
+
+/// True when the first bytes are an MVNX document: an `<mvnx` root element (after the XML
+/// declaration and comments) or the MVNX namespace.
+pub fn looks_like(head: &[u8]) -> bool {
+    let text = String::from_utf8_lossy(head);
+    text.contains("<mvnx") && (text.contains(NAMESPACE) || text.trim_start().starts_with("<?xml"))
+}
+
+pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    read_single_file(path, options, read_from)
+}
+
+/// A `BufRead` that counts the newlines the parser has consumed: the line of each event.
+struct Counting<B> {
+    inner: B,
+    newlines: u64,
+}
+
+impl<B: BufRead> Read for Counting<B> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.newlines += memchr::memchr_iter(b'\n', &buf[..n]).count() as u64;
+        Ok(n)
+    }
+}
+
+impl<B: BufRead> BufRead for Counting<B> {
+    fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
+        self.inner.fill_buf()
+    }
+    fn consume(&mut self, amt: usize) {
+        if let Ok(buf) = self.inner.fill_buf() {
+            let amt = amt.min(buf.len());
+            self.newlines += memchr::memchr_iter(b'\n', &buf[..amt]).count() as u64;
+        }
+        self.inner.consume(amt);
+    }
+}
+
+/// Where in the document the parser is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Field {
+    None,
+    SensorOrientation,
+    FootContacts,
+}
+
+/// The frame being read.
+#[derive(Debug, Default)]
+struct Frame {
+    normal: bool,
+    line: u64,
+    index: Option<f64>,
+    time_ms: Option<f64>,
+    /// The start tag, for reports.
+    tag: String,
+    orientation: Option<Vec<u8>>,
+    contacts: Option<Vec<u8>>,
+}
+
+fn attribute(e: &BytesStart<'_>, name: &str) -> Option<String> {
+    e.attributes()
+        .flatten()
+        .find(|a| a.key.local_name().into_inner() == name)
+        .map(|a| a.value.to_string())
+}
+
+fn numbers(text: &[u8]) -> Option<Vec<f64>> {
+    text.split(|b| b.is_ascii_whitespace())
+        .filter(|t| !t.is_empty())
+        .map(|t| {
+            fast_float2::parse::<f64, _>(t)
+                .ok()
+                .filter(|v| v.is_finite())
+        })
+        .collect()
+}
+
+/// Reads an MVNX document from any reader; `path` names it in reports.
+pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    let world = options.world.unwrap_or(World::Nwu);
+    let mut take = TakeBuilder::new(path, InputFormat::XsensMvnx, world, ClockUnit::Seconds);
+    let mut xml = quick_xml::Reader::from_reader(Counting {
+        inner: BufReader::with_capacity(1 << 16, reader),
+        newlines: 0,
+    });
+    xml.config_mut().trim_text(true);
+    let mut buf = Vec::new();
+    let mut frame_rate: Option<f64> = None;
+    let mut sensors: Vec<SensorIdx> = Vec::new();
+    let mut labels: Vec<String> = Vec::new();
+    let mut in_sensors = false;
+    let mut seen_root = false;
+    let mut field = Field::None;
+    let mut frame: Option<Frame> = None;
+    let mut normal_frames = 0u64;
+    let mut contacts: Vec<(f64, [bool; 2])> = Vec::new();
+    let line_of = |xml: &quick_xml::Reader<Counting<BufReader<_>>>| xml.get_ref().newlines + 1;
+    loop {
+        let event = xml.read_event_into(&mut buf).map_err(|e| {
+            ReadError::line(path, line_of(&xml), format!("not well-formed XML: {e}"))
+        })?;
+        let line = line_of(&xml);
+        match event {
+            Event::Start(ref e) | Event::Empty(ref e) => {
+                let empty = matches!(event, Event::Empty(_));
+                match e.local_name().into_inner() {
+                    "mvnx" => seen_root = true,
+                    _ if !seen_root => {
+                        return Err(ReadError::line(
+                            path,
+                            line,
+                            "not an MVNX document: the root element is not `mvnx`",
+                        ));
+                    }
+                    "subject" => {
+                        frame_rate = attribute(e, "frameRate")
+                            .and_then(|v| v.trim().parse::<f64>().ok())
+                            .filter(|v| v.is_finite() && *v > 0.0);
+                    }
+                    "sensors" if !empty => in_sensors = true,
+                    "sensor" if in_sensors => {
+                        let label = attribute(e, "label").unwrap_or_default();
+                        if label.is_empty() || labels.contains(&label) {
+                            return Err(ReadError::line(
+                                path,
+                                line,
+                                format!("a sensor without a label, or a repeated one (`{label}`)"),
+                            ));
+                        }
+                        sensors.push(take.sensor(&label));
+                        labels.push(label);
+                    }
+                    "frame" if !empty => {
+                        let kind = attribute(e, "type").unwrap_or_default();
+                        frame = Some(Frame {
+                            normal: kind == "normal",
+                            line,
+                            index: attribute(e, "index").and_then(|v| v.trim().parse().ok()),
+                            time_ms: attribute(e, "time").and_then(|v| v.trim().parse().ok()),
+                            tag: format!("<{}>", AsRef::<str>::as_ref(e)),
+                            orientation: None,
+                            contacts: None,
+                        });
+                    }
+                    "sensorOrientation" if frame.as_ref().is_some_and(|f| f.normal) => {
+                        field = Field::SensorOrientation;
+                    }
+                    "footContacts" if frame.as_ref().is_some_and(|f| f.normal) => {
+                        field = Field::FootContacts;
+                    }
+                    _ => {}
+                }
+            }
+            Event::Text(ref t) => {
+                if let Some(f) = &mut frame {
+                    match field {
+                        Field::SensorOrientation => {
+                            f.orientation = Some(AsRef::<str>::as_ref(t).as_bytes().to_vec())
+                        }
+                        Field::FootContacts => {
+                            f.contacts = Some(AsRef::<str>::as_ref(t).as_bytes().to_vec())
+                        }
+                        Field::None => {}
+                    }
+                }
+            }
+            Event::End(ref e) => match e.local_name().into_inner() {
+                "sensors" => in_sensors = false,
+                "sensorOrientation" | "footContacts" => field = Field::None,
+                "frame" => {
+                    if let Some(f) = frame.take().filter(|f| f.normal) {
+                        normal_frames += 1;
+                        frame_done(path, &mut take, &f, frame_rate, &sensors, &mut contacts)?;
+                    }
+                }
+                _ => {}
+            },
+            Event::Eof => break,
+            _ => {}
+        }
+        buf.clear();
+    }
+    if !seen_root {
+        return Err(ReadError::format(
+            path,
+            "not an MVNX document (no `mvnx` element)",
+        ));
+    }
+    if sensors.is_empty() {
+        return Err(ReadError::format(
+            path,
+            "the MVNX file lists no sensors (`<sensors>`): nothing to animate from",
+        ));
+    }
+    if normal_frames == 0 {
+        return Err(ReadError::format(
+            path,
+            "the MVNX file has no normal frames",
+        ));
+    }
+    take.set_vendor_contacts("xsens", contacts);
+    take.finish(options.skip_seconds)
+        .map_err(|e| ReadError::take(path, e))
+}
+
+/// One normal frame into the take.
+fn frame_done(
+    path: &Path,
+    take: &mut TakeBuilder,
+    f: &Frame,
+    frame_rate: Option<f64>,
+    sensors: &[SensorIdx],
+    contacts: &mut Vec<(f64, [bool; 2])>,
+) -> Result<(), ReadError> {
+    let raw = f.tag.as_bytes();
+    let t = match (f.index, frame_rate, f.time_ms) {
+        (Some(i), Some(rate), _) => i / rate,
+        (_, _, Some(ms)) => ms / 1000.0,
+        _ => {
+            take.drop_line(f.line, "a frame with neither `index` nor `time`", raw);
+            return Ok(());
+        }
+    };
+    let Some(values) = f.orientation.as_deref() else {
+        take.drop_line(f.line, "a frame without `sensorOrientation`", raw);
+        return Ok(());
+    };
+    let Some(values) = numbers(values) else {
+        take.drop_line(
+            f.line,
+            "`sensorOrientation` holds a value that is not a number",
+            raw,
+        );
+        return Ok(());
+    };
+    if values.len() != 4 * sensors.len() {
+        take.drop_line(
+            f.line,
+            format!(
+                "`sensorOrientation` has {} values; {} sensors need {}",
+                values.len(),
+                sensors.len(),
+                4 * sensors.len()
+            ),
+            raw,
+        );
+        return Ok(());
+    }
+    for (q, &sensor) in values.chunks_exact(4).zip(sensors) {
+        match unit_quaternion(Quaternion::new(q[0], q[1], q[2], q[3])) {
+            Some((q, _)) => take
+                .push_quaternion(sensor, t, q, f.line, raw)
+                .map_err(|e| ReadError::take(path, e))?,
+            None => take.drop_line(f.line, "a zero quaternion in `sensorOrientation`", raw),
+        }
+    }
+    if let Some(c) = f.contacts.as_deref().and_then(numbers)
+        && c.len() == 4
+    {
+        contacts.push((t, [c[0] > 0.5 || c[1] > 0.5, c[2] > 0.5 || c[3] > 0.5]));
+    }
+    Ok(())
+}
