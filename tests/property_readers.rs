@@ -1,7 +1,22 @@
 //! Property tests: no reader panics on any input, and the SOU line check is exactly the paper's
 //! regular expression (checked against the `regex` crate, an independent implementation).
 
-use imubake::read::{ReadOptions, detect_bytes, imubake_csv, sou};
+use imubake::read::{ReadOptions, detect_bytes, imubake_csv, sou, xsens_mvnx};
+
+/// A small valid MVNX document (two sensors, a calibration frame, three normal frames).
+const MVNX: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<mvnx xmlns="http://www.xsens.com/mvn/mvnx" version="4">
+<subject label="s" frameRate="60" segmentCount="1" configuration="Custom">
+<sensors><sensor label="Pelvis"/><sensor label="T8"/></sensors>
+<frames>
+<frame time="0" type="tpose"><orientation>1 0 0 0</orientation></frame>
+<frame time="0" index="0" type="normal"><footContacts>1 1 0 0</footContacts><sensorOrientation>1 0 0 0 0.5 0.5 0.5 0.5</sensorOrientation></frame>
+<frame time="17" index="1" type="normal"><footContacts>0 0 1 1</footContacts><sensorOrientation>0.7071 0.7071 0 0 0.5 0.5 0.5 0.5</sensorOrientation></frame>
+<frame time="33" index="2" type="normal"><sensorOrientation>0 1 0 0 1 0 0 0</sensorOrientation></frame>
+</frames>
+</subject>
+</mvnx>
+"#;
 use proptest::prelude::*;
 use std::path::Path;
 
@@ -26,6 +41,33 @@ proptest! {
     fn sou_reader_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..2048)) {
         let _ = sou::read_from(&bytes[..], Path::new("fuzz.log"), &ReadOptions::default());
         let _ = detect_bytes(&bytes);
+    }
+
+    /// MVNX: arbitrary bytes, and valid documents edited byte by byte (the XML parser, the
+    /// numbers, the frame bookkeeping): a take whose tracks hold their invariants, or an error.
+    #[test]
+    fn mvnx_reader_never_panics(
+        bytes in proptest::collection::vec(any::<u8>(), 0..1024),
+        edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>(), 0u8..3), 0..12),
+    ) {
+        let _ = xsens_mvnx::read_from(&bytes[..], Path::new("fuzz.mvnx"), &ReadOptions::default());
+        let mut doc = MVNX.as_bytes().to_vec();
+        for (index, byte, op) in edits {
+            if doc.is_empty() { doc.push(byte); continue; }
+            let i = index.index(doc.len());
+            match op {
+                0 => doc[i] = byte,
+                1 => doc.insert(i, byte),
+                _ => { doc.remove(i); }
+            }
+        }
+        if let Ok(take) = xsens_mvnx::read_from(&doc[..], Path::new("m.mvnx"), &ReadOptions::default()) {
+            for s in take.sensors() {
+                let times = s.primary_times_s();
+                prop_assert!(times.windows(2).all(|w| w[0] < w[1]));
+                prop_assert!(times.iter().all(|t| t.is_finite() && *t >= 0.0));
+            }
+        }
     }
 
     #[test]
