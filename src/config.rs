@@ -26,6 +26,8 @@
 //!                        # madgwick:beta=0.1, mahony, trust, gyro, vqf:6d (no magnetometer)
 //! sensor_calibration: sensors.yaml   # calibrate-sensors' file; relative to this one
 //! subject: subject.yaml  # height_m and/or segment lengths: the rig scaled to the subject
+//! bone_map: bones.json   # a BVH take: which joint drives which bone (default: by part)
+//! bvh_reference: rest    # a BVH take: changes measured from its rest pose, or frame:N
 //! smoothing: butterworth:order=4,cutoff=14   # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
 //! # or with per-bone overrides:
 //! # smoothing: {method: "butterworth:cutoff=4", bones: {LeftHand: none, Head: "gaussian:sigma=0.05"}}
@@ -92,6 +94,17 @@ pub struct Config {
     pub sensor_calibration: Option<PathBuf>,
     /// A subject file (`height_m`, segment lengths) the rig is scaled to.
     pub subject: Option<PathBuf>,
+    /// A BVH take's bone map (source joint → bone), relative to the config file.
+    pub bone_map: Option<PathBuf>,
+    /// A BVH take's reference pose: `rest` or `frame:N`.
+    #[serde(default, deserialize_with = "bvh_reference")]
+    pub bvh_reference: Option<crate::retarget::Reference>,
+}
+
+fn bvh_reference<'de, D: Deserializer<'de>>(
+    d: D,
+) -> Result<Option<crate::retarget::Reference>, D::Error> {
+    parsed(d, "bvh_reference")
 }
 
 fn fusion<'de, D: Deserializer<'de>>(d: D) -> Result<Option<crate::fusion::Fusion>, D::Error> {
@@ -211,6 +224,9 @@ impl Config {
         {
             config.sensor_calibration = Some(base.join(c));
         }
+        if let Some(b) = config.bone_map.as_ref().filter(|b| b.is_relative()) {
+            config.bone_map = Some(base.join(b));
+        }
         if let Some(r) = &config.rig {
             let p = Path::new(r);
             let is_file = r.ends_with(".yaml")
@@ -259,6 +275,8 @@ impl Config {
             fusion: self.fusion.or(below.fusion),
             sensor_calibration: self.sensor_calibration.or(below.sensor_calibration),
             subject: self.subject.or(below.subject),
+            bone_map: self.bone_map.or(below.bone_map),
+            bvh_reference: self.bvh_reference.or(below.bvh_reference),
         }
     }
 
@@ -270,6 +288,8 @@ impl Config {
             rig: self.rig.clone(),
             sensor_calibration: self.sensor_calibration.clone(),
             subject: self.subject.clone(),
+            bone_map: self.bone_map.clone(),
+            bvh_reference: self.bvh_reference.unwrap_or_default(),
             ..ConvertSettings::default()
         };
         if let Some(fps) = self.fps {

@@ -57,6 +57,11 @@ pub struct ConvertSettings {
     pub in_place: bool,
     /// Where `read.world` came from (`--world` or the config file), when it is set.
     pub world_from: Option<WorldFrom>,
+    /// A BVH take: which of its joints drive which bones (the Blender add-on's bone-map JSON);
+    /// default: by anatomical part.
+    pub bone_map: Option<PathBuf>,
+    /// A BVH take: the pose its joints' changes are measured from.
+    pub bvh_reference: crate::retarget::Reference,
 }
 
 impl ConvertSettings {
@@ -90,6 +95,8 @@ impl Default for ConvertSettings {
             bind_frame: false,
             in_place: false,
             world_from: None,
+            bone_map: None,
+            bvh_reference: crate::retarget::Reference::Rest,
         }
     }
 }
@@ -132,6 +139,9 @@ pub enum ConvertError {
     LegacyStream(PathBuf),
     #[error("a stream needs --mapping (its sensors are not known in advance)")]
     NoStreamMapping,
+    /// A BVH take that cannot be read or retargeted.
+    #[error("{}: {reason}", .input.display())]
+    Bvh { input: PathBuf, reason: String },
 }
 
 impl crate::diagnostic::Diagnostic for ConvertError {
@@ -154,6 +164,7 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             | ConvertError::Output(OutputError::Gltf { path, .. }) => Some(path),
             ConvertError::LegacyStream(path) => Some(path),
             ConvertError::NoStreamMapping => None,
+            ConvertError::Bvh { input, .. } => Some(input),
         }
     }
 
@@ -178,6 +189,9 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             }
             ConvertError::Output(_) => Some("check the output folder: free space and permissions"),
             ConvertError::LegacyStream(_) | ConvertError::NoStreamMapping => None,
+            ConvertError::Bvh { .. } => Some(
+                "the BVH's joints are matched to the rig's bones by name; --bone-map names them",
+            ),
         }
     }
 }
@@ -392,13 +406,23 @@ fn convert_unclean(
     out_dir: &Path,
     settings: &ConvertSettings,
 ) -> Result<ConvertOutcome, ConvertError> {
-    let (take, sha256) = read_and_hash(input, &settings.read)?;
     // The subject file, read once: it scales the rig, and the sidecar records it.
     let subject = match &settings.subject {
         Some(path) => Some(Subject::load(path)?),
         None => None,
     };
     let subject = subject.as_ref();
+    if is_bvh_take(input, &settings.read) {
+        let (conversion, source) = bvh_conversion(input, settings, subject)?;
+        let facts = TakeFacts {
+            sensor_summaries: SensorSummaries(Vec::new()),
+            warnings: conversion.warnings.clone(),
+            dropped_lines: Vec::new(),
+            repaired_lines: Vec::new(),
+        };
+        return write_take(input, out_dir, settings, subject, source, facts, conversion);
+    }
+    let (take, sha256) = read_and_hash(input, &settings.read)?;
     let mut conversion = conversion(input, &take, settings, subject)?;
     conversion.vendor_contacts = take
         .vendor_contacts()
@@ -420,11 +444,16 @@ fn convert_unclean(
 /// The animation of one take, as `convert` would write it, without writing anything (for
 /// `imubake angles` and `compare` on a capture).
 pub fn animate(input: &Path, settings: &ConvertSettings) -> Result<Animation, ConvertError> {
-    let take = read_take(input, &settings.read)?;
     let subject = match &settings.subject {
         Some(path) => Some(Subject::load(path)?),
         None => None,
     };
+    if is_bvh_take(input, &settings.read) {
+        return Ok(bvh_conversion(input, settings, subject.as_ref())?
+            .0
+            .animation);
+    }
+    let take = read_take(input, &settings.read)?;
     Ok(conversion(input, &take, settings, subject.as_ref())?.animation)
 }
 
@@ -496,6 +525,130 @@ fn conversion(
     } else {
         conversion
     })
+}
+
+/// Is `input` a BVH take (`--input-format bvh`, else a file whose content is BVH)?
+fn is_bvh_take(input: &Path, read: &ReadOptions) -> bool {
+    match read.format {
+        Some(format) => format == crate::take::InputFormat::Bvh,
+        None => {
+            input.is_file()
+                && crate::read::detect_format(input)
+                    .is_ok_and(|f| f == crate::take::InputFormat::Bvh)
+        }
+    }
+}
+
+/// A BVH take retargeted onto the rig ([`crate::retarget`]) at the settings' rate, and what the
+/// sidecar says of its source.
+fn bvh_conversion(
+    input: &Path,
+    settings: &ConvertSettings,
+    subject: Option<&Subject>,
+) -> Result<(Conversion, SourceRecord), ConvertError> {
+    let fail = |reason: String| ConvertError::Bvh {
+        input: input.to_path_buf(),
+        reason,
+    };
+    let bytes = std::fs::read(input).map_err(|e| fail(e.to_string()))?;
+    let sha256 = hex(&Sha256::digest(&bytes));
+    let bvh = crate::bvh::parse(&bytes).map_err(|e| fail(e.to_string()))?;
+    drop(bytes);
+    let source_fps = crate::fps::Fps::from_frame_time_s(bvh.frame_time_s()).ok_or_else(|| {
+        fail(format!(
+            "Frame Time {} is not a frame rate",
+            bvh.frame_time_s()
+        ))
+    })?;
+    let rig = rig_for(settings, None, subject)?;
+    let source_names: Vec<&str> = bvh.joints().iter().map(|j| j.name.as_str()).collect();
+    let target_names: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
+    let pairs = match &settings.bone_map {
+        Some(path) => crate::retarget::load_bone_map(path, &source_names, &target_names),
+        None => crate::retarget::auto_pairs(&bvh, &rig),
+    }
+    .map_err(|e| fail(e.to_string()))?;
+    let animation = crate::retarget::retarget(
+        &bvh,
+        source_fps,
+        &rig,
+        &pairs,
+        settings.bvh_reference,
+        settings.pipeline.fps,
+    )
+    .map_err(|e| fail(e.to_string()))?;
+    let mut warnings = Vec::new();
+    if settings.pipeline.trim.is_some() {
+        warnings.push("--trim is not applied to a BVH take".to_string());
+    }
+    let identity = [1.0, 0.0, 0.0, 0.0];
+    let sensors = pairs
+        .iter()
+        .map(|&(s, t)| crate::mapping::SensorRecord {
+            sensor: source_names[s].to_string(),
+            bone: target_names[t].to_string(),
+            mount_source: "fixed",
+            mount: identity,
+            forward: None,
+            orientation: "bvh",
+            world: World::Rig,
+            heading_aligned_by: None,
+        })
+        .collect();
+    let mut pipeline = pipeline_record(
+        settings,
+        &HeadingSource::None,
+        0.0,
+        0,
+        "bvh-retarget",
+        pipeline::root::RootMode::Fixed,
+    );
+    pipeline.root = "source";
+    pipeline.smoothing = None;
+    pipeline.unsensed = "rest";
+    pipeline.trim = None;
+    let conversion = Conversion {
+        euler_deg: pipeline::output::euler_degrees(&animation),
+        animation,
+        unsmoothed: None,
+        mapping: MappingRecord {
+            file: settings
+                .bone_map
+                .as_ref()
+                .map(|p| p.to_string_lossy().into_owned()),
+            rig: rig.name().to_string(),
+            world: World::Rig,
+            calibration: None,
+            sensors,
+            legacy: None,
+        },
+        pipeline,
+        contacts: None,
+        world: (World::Rig, WorldFrom::Format),
+        vendor_contacts: None,
+        warnings,
+    };
+    let conversion = if settings.in_place {
+        conversion
+            .in_place()
+            .map_err(|e| fail(format!("--in-place: {e}")))?
+    } else {
+        conversion
+    };
+    let conversion = if settings.bind_frame {
+        conversion.with_bind_frame()
+    } else {
+        conversion
+    };
+    let source = SourceRecord {
+        path: input.to_string_lossy().into_owned(),
+        sha256,
+        format: crate::take::InputFormat::Bvh,
+        world: World::Rig,
+        world_from: WorldFrom::Format,
+        start_timestamp: "0 s".to_string(),
+    };
+    Ok((conversion, source))
 }
 
 /// A converted take, whichever mapping mode made it: the animation, what the writers need of it,

@@ -197,6 +197,12 @@ struct FingerprintInput<'a> {
     /// SHA-256 of the subject file's content.
     #[serde(skip_serializing_if = "Option::is_none")]
     subject: Option<String>,
+    /// SHA-256 of a BVH take's bone map.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bone_map: Option<String>,
+    /// A BVH take's reference pose, when not the rest pose.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bvh_reference: Option<String>,
 }
 
 fn file_sha256(path: &Path) -> String {
@@ -240,6 +246,9 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         fusion: p.fusion.as_ref().map(|f| f.to_string()),
         sensor_calibration: settings.sensor_calibration.as_deref().map(file_sha256),
         subject: settings.subject.as_deref().map(file_sha256),
+        bone_map: settings.bone_map.as_deref().map(file_sha256),
+        bvh_reference: (settings.bvh_reference != crate::retarget::Reference::Rest)
+            .then(|| settings.bvh_reference.to_string()),
     };
     let json = serde_json::to_vec(&input).expect("the fingerprint input serialises");
     format!("{FINGERPRINT_SCHEMA}:{}", hex(&Sha256::digest(&json)))

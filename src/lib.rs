@@ -21,6 +21,7 @@ pub mod live;
 pub mod mapping;
 pub mod pipeline;
 pub mod read;
+pub mod retarget;
 pub mod rig;
 pub mod rotation;
 pub mod simulate;

@@ -13,7 +13,7 @@ const LAYERS: [&[&str]; 11] = [
     &["read", "bvh", "inspect", "fusion"],
     &["rig", "intrinsics"],
     &["mapping", "anim"],
-    &["pipeline", "analysis"],
+    &["pipeline", "analysis", "retarget"],
     &["write"],
     &["convert", "simulate"],
     &["config", "ledger", "view"],

@@ -103,6 +103,14 @@ pub struct SettingsArgs {
     /// `imubake calibrate-sensors`): gyro bias and gain, accelerometer, magnetometer, per sensor.
     #[arg(long, value_name = "FILE.yaml")]
     sensor_calibration: Option<PathBuf>,
+    /// A BVH take: which of its joints drive which bones, {"bones": {"joint": "bone or part"}}
+    /// [default: by anatomical part, from the joints' names]
+    #[arg(long, value_name = "FILE.json")]
+    bone_map: Option<PathBuf>,
+    /// A BVH take: the pose its joints' turns are measured from: rest (every channel zero) or
+    /// frame:N [default: rest]
+    #[arg(long, value_name = "rest|frame:N")]
+    bvh_reference: Option<imubake::retarget::Reference>,
     #[command(flatten)]
     read: ReadArgs,
 }
@@ -174,6 +182,8 @@ impl SettingsArgs {
             in_place: self.in_place,
             unsensed: self.unsensed,
             subject: self.subject.clone(),
+            bone_map: self.bone_map.clone(),
+            bvh_reference: self.bvh_reference,
             ..self.read.layer()
         }
     }

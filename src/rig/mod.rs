@@ -6,6 +6,7 @@
 //! BVH file's hierarchy serves as a rig too.
 
 pub mod file;
+pub mod names;
 pub mod subject;
 
 mod bvh;
