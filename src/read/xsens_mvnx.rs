@@ -30,7 +30,7 @@
 //! with its line.
 
 use super::{InputFormat, ReadError, ReadOptions, read_single_file, unit_quaternion};
-use crate::take::{ClockUnit, SensorIdx, Take, TakeBuilder};
+use crate::take::{ClockUnit, ContactSample, SensorIdx, Take, TakeBuilder};
 use crate::world::World;
 use nalgebra::Quaternion;
 use quick_xml::events::{BytesStart, Event};
@@ -78,25 +78,51 @@ impl<B: BufRead> BufRead for Counting<B> {
     }
 }
 
-/// Where in the document the parser is.
+/// Which element's text the scanner is in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Field {
     None,
+    Orientation,
+    Position,
     SensorOrientation,
     FootContacts,
 }
 
-/// The frame being read.
+/// What the document says before its frames.
 #[derive(Debug, Default)]
-struct Frame {
-    normal: bool,
-    line: u64,
-    index: Option<f64>,
-    time_ms: Option<f64>,
+pub(crate) struct Header {
+    pub frame_rate: Option<f64>,
+    /// `<sensors>` labels, in order.
+    pub sensors: Vec<String>,
+    /// `<segments>` labels, in order.
+    pub segments: Vec<String>,
+}
+
+/// One `<frame>` as written: its attributes and the texts of the elements read.
+#[derive(Debug, Default)]
+pub(crate) struct RawFrame {
+    /// `normal`, or a calibration frame's type (`identity`, `tpose`, `tpose-isb`).
+    pub kind: String,
+    pub line: u64,
+    pub index: Option<f64>,
+    pub time_ms: Option<f64>,
     /// The start tag, for reports.
-    tag: String,
-    orientation: Option<Vec<u8>>,
-    contacts: Option<Vec<u8>>,
+    pub tag: String,
+    pub orientation: Option<Vec<u8>>,
+    pub position: Option<Vec<u8>>,
+    pub sensor_orientation: Option<Vec<u8>>,
+    pub contacts: Option<Vec<u8>>,
+}
+
+impl RawFrame {
+    /// The frame's time, seconds: `index / frameRate`, else `time` (ms).
+    pub fn time_s(&self, frame_rate: Option<f64>) -> Option<f64> {
+        match (self.index, frame_rate, self.time_ms) {
+            (Some(i), Some(rate), _) => Some(i / rate),
+            (_, _, Some(ms)) => Some(ms / 1000.0),
+            _ => None,
+        }
+    }
 }
 
 fn attribute(e: &BytesStart<'_>, name: &str) -> Option<String> {
@@ -106,7 +132,8 @@ fn attribute(e: &BytesStart<'_>, name: &str) -> Option<String> {
         .map(|a| a.value.to_string())
 }
 
-fn numbers(text: &[u8]) -> Option<Vec<f64>> {
+/// Whitespace-separated finite numbers; `None` if any is not one.
+pub(crate) fn numbers(text: &[u8]) -> Option<Vec<f64>> {
     text.split(|b| b.is_ascii_whitespace())
         .filter(|t| !t.is_empty())
         .map(|t| {
@@ -117,25 +144,27 @@ fn numbers(text: &[u8]) -> Option<Vec<f64>> {
         .collect()
 }
 
-/// Reads an MVNX document from any reader; `path` names it in reports.
-pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
-    let world = options.world.unwrap_or(World::Nwu);
-    let mut take = TakeBuilder::new(path, InputFormat::XsensMvnx, world, ClockUnit::Seconds);
+/// Streams an MVNX document: `on_frame` hears each frame as it ends (the header complete by
+/// then); `segments` says whether segment data (`orientation`, `position`) is kept. Malformed XML,
+/// a root that is not `mvnx` and a repeated or empty sensor label are errors with their line.
+pub(crate) fn scan(
+    reader: impl Read,
+    path: &Path,
+    segments: bool,
+    mut on_frame: impl FnMut(&Header, RawFrame) -> Result<(), ReadError>,
+) -> Result<Header, ReadError> {
     let mut xml = quick_xml::Reader::from_reader(Counting {
         inner: BufReader::with_capacity(1 << 16, reader),
         newlines: 0,
     });
     xml.config_mut().trim_text(true);
     let mut buf = Vec::new();
-    let mut frame_rate: Option<f64> = None;
-    let mut sensors: Vec<SensorIdx> = Vec::new();
-    let mut labels: Vec<String> = Vec::new();
+    let mut header = Header::default();
     let mut in_sensors = false;
+    let mut in_segments = false;
     let mut seen_root = false;
     let mut field = Field::None;
-    let mut frame: Option<Frame> = None;
-    let mut normal_frames = 0u64;
-    let mut contacts: Vec<(f64, [bool; 2])> = Vec::new();
+    let mut frame: Option<RawFrame> = None;
     let line_of = |xml: &quick_xml::Reader<Counting<BufReader<_>>>| xml.get_ref().newlines + 1;
     loop {
         let event = xml.read_event_into(&mut buf).map_err(|e| {
@@ -145,6 +174,7 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
         match event {
             Event::Start(ref e) | Event::Empty(ref e) => {
                 let empty = matches!(event, Event::Empty(_));
+                let in_frame = frame.is_some();
                 match e.local_name().into_inner() {
                     "mvnx" => seen_root = true,
                     _ if !seen_root => {
@@ -155,64 +185,66 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
                         ));
                     }
                     "subject" => {
-                        frame_rate = attribute(e, "frameRate")
+                        header.frame_rate = attribute(e, "frameRate")
                             .and_then(|v| v.trim().parse::<f64>().ok())
                             .filter(|v| v.is_finite() && *v > 0.0);
                     }
                     "sensors" if !empty => in_sensors = true,
+                    "segments" if !empty => in_segments = true,
                     "sensor" if in_sensors => {
                         let label = attribute(e, "label").unwrap_or_default();
-                        if label.is_empty() || labels.contains(&label) {
+                        if label.is_empty() || header.sensors.contains(&label) {
                             return Err(ReadError::line(
                                 path,
                                 line,
                                 format!("a sensor without a label, or a repeated one (`{label}`)"),
                             ));
                         }
-                        sensors.push(take.sensor(&label));
-                        labels.push(label);
+                        header.sensors.push(label);
+                    }
+                    "segment" if in_segments => {
+                        header
+                            .segments
+                            .push(attribute(e, "label").unwrap_or_default());
                     }
                     "frame" if !empty => {
-                        let kind = attribute(e, "type").unwrap_or_default();
-                        frame = Some(Frame {
-                            normal: kind == "normal",
+                        frame = Some(RawFrame {
+                            kind: attribute(e, "type").unwrap_or_default(),
                             line,
                             index: attribute(e, "index").and_then(|v| v.trim().parse().ok()),
                             time_ms: attribute(e, "time").and_then(|v| v.trim().parse().ok()),
                             tag: format!("<{}>", AsRef::<str>::as_ref(e)),
-                            orientation: None,
-                            contacts: None,
+                            ..RawFrame::default()
                         });
                     }
-                    "sensorOrientation" if frame.as_ref().is_some_and(|f| f.normal) => {
-                        field = Field::SensorOrientation;
-                    }
-                    "footContacts" if frame.as_ref().is_some_and(|f| f.normal) => {
-                        field = Field::FootContacts;
-                    }
+                    "orientation" if in_frame && segments => field = Field::Orientation,
+                    "position" if in_frame && segments => field = Field::Position,
+                    "sensorOrientation" if in_frame => field = Field::SensorOrientation,
+                    "footContacts" if in_frame => field = Field::FootContacts,
                     _ => {}
                 }
             }
             Event::Text(ref t) => {
                 if let Some(f) = &mut frame {
+                    let text = || Some(AsRef::<str>::as_ref(t).as_bytes().to_vec());
                     match field {
-                        Field::SensorOrientation => {
-                            f.orientation = Some(AsRef::<str>::as_ref(t).as_bytes().to_vec())
-                        }
-                        Field::FootContacts => {
-                            f.contacts = Some(AsRef::<str>::as_ref(t).as_bytes().to_vec())
-                        }
+                        Field::Orientation => f.orientation = text(),
+                        Field::Position => f.position = text(),
+                        Field::SensorOrientation => f.sensor_orientation = text(),
+                        Field::FootContacts => f.contacts = text(),
                         Field::None => {}
                     }
                 }
             }
             Event::End(ref e) => match e.local_name().into_inner() {
                 "sensors" => in_sensors = false,
-                "sensorOrientation" | "footContacts" => field = Field::None,
+                "segments" => in_segments = false,
+                "orientation" | "position" | "sensorOrientation" | "footContacts" => {
+                    field = Field::None
+                }
                 "frame" => {
-                    if let Some(f) = frame.take().filter(|f| f.normal) {
-                        normal_frames += 1;
-                        frame_done(path, &mut take, &f, frame_rate, &sensors, &mut contacts)?;
+                    if let Some(f) = frame.take() {
+                        on_frame(&header, f)?;
                     }
                 }
                 _ => {}
@@ -228,7 +260,34 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
             "not an MVNX document (no `mvnx` element)",
         ));
     }
-    if sensors.is_empty() {
+    Ok(header)
+}
+
+/// Reads an MVNX document from any reader; `path` names it in reports.
+pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    let world = options.world.unwrap_or(World::Nwu);
+    let mut take = TakeBuilder::new(path, InputFormat::XsensMvnx, world, ClockUnit::Seconds);
+    let mut sensors: Vec<SensorIdx> = Vec::new();
+    let mut normal_frames = 0u64;
+    let mut contacts: Vec<ContactSample> = Vec::new();
+    let header = scan(reader, path, false, |header, f| {
+        if sensors.len() != header.sensors.len() {
+            sensors = header.sensors.iter().map(|l| take.sensor(l)).collect();
+        }
+        if f.kind == "normal" {
+            normal_frames += 1;
+            frame_done(
+                path,
+                &mut take,
+                &f,
+                header.frame_rate,
+                &sensors,
+                &mut contacts,
+            )?;
+        }
+        Ok(())
+    })?;
+    if header.sensors.is_empty() {
         return Err(ReadError::format(
             path,
             "the MVNX file lists no sensors (`<sensors>`): nothing to animate from",
@@ -249,21 +308,17 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
 fn frame_done(
     path: &Path,
     take: &mut TakeBuilder,
-    f: &Frame,
+    f: &RawFrame,
     frame_rate: Option<f64>,
     sensors: &[SensorIdx],
-    contacts: &mut Vec<(f64, [bool; 2])>,
+    contacts: &mut Vec<ContactSample>,
 ) -> Result<(), ReadError> {
     let raw = f.tag.as_bytes();
-    let t = match (f.index, frame_rate, f.time_ms) {
-        (Some(i), Some(rate), _) => i / rate,
-        (_, _, Some(ms)) => ms / 1000.0,
-        _ => {
-            take.drop_line(f.line, "a frame with neither `index` nor `time`", raw);
-            return Ok(());
-        }
+    let Some(t) = f.time_s(frame_rate) else {
+        take.drop_line(f.line, "a frame with neither `index` nor `time`", raw);
+        return Ok(());
     };
-    let Some(values) = f.orientation.as_deref() else {
+    let Some(values) = f.sensor_orientation.as_deref() else {
         take.drop_line(f.line, "a frame without `sensorOrientation`", raw);
         return Ok(());
     };

@@ -8,7 +8,7 @@ mod sequence;
 mod stream;
 mod track;
 
-pub use builder::{BuildError, ClockUnit, SensorIdx, TakeBuilder};
+pub use builder::{BuildError, ClockUnit, ContactSample, SensorIdx, TakeBuilder};
 pub use format::InputFormat;
 pub use samples::{ImuSample, YawPitchRollDeg};
 pub use sequence::LOOKAHEAD_ROWS;
