@@ -561,16 +561,17 @@ fn bvh_conversion(
         ))
     })?;
     let rig = rig_for(settings, None, subject)?;
-    let source_names: Vec<&str> = bvh.joints().iter().map(|j| j.name.as_str()).collect();
+    let source = crate::retarget::SourceMotion::of_bvh(&bvh, source_fps);
+    drop(bvh);
+    let source_names: Vec<&str> = source.names.iter().map(String::as_str).collect();
     let target_names: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
     let pairs = match &settings.bone_map {
         Some(path) => crate::retarget::load_bone_map(path, &source_names, &target_names),
-        None => crate::retarget::auto_pairs(&bvh, &rig),
+        None => crate::retarget::auto_pairs(&source_names, &rig),
     }
     .map_err(|e| fail(e.to_string()))?;
     let animation = crate::retarget::retarget(
-        &bvh,
-        source_fps,
+        &source,
         &rig,
         &pairs,
         settings.bvh_reference,

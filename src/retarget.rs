@@ -124,21 +124,68 @@ pub fn load_bone_map(
     Ok(pairs)
 }
 
+/// A skeleton's motion, as retargeting reads it: each joint's world rotation per frame (rig
+/// world axes: Y up), the root's position, the hips' rest height above the rest pose's lowest
+/// point (in the source's units) and the rate.
+#[derive(Debug, Clone)]
+pub struct SourceMotion {
+    pub names: Vec<String>,
+    pub fps: Fps,
+    /// `world[frame][joint]`: q_world_joint.
+    pub world: Vec<Vec<UnitQuaternion<f64>>>,
+    /// The root joint's position per frame, source units; the floor is y = 0.
+    pub roots: Vec<Vector3<f64>>,
+    pub hip_height: f64,
+}
+
+impl SourceMotion {
+    /// A BVH file's motion (its forward kinematics), at `fps` (its `Frame Time`'s rate).
+    pub fn of_bvh(bvh: &Bvh, fps: Fps) -> SourceMotion {
+        let (rest, lowest) = rest_heights(bvh);
+        let mut world = Vec::with_capacity(bvh.frame_count());
+        let mut roots = Vec::with_capacity(bvh.frame_count());
+        for n in 0..bvh.frame_count() {
+            let translations = bvh.joint_translations(n);
+            world.push(
+                bvh.forward_kinematics(&bvh.local_rotations(n), &translations)
+                    .1,
+            );
+            roots.push(translations[0]);
+        }
+        SourceMotion {
+            names: bvh.joints().iter().map(|j| j.name.clone()).collect(),
+            fps,
+            world,
+            roots,
+            hip_height: rest.first().map_or(0.0, |r| r.y) - lowest,
+        }
+    }
+
+    /// An animation's motion on its own rig.
+    pub fn of_animation(anim: &Animation) -> SourceMotion {
+        let rig = anim.rig();
+        SourceMotion {
+            names: rig.joints().iter().map(|j| j.name.clone()).collect(),
+            fps: anim.fps(),
+            world: (0..anim.frames())
+                .map(|n| rig.world_rotations(&anim.pose_at(n)))
+                .collect(),
+            roots: anim.root_positions().to_vec(),
+            hip_height: rig.root_height(),
+        }
+    }
+}
+
 /// The pairs by anatomical part ([`crate::rig::names::auto_map`]); an error when there are none.
-pub fn auto_pairs(bvh: &Bvh, target: &Rig) -> Result<Vec<(usize, usize)>, RetargetError> {
+pub fn auto_pairs(source: &[&str], target: &Rig) -> Result<Vec<(usize, usize)>, RetargetError> {
     let pairs = crate::rig::names::auto_map(
-        bvh.joints().iter().map(|j| j.name.as_str()),
+        source.iter().copied(),
         target.joints().iter().map(|j| j.name.as_str()),
     );
     if pairs.is_empty() {
         return Err(RetargetError::NothingMapped {
             rig: target.name().to_string(),
-            joints: bvh
-                .joints()
-                .iter()
-                .map(|j| j.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
+            joints: source.join(", "),
         });
     }
     Ok(pairs)
@@ -160,41 +207,22 @@ fn rest_heights(bvh: &Bvh) -> (Vec<Vector3<f64>>, f64) {
     (pos, lowest)
 }
 
-/// The root scale k = h_target / h_source (1 when the source's hips are not above its lowest
-/// point).
-pub fn hip_scale(bvh: &Bvh, target: &Rig) -> f64 {
-    let (rest, lowest) = rest_heights(bvh);
-    let h_source = rest[0].y - lowest;
-    let h_target = target.root_height();
-    if h_source > 1e-9 && h_target > 0.0 {
-        h_target / h_source
-    } else {
-        1.0
-    }
-}
-
-/// The BVH's motion on `target` at `fps` (see the module documentation). `source_fps` is the
-/// BVH's rate.
+/// The source's motion on `target` at `fps` (see the module documentation).
 pub fn retarget(
-    bvh: &Bvh,
-    source_fps: Fps,
+    source: &SourceMotion,
     target: &Rig,
     pairs: &[(usize, usize)],
     reference: Reference,
     fps: Fps,
 ) -> Result<Animation, RetargetError> {
-    let frames = bvh.frame_count();
-    if frames == 0 {
+    let frames = source.world.len();
+    if frames == 0 || source.roots.len() != frames {
         return Err(RetargetError::NoFrames);
     }
-    // Each source frame's world rotations of the mapped joints, as changes since the reference.
-    let world = |n: usize| {
-        bvh.forward_kinematics(&bvh.local_rotations(n), &bvh.joint_translations(n))
-            .1
-    };
+    let joints = source.names.len();
     let reference_rot: Vec<UnitQuaternion<f64>> = match reference {
-        Reference::Rest => vec![UnitQuaternion::identity(); bvh.joints().len()],
-        Reference::Frame(n) if n < frames => world(n),
+        Reference::Rest => vec![UnitQuaternion::identity(); joints],
+        Reference::Frame(n) if n < frames => source.world[n].clone(),
         Reference::Frame(n) => {
             return Err(RetargetError::ReferenceFrame {
                 frame: n,
@@ -202,53 +230,59 @@ pub fn retarget(
             });
         }
     };
-    let mut change: Vec<Vec<UnitQuaternion<f64>>> = Vec::with_capacity(frames);
-    let mut roots: Vec<Vector3<f64>> = Vec::with_capacity(frames);
-    for n in 0..frames {
-        let w = world(n);
-        change.push(
+    // Each frame's changes since the reference, of the mapped joints.
+    let change: Vec<Vec<UnitQuaternion<f64>>> = source
+        .world
+        .iter()
+        .map(|w| {
             pairs
                 .iter()
                 .map(|&(s, _)| w[s] * reference_rot[s].inverse())
-                .collect(),
-        );
-        roots.push(bvh.joint_translations(n)[0]);
-    }
+                .collect()
+        })
+        .collect();
 
-    let k = hip_scale(bvh, target);
-    let floor = target.joints()[0].offset.y - target.root_height();
-    let duration = source_fps.frame_time_of(frames as u64 - 1);
+    let h_target = target.root_height();
+    let k = if source.hip_height > 1e-9 && h_target > 0.0 {
+        h_target / source.hip_height
+    } else {
+        1.0
+    };
+    let floor = target.joints()[0].offset.y - h_target;
+    let duration = source.fps.frame_time_of(frames as u64 - 1);
     let out_frames = fps.frame_count(duration) as usize;
-    let joints = target.joints();
-    let mut source_of = vec![None; joints.len()];
+    let bones = target.joints();
+    let mut source_of = vec![None; bones.len()];
     for (i, &(_, t)) in pairs.iter().enumerate() {
         source_of[t] = Some(i);
     }
-    let mut local = vec![Vec::with_capacity(out_frames); joints.len()];
+    let mut local = vec![Vec::with_capacity(out_frames); bones.len()];
     let mut root_positions = Vec::with_capacity(out_frames);
-    let mut w = vec![UnitQuaternion::identity(); joints.len()];
+    let mut w = vec![UnitQuaternion::identity(); bones.len()];
     for n in 0..out_frames {
         // Where frame n falls in the source: between frames i and i + 1, a of the way.
-        let u = fps.frame_time_of(n as u64) * source_fps.as_f64();
+        let u = fps.frame_time_of(n as u64) * source.fps.as_f64();
         let i = (u.floor().max(0.0) as usize).min(frames - 1);
-        let a = if i + 1 < frames {
+        let i1 = (i + 1).min(frames - 1);
+        let a = if i1 > i {
             (u - i as f64).clamp(0.0, 1.0)
         } else {
             0.0
         };
-        let j1 = (i + 1).min(frames - 1);
-        for (j, joint) in joints.iter().enumerate() {
-            let parent = joint.parent.map_or(UnitQuaternion::identity(), |p| w[p]);
+        for (j, bone) in bones.iter().enumerate() {
+            let parent = bone.parent.map_or(UnitQuaternion::identity(), |p| w[p]);
             w[j] = match source_of[j] {
-                Some(m) => change[i][m].slerp(&change[j1][m], a),
+                Some(m) => change[i][m]
+                    .try_slerp(&change[i1][m], a, 1e-12)
+                    .unwrap_or(change[i][m]),
                 None => parent,
             };
             local[j].push(parent.inverse() * w[j]);
         }
-        let p = roots[i].lerp(&roots[j1], a) * k;
+        let p = source.roots[i].lerp(&source.roots[i1], a) * k;
         root_positions.push(Vector3::new(p.x, p.y + floor, p.z));
     }
-    let animated = (0..joints.len()).map(|j| source_of[j].is_some()).collect();
+    let animated = (0..bones.len()).map(|j| source_of[j].is_some()).collect();
     Ok(Animation::new(
         target.clone(),
         fps,
