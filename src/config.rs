@@ -28,6 +28,7 @@
 //! subject: subject.yaml  # height_m and/or segment lengths: the rig scaled to the subject
 //! bone_map: bones.json   # a BVH take: which joint drives which bone (default: by part)
 //! bvh_reference: rest    # a BVH take: changes measured from its rest pose, or frame:N
+//! mvnx_segments: false   # an MVNX take: Xsens's own segment kinematics instead of its sensors
 //! smoothing: butterworth:order=4,cutoff=14   # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
 //! # or with per-bone overrides:
 //! # smoothing: {method: "butterworth:cutoff=4", bones: {LeftHand: none, Head: "gaussian:sigma=0.05"}}
@@ -99,6 +100,9 @@ pub struct Config {
     /// A BVH take's reference pose: `rest` or `frame:N`.
     #[serde(default, deserialize_with = "bvh_reference")]
     pub bvh_reference: Option<crate::retarget::Reference>,
+    /// An MVNX take: Xsens's segment kinematics instead of its sensors (a flag).
+    #[serde(default)]
+    pub mvnx_segments: bool,
 }
 
 fn bvh_reference<'de, D: Deserializer<'de>>(
@@ -277,6 +281,7 @@ impl Config {
             subject: self.subject.or(below.subject),
             bone_map: self.bone_map.or(below.bone_map),
             bvh_reference: self.bvh_reference.or(below.bvh_reference),
+            mvnx_segments: self.mvnx_segments || below.mvnx_segments,
         }
     }
 
@@ -290,6 +295,7 @@ impl Config {
             subject: self.subject.clone(),
             bone_map: self.bone_map.clone(),
             bvh_reference: self.bvh_reference.unwrap_or_default(),
+            mvnx_segments: self.mvnx_segments,
             ..ConvertSettings::default()
         };
         if let Some(fps) = self.fps {

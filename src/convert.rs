@@ -62,6 +62,8 @@ pub struct ConvertSettings {
     pub bone_map: Option<PathBuf>,
     /// A BVH take: the pose its joints' changes are measured from.
     pub bvh_reference: crate::retarget::Reference,
+    /// An MVNX take: Xsens's own segment orientations and positions instead of its sensors.
+    pub mvnx_segments: bool,
 }
 
 impl ConvertSettings {
@@ -97,6 +99,7 @@ impl Default for ConvertSettings {
             world_from: None,
             bone_map: None,
             bvh_reference: crate::retarget::Reference::Rest,
+            mvnx_segments: false,
         }
     }
 }
@@ -139,9 +142,9 @@ pub enum ConvertError {
     LegacyStream(PathBuf),
     #[error("a stream needs --mapping (its sensors are not known in advance)")]
     NoStreamMapping,
-    /// A BVH take that cannot be read or retargeted.
+    /// A take on a skeleton (a BVH, Xsens's segments) that cannot be read or retargeted.
     #[error("{}: {reason}", .input.display())]
-    Bvh { input: PathBuf, reason: String },
+    Motion { input: PathBuf, reason: String },
 }
 
 impl crate::diagnostic::Diagnostic for ConvertError {
@@ -164,7 +167,7 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             | ConvertError::Output(OutputError::Gltf { path, .. }) => Some(path),
             ConvertError::LegacyStream(path) => Some(path),
             ConvertError::NoStreamMapping => None,
-            ConvertError::Bvh { input, .. } => Some(input),
+            ConvertError::Motion { input, .. } => Some(input),
         }
     }
 
@@ -189,8 +192,8 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             }
             ConvertError::Output(_) => Some("check the output folder: free space and permissions"),
             ConvertError::LegacyStream(_) | ConvertError::NoStreamMapping => None,
-            ConvertError::Bvh { .. } => Some(
-                "the BVH's joints are matched to the rig's bones by name; --bone-map names them",
+            ConvertError::Motion { .. } => Some(
+                "a skeleton's joints are matched to the rig's bones by name; --bone-map names them",
             ),
         }
     }
@@ -422,6 +425,17 @@ fn convert_unclean(
         };
         return write_take(input, out_dir, settings, subject, source, facts, conversion);
     }
+    if settings.mvnx_segments {
+        let (conversion, source, dropped_lines) =
+            mvnx_segments_conversion(input, settings, subject)?;
+        let facts = TakeFacts {
+            sensor_summaries: SensorSummaries(Vec::new()),
+            warnings: conversion.warnings.clone(),
+            dropped_lines,
+            repaired_lines: Vec::new(),
+        };
+        return write_take(input, out_dir, settings, subject, source, facts, conversion);
+    }
     let (take, sha256) = read_and_hash(input, &settings.read)?;
     let mut conversion = conversion(input, &take, settings, subject)?;
     conversion.vendor_contacts = take
@@ -546,7 +560,7 @@ fn bvh_conversion(
     settings: &ConvertSettings,
     subject: Option<&Subject>,
 ) -> Result<(Conversion, SourceRecord), ConvertError> {
-    let fail = |reason: String| ConvertError::Bvh {
+    let fail = |reason: String| ConvertError::Motion {
         input: input.to_path_buf(),
         reason,
     };
@@ -578,69 +592,10 @@ fn bvh_conversion(
         settings.pipeline.fps,
     )
     .map_err(|e| fail(e.to_string()))?;
-    let mut warnings = Vec::new();
-    if settings.pipeline.trim.is_some() {
-        warnings.push("--trim is not applied to a BVH take".to_string());
-    }
-    let identity = [1.0, 0.0, 0.0, 0.0];
-    let sensors = pairs
+    let pairs: Vec<(String, String)> = pairs
         .iter()
-        .map(|&(s, t)| crate::mapping::SensorRecord {
-            sensor: source_names[s].to_string(),
-            bone: target_names[t].to_string(),
-            mount_source: "fixed",
-            mount: identity,
-            forward: None,
-            orientation: "bvh",
-            world: World::Rig,
-            heading_aligned_by: None,
-        })
+        .map(|&(s, t)| (source_names[s].to_string(), target_names[t].to_string()))
         .collect();
-    let mut pipeline = pipeline_record(
-        settings,
-        &HeadingSource::None,
-        0.0,
-        0,
-        "bvh-retarget",
-        pipeline::root::RootMode::Fixed,
-    );
-    pipeline.root = "source";
-    pipeline.smoothing = None;
-    pipeline.unsensed = "rest";
-    pipeline.trim = None;
-    let conversion = Conversion {
-        euler_deg: pipeline::output::euler_degrees(&animation),
-        animation,
-        unsmoothed: None,
-        mapping: MappingRecord {
-            file: settings
-                .bone_map
-                .as_ref()
-                .map(|p| p.to_string_lossy().into_owned()),
-            rig: rig.name().to_string(),
-            world: World::Rig,
-            calibration: None,
-            sensors,
-            legacy: None,
-        },
-        pipeline,
-        contacts: None,
-        world: (World::Rig, WorldFrom::Format),
-        vendor_contacts: None,
-        warnings,
-    };
-    let conversion = if settings.in_place {
-        conversion
-            .in_place()
-            .map_err(|e| fail(format!("--in-place: {e}")))?
-    } else {
-        conversion
-    };
-    let conversion = if settings.bind_frame {
-        conversion.with_bind_frame()
-    } else {
-        conversion
-    };
     let source = SourceRecord {
         path: input.to_string_lossy().into_owned(),
         sha256,
@@ -649,7 +604,192 @@ fn bvh_conversion(
         world_from: WorldFrom::Format,
         start_timestamp: "0 s".to_string(),
     };
-    Ok((conversion, source))
+    let motion = Motion {
+        animation,
+        pairs,
+        orientation: "bvh",
+        world: World::Rig,
+        mode: "bvh-retarget",
+        warnings: Vec::new(),
+    };
+    Ok((motion.conversion(input, settings)?, source))
+}
+
+/// A take whose motion is already on a skeleton (a BVH, Xsens's segments), as a conversion: its
+/// animation, and each source joint that drove a bone.
+struct Motion {
+    animation: Animation,
+    /// (source joint or segment, bone).
+    pairs: Vec<(String, String)>,
+    /// `mapping.sensors[].orientation`: `bvh`, `xsens-segment`.
+    orientation: &'static str,
+    world: World,
+    /// `pipeline.mode`.
+    mode: &'static str,
+    warnings: Vec<String>,
+}
+
+impl Motion {
+    /// The conversion `write_take` writes: the sidecar's records (identity mounts, no smoothing,
+    /// the root from the source), then `--in-place` and `--bind-frame`.
+    fn conversion(
+        self,
+        input: &Path,
+        settings: &ConvertSettings,
+    ) -> Result<Conversion, ConvertError> {
+        let Motion {
+            animation,
+            pairs,
+            orientation,
+            world,
+            mode,
+            mut warnings,
+        } = self;
+        if settings.pipeline.trim.is_some() {
+            warnings.push(format!("--trim is not applied in {mode} mode"));
+        }
+        let sensors = pairs
+            .into_iter()
+            .map(|(sensor, bone)| crate::mapping::SensorRecord {
+                sensor,
+                bone,
+                mount_source: "fixed",
+                mount: [1.0, 0.0, 0.0, 0.0],
+                forward: None,
+                orientation,
+                world,
+                heading_aligned_by: None,
+            })
+            .collect();
+        let mut pipeline = pipeline_record(
+            settings,
+            &HeadingSource::None,
+            0.0,
+            0,
+            mode,
+            pipeline::root::RootMode::Fixed,
+        );
+        pipeline.root = "source";
+        pipeline.smoothing = None;
+        pipeline.unsensed = "rest";
+        pipeline.trim = None;
+        let rig = animation.rig().name().to_string();
+        let conversion = Conversion {
+            euler_deg: pipeline::output::euler_degrees(&animation),
+            animation,
+            unsmoothed: None,
+            mapping: MappingRecord {
+                file: settings
+                    .bone_map
+                    .as_ref()
+                    .map(|p| p.to_string_lossy().into_owned()),
+                rig,
+                world,
+                calibration: None,
+                sensors,
+                legacy: None,
+            },
+            pipeline,
+            contacts: None,
+            world: (world, WorldFrom::Format),
+            vendor_contacts: None,
+            warnings,
+        };
+        let conversion = if settings.in_place {
+            conversion.in_place().map_err(|e| ConvertError::Motion {
+                input: input.to_path_buf(),
+                reason: format!("--in-place: {e}"),
+            })?
+        } else {
+            conversion
+        };
+        Ok(if settings.bind_frame {
+            conversion.with_bind_frame()
+        } else {
+            conversion
+        })
+    }
+}
+
+/// Xsens's own segment kinematics (`--mvnx-segments`) as the take: on the rig the file's segments
+/// make, or retargeted onto `--rig` by anatomical part (or `--bone-map`); Xsens's foot contacts
+/// in the sidecar.
+fn mvnx_segments_conversion(
+    input: &Path,
+    settings: &ConvertSettings,
+    subject: Option<&Subject>,
+) -> Result<(Conversion, SourceRecord, Vec<LineReport>), ConvertError> {
+    let fail = |reason: String| ConvertError::Motion {
+        input: input.to_path_buf(),
+        reason,
+    };
+    let sha256 = source_sha256(input).map_err(|e| fail(e.to_string()))?;
+    let segments = crate::read::xsens_mvnx::read_segments(input)?;
+    let (mvn, mut warnings) = crate::retarget::mvnx_animation(&segments, settings.pipeline.fps)
+        .map_err(|e| fail(e.to_string()))?;
+    let names: Vec<String> = mvn.rig().joints().iter().map(|j| j.name.clone()).collect();
+    let (animation, pairs) = if settings.rig.is_some() || settings.bone_map.is_some() {
+        let rig = rig_for(settings, None, subject)?;
+        let source = crate::retarget::SourceMotion::of_animation(&mvn);
+        let source_names: Vec<&str> = names.iter().map(String::as_str).collect();
+        let target_names: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
+        let pairs = match &settings.bone_map {
+            Some(path) => crate::retarget::load_bone_map(path, &source_names, &target_names),
+            None => crate::retarget::auto_pairs(&source_names, &rig),
+        }
+        .map_err(|e| fail(e.to_string()))?;
+        let animation = crate::retarget::retarget(
+            &source,
+            &rig,
+            &pairs,
+            crate::retarget::Reference::Rest,
+            settings.pipeline.fps,
+        )
+        .map_err(|e| fail(e.to_string()))?;
+        let pairs = pairs
+            .iter()
+            .map(|&(s, t)| (names[s].clone(), target_names[t].to_string()))
+            .collect();
+        (animation, pairs)
+    } else {
+        let pairs = names.iter().map(|n| (n.clone(), n.clone())).collect();
+        (mvn, pairs)
+    };
+    if !segments.dropped.is_empty() {
+        warnings.push(format!(
+            "{} frames dropped (see dropped_lines)",
+            segments.dropped.len()
+        ));
+    }
+    let motion = Motion {
+        animation,
+        pairs,
+        orientation: "xsens-segment",
+        world: World::Nwu,
+        mode: "mvnx-segments",
+        warnings,
+    };
+    let mut conversion = motion.conversion(input, settings)?;
+    if !segments.contacts.is_empty() {
+        let (times_s, planted) = segments.contacts.iter().copied().unzip();
+        conversion.vendor_contacts = Some(vendor_contacts_record(
+            &crate::take::VendorContacts {
+                vendor: "xsens",
+                times_s,
+                planted,
+            },
+            &conversion,
+        ));
+    }
+    let source = SourceRecord {
+        path: input.to_string_lossy().into_owned(),
+        sha256,
+        format: crate::take::InputFormat::XsensMvnx,
+        world: World::Nwu,
+        world_from: WorldFrom::Format,
+        start_timestamp: "0 s".to_string(),
+    };
+    Ok((conversion, source, segments.dropped))
 }
 
 /// A converted take, whichever mapping mode made it: the animation, what the writers need of it,

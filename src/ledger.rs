@@ -203,6 +203,8 @@ struct FingerprintInput<'a> {
     /// A BVH take's reference pose, when not the rest pose.
     #[serde(skip_serializing_if = "Option::is_none")]
     bvh_reference: Option<String>,
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    mvnx_segments: bool,
 }
 
 fn file_sha256(path: &Path) -> String {
@@ -249,6 +251,7 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         bone_map: settings.bone_map.as_deref().map(file_sha256),
         bvh_reference: (settings.bvh_reference != crate::retarget::Reference::Rest)
             .then(|| settings.bvh_reference.to_string()),
+        mvnx_segments: settings.mvnx_segments,
     };
     let json = serde_json::to_vec(&input).expect("the fingerprint input serialises");
     format!("{FINGERPRINT_SCHEMA}:{}", hex(&Sha256::digest(&json)))

@@ -74,6 +74,8 @@ pub enum RetargetError {
     ReferenceFrame { frame: usize, last: usize },
     #[error("the BVH has no frames")]
     NoFrames,
+    #[error("MVNX segments: {0}")]
+    Segments(String),
     #[error("{path}: {reason}")]
     BoneMap { path: PathBuf, reason: String },
     #[error(transparent)]
@@ -290,4 +292,127 @@ pub fn retarget(
         animated,
         root_positions,
     )?)
+}
+
+/// MVN's 23 body segments and each one's parent: the skeleton an MVNX file's segments form.
+const MVN_SKELETON: [(&str, Option<&str>); 23] = [
+    ("Pelvis", None),
+    ("L5", Some("Pelvis")),
+    ("L3", Some("L5")),
+    ("T12", Some("L3")),
+    ("T8", Some("T12")),
+    ("Neck", Some("T8")),
+    ("Head", Some("Neck")),
+    ("RightShoulder", Some("T8")),
+    ("RightUpperArm", Some("RightShoulder")),
+    ("RightForeArm", Some("RightUpperArm")),
+    ("RightHand", Some("RightForeArm")),
+    ("LeftShoulder", Some("T8")),
+    ("LeftUpperArm", Some("LeftShoulder")),
+    ("LeftForeArm", Some("LeftUpperArm")),
+    ("LeftHand", Some("LeftForeArm")),
+    ("RightUpperLeg", Some("Pelvis")),
+    ("RightLowerLeg", Some("RightUpperLeg")),
+    ("RightFoot", Some("RightLowerLeg")),
+    ("RightToe", Some("RightFoot")),
+    ("LeftUpperLeg", Some("Pelvis")),
+    ("LeftLowerLeg", Some("LeftUpperLeg")),
+    ("LeftFoot", Some("LeftLowerLeg")),
+    ("LeftToe", Some("LeftFoot")),
+];
+
+/// Xsens's own segment kinematics (`convert --mvnx-segments`) as an animation at `fps` on a rig
+/// built from the file: MVN's segments as joints (their parents MVN's), each offset the segment's
+/// place in the `identity` frame less its parent's, turned into the rig world by
+/// A = q_rig_nwu ([`crate::world::World::Nwu`]). In that frame every segment's axes are the
+/// global ones, so a segment's orientation q (MVN: segment → global) is the rig bone's
+///
+/// ```text
+/// W = A ⊗ q ⊗ A⁻¹      (the rest pose is the identity, as for every rig)
+/// ```
+///
+/// and the root is the pelvis at A · p. Frames are resampled by slerp (orientations) and linear
+/// interpolation (the pelvis). Segments that are not MVN's body segments (props) are left out,
+/// with a warning.
+pub fn mvnx_animation(
+    segments: &crate::read::xsens_mvnx::Segments,
+    fps: Fps,
+) -> Result<(Animation, Vec<String>), RetargetError> {
+    let fail = |reason: String| RetargetError::Segments(reason);
+    let a = crate::world::World::Nwu.to_rig();
+    let mut warnings = Vec::new();
+    // Kept segments: (index in the file, index of the parent among the kept).
+    let mut kept: Vec<(usize, Option<usize>)> = Vec::new();
+    for (i, label) in segments.labels.iter().enumerate() {
+        let Some((_, parent)) = MVN_SKELETON.iter().find(|(name, _)| name == label) else {
+            warnings.push(format!(
+                "segment `{label}` is not one of MVN's body segments: left out"
+            ));
+            continue;
+        };
+        let parent = match parent {
+            None => None,
+            Some(p) => Some(
+                kept.iter()
+                    .position(|&(k, _)| segments.labels[k] == *p)
+                    .ok_or_else(|| {
+                        fail(format!("segment `{label}` comes before its parent `{p}`"))
+                    })?,
+            ),
+        };
+        if parent.is_none() && !kept.is_empty() {
+            return Err(fail(format!("a second root segment `{label}`")));
+        }
+        kept.push((i, parent));
+    }
+    if kept.first().is_none_or(|&(_, p)| p.is_some()) {
+        return Err(fail("the file has no `Pelvis` segment first".into()));
+    }
+    let joints = kept
+        .iter()
+        .map(|&(i, parent)| crate::rig::Joint {
+            name: segments.labels[i].clone(),
+            parent,
+            offset: a * match parent {
+                None => segments.rest[i],
+                Some(p) => segments.rest[i] - segments.rest[kept[p].0],
+            },
+            order: crate::rotation::EulerOrder::ZXY,
+            end_site: None,
+        })
+        .collect();
+    let rig = Rig::new("xsens-mvn", crate::rig::LengthUnit::Metres, joints)
+        .map_err(|e| fail(e.to_string()))?;
+
+    let times = &segments.times_s;
+    let last = *times.last().ok_or(RetargetError::NoFrames)?;
+    let out_frames = fps.frame_count(last) as usize;
+    let mut local = vec![Vec::with_capacity(out_frames); kept.len()];
+    let mut roots = Vec::with_capacity(out_frames);
+    let mut w = vec![UnitQuaternion::identity(); kept.len()];
+    for n in 0..out_frames {
+        let t = fps.frame_time_of(n as u64);
+        let i = times.partition_point(|&x| x <= t).saturating_sub(1);
+        let i1 = (i + 1).min(times.len() - 1);
+        let s = if i1 > i {
+            ((t - times[i]) / (times[i1] - times[i])).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        for (j, &(k, parent)) in kept.iter().enumerate() {
+            let q0 = segments.orientations[i][k];
+            let q = q0
+                .try_slerp(&segments.orientations[i1][k], s, 1e-12)
+                .unwrap_or(q0);
+            w[j] = a * q * a.inverse();
+            let parent = parent.map_or(UnitQuaternion::identity(), |p| w[p]);
+            local[j].push(parent.inverse() * w[j]);
+        }
+        let pelvis = kept[0].0;
+        let p = segments.positions[i][pelvis].lerp(&segments.positions[i1][pelvis], s);
+        roots.push(a * p);
+    }
+    let animated = vec![true; kept.len()];
+    let animation = Animation::new(rig, fps, local, animated, roots)?;
+    Ok((animation, warnings))
 }

@@ -368,3 +368,90 @@ fn damaged_frames_are_dropped_with_their_lines() {
         assert!(e.contains(says), "{e}");
     }
 }
+
+/// `--mvnx-segments`: Xsens's own segment kinematics on a rig made from the file. Every joint of
+/// the written BVH (the numpy reader's forward kinematics) stands where the MVNX puts its segment
+/// (PyPI `mvnx`'s `position`, turned into the rig world: y west → +X, z up → +Y, x north → +Z)
+/// within 1 mm at every 30 fps frame m (MVNX frame 2m); with `--rig mixamo` it is retargeted by
+/// part (L5 → Spine, T8 → Spine2, RightUpperLeg → RightUpLeg, …) and keeps Xsens's contacts.
+#[test]
+fn mvnx_segments_are_xsens_own_skeleton() {
+    let Some(py) = python() else { return };
+    let (dir, _) = fixtures(&py);
+    let mvnx = dir.path().join("walk.mvnx");
+    let out = dir.path().join("segments");
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&mvnx)
+        .args(["--mvnx-segments", "--format", "bvh", "--out"])
+        .arg(&out));
+    let sidecar: Value =
+        serde_json::from_slice(&std::fs::read(out.join("walk.imubake.json")).unwrap()).unwrap();
+    assert_eq!(sidecar["pipeline"]["mode"], "mvnx-segments");
+    assert_eq!(sidecar["rig"]["name"], "xsens-mvn");
+    let frames = sidecar["frames"].as_u64().unwrap() as usize;
+    let script = "import json, sys, mvnx\nm = mvnx.load(sys.argv[1])\n\
+        json.dump({'segments': list(m.segments.values()), 'p': m.position.tolist()}, sys.stdout)";
+    let reference: Value =
+        serde_json::from_slice(&run(Command::new(&py).args(["-c", script]).arg(&mvnx)).stdout)
+            .unwrap();
+    let wanted: Vec<String> = (0..frames).map(|m| m.to_string()).collect();
+    let bvh: Value = serde_json::from_slice(
+        &run(Command::new(&py)
+            .arg(repo_file("tests/browser/bvh_reference_positions.py"))
+            .arg(out.join("walk.bvh"))
+            .arg("1")
+            .args(&wanted))
+        .stdout,
+    )
+    .unwrap();
+    assert_eq!(
+        bvh["names"], reference["segments"],
+        "joints are the segments, in order"
+    );
+    let mut worst: f64 = 0.0;
+    for m in 0..frames {
+        let row = reference["p"][2 * m].as_array().unwrap();
+        for (k, joint) in bvh["frames"][m.to_string()]
+            .as_array()
+            .unwrap()
+            .iter()
+            .enumerate()
+        {
+            let nwu = [0, 1, 2].map(|c| row[3 * k + c].as_f64().unwrap());
+            let rig = nalgebra::Vector3::new(nwu[1], nwu[2], nwu[0]);
+            worst = worst.max((common::vec3(joint) - rig).norm());
+        }
+    }
+    eprintln!("{frames} frames × 23 segments: worst {:.3} mm", worst * 1e3);
+    assert!(worst < 1e-3, "{worst} m");
+
+    let out = dir.path().join("on_mixamo");
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&mvnx)
+        .args(["--mvnx-segments", "--rig", "mixamo", "--out"])
+        .arg(&out));
+    let sidecar: Value =
+        serde_json::from_slice(&std::fs::read(out.join("walk.imubake.json")).unwrap()).unwrap();
+    let pairs: Vec<(&str, &str)> = sidecar["mapping"]["sensors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| (s["sensor"].as_str().unwrap(), s["bone"].as_str().unwrap()))
+        .collect();
+    for pair in [
+        ("Pelvis", "Hips"),
+        ("L5", "Spine"),
+        ("T8", "Spine2"),
+        ("RightUpperLeg", "RightUpLeg"),
+        ("LeftToe", "LeftToeBase"),
+    ] {
+        assert!(pairs.contains(&pair), "{pair:?} in {pairs:?}");
+    }
+    assert_eq!(sidecar["rig"]["name"], "mixamo");
+    assert_eq!(
+        sidecar["vendor_contacts"]["left"][0],
+        serde_json::json!([0, 22])
+    );
+}

@@ -111,6 +111,10 @@ pub struct SettingsArgs {
     /// frame:N [default: rest]
     #[arg(long, value_name = "rest|frame:N")]
     bvh_reference: Option<imubake::retarget::Reference>,
+    /// An Xsens MVNX take: Xsens's own segment orientations and positions instead of its
+    /// sensors, on a rig made from the file's segments (or retargeted onto --rig)
+    #[arg(long)]
+    mvnx_segments: bool,
     #[command(flatten)]
     read: ReadArgs,
 }
@@ -184,6 +188,7 @@ impl SettingsArgs {
             subject: self.subject.clone(),
             bone_map: self.bone_map.clone(),
             bvh_reference: self.bvh_reference,
+            mvnx_segments: self.mvnx_segments,
             ..self.read.layer()
         }
     }

@@ -30,9 +30,9 @@
 //! with its line.
 
 use super::{InputFormat, ReadError, ReadOptions, read_single_file, unit_quaternion};
-use crate::take::{ClockUnit, ContactSample, SensorIdx, Take, TakeBuilder};
+use crate::take::{ClockUnit, ContactSample, LineReport, SensorIdx, Take, TakeBuilder};
 use crate::world::World;
-use nalgebra::Quaternion;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use quick_xml::events::{BytesStart, Event};
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
@@ -357,4 +357,140 @@ fn frame_done(
         contacts.push((t, [c[0] > 0.5 || c[1] > 0.5, c[2] > 0.5 || c[3] > 0.5]));
     }
     Ok(())
+}
+
+/// Xsens's own segment kinematics (`convert --mvnx-segments`), in MVN's global frame (`nwu`,
+/// metres): the segments in order, where each stands in the `identity` calibration frame (every
+/// segment's axes those of the global frame: x forward, y left, z up), and per normal frame each
+/// segment's orientation q_global_segment (w first in the file) and position.
+#[derive(Debug, Clone)]
+pub struct Segments {
+    pub labels: Vec<String>,
+    /// Positions in the `identity` frame: the rest layout.
+    pub rest: Vec<Vector3<f64>>,
+    /// Seconds from the first kept frame.
+    pub times_s: Vec<f64>,
+    /// `orientations[frame][segment]`.
+    pub orientations: Vec<Vec<UnitQuaternion<f64>>>,
+    pub positions: Vec<Vec<Vector3<f64>>>,
+    /// Frames dropped, with their lines.
+    pub dropped: Vec<LineReport>,
+    /// Xsens's foot contacts at `times_s`.
+    pub contacts: Vec<ContactSample>,
+}
+
+/// A kept frame's time, orientations, positions and contacts.
+type SegmentFrame = (
+    f64,
+    Vec<UnitQuaternion<f64>>,
+    Vec<Vector3<f64>>,
+    Option<[bool; 2]>,
+);
+
+/// Reads the segment kinematics of an MVNX file. A normal frame whose `orientation` or
+/// `position` is missing, has the wrong count or a zero quaternion is dropped with its line; no
+/// `identity` frame, or no frame kept, is an error.
+pub fn read_segments(path: &Path) -> Result<Segments, ReadError> {
+    let file = std::fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
+    let mut rest: Option<Vec<Vector3<f64>>> = None;
+    let mut kept: Vec<SegmentFrame> = Vec::new();
+    let mut dropped = Vec::new();
+    let vectors = |text: Option<&[u8]>, n: usize| -> Result<Vec<Vector3<f64>>, String> {
+        let v =
+            numbers(text.ok_or("no `position`")?).ok_or("a `position` value is not a number")?;
+        if v.len() != 3 * n {
+            return Err(format!(
+                "`position` has {} values; {n} segments need {}",
+                v.len(),
+                3 * n
+            ));
+        }
+        Ok(v.chunks_exact(3)
+            .map(|p| Vector3::new(p[0], p[1], p[2]))
+            .collect())
+    };
+    let header = scan(file, path, true, |header, f| {
+        let n = header.segments.len();
+        if f.kind == "identity" {
+            rest = vectors(f.position.as_deref(), n).ok();
+            return Ok(());
+        }
+        if f.kind != "normal" {
+            return Ok(());
+        }
+        let frame = (|| -> Result<_, String> {
+            let t = f
+                .time_s(header.frame_rate)
+                .ok_or("a frame with neither `index` nor `time`")?;
+            let q = numbers(f.orientation.as_deref().ok_or("no `orientation`")?)
+                .ok_or("an `orientation` value is not a number")?;
+            if q.len() != 4 * n {
+                return Err(format!(
+                    "`orientation` has {} values; {n} segments need {}",
+                    q.len(),
+                    4 * n
+                ));
+            }
+            let q = q
+                .chunks_exact(4)
+                .map(|q| unit_quaternion(Quaternion::new(q[0], q[1], q[2], q[3])).map(|u| u.0))
+                .collect::<Option<Vec<_>>>()
+                .ok_or("a zero quaternion in `orientation`")?;
+            let p = vectors(f.position.as_deref(), n)?;
+            let feet = f
+                .contacts
+                .as_deref()
+                .and_then(numbers)
+                .filter(|c| c.len() == 4)
+                .map(|c| [c[0] + c[1] > 0.0, c[2] + c[3] > 0.0]);
+            Ok((t, q, p, feet))
+        })();
+        match frame {
+            Ok(frame) => {
+                // Frames in time order; a repeated time keeps the first.
+                if kept.last().is_none_or(|last| frame.0 > last.0) {
+                    kept.push(frame);
+                } else {
+                    dropped.push(LineReport::new(
+                        None,
+                        f.line,
+                        "a frame at or before the one before it",
+                        f.tag.as_bytes(),
+                    ));
+                }
+            }
+            Err(reason) => dropped.push(LineReport::new(None, f.line, reason, f.tag.as_bytes())),
+        }
+        Ok(())
+    })?;
+    let rest = rest.ok_or_else(|| {
+        ReadError::format(
+            path,
+            "no `identity` calibration frame with every segment's position: the segments' layout is unknown",
+        )
+    })?;
+    let t0 = kept.first().map(|k| k.0).ok_or_else(|| {
+        ReadError::format(
+            path,
+            "no normal frame with every segment's orientation and position",
+        )
+    })?;
+    let mut segments = Segments {
+        labels: header.segments,
+        rest,
+        times_s: Vec::with_capacity(kept.len()),
+        orientations: Vec::with_capacity(kept.len()),
+        positions: Vec::with_capacity(kept.len()),
+        dropped,
+        contacts: Vec::new(),
+    };
+    for (t, q, p, feet) in kept {
+        segments.times_s.push(t - t0);
+        segments.orientations.push(q);
+        segments.positions.push(p);
+        if let Some(feet) = feet {
+            segments.contacts.push((t - t0, feet));
+        }
+    }
+    Ok(segments)
 }

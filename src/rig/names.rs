@@ -6,8 +6,9 @@
 //! Recognised: Mixamo (`mixamorig:LeftArm`, any `namespace:` or `|` prefix), Unity/VRM humanoid
 //! (`LeftUpperArm`, `LeftLowerLeg`), `.L/.R`, `_l/_r`, `_L/_R`, `l_`/`r_` (`upper_arm.L`,
 //! `upperarm_l` as in Unreal's mannequin, `l_up_arm` as in mocopi), CMU/Axis (`LeftUpLeg`,
-//! `LowerBack`, `Spine3`), SlimeVR (`Hip`, `Waist`, `Chest`, `UpperChest`, `LeftUpperLeg`), and
-//! a spine numbered from the hips (`spine_01` … `spine_03`).
+//! `LowerBack`, `Spine3`), SlimeVR (`Hip`, `Waist`, `Chest`, `UpperChest`, `LeftUpperLeg`), Xsens
+//! MVN's segments (`Pelvis`, `L5`, `T12`, `T8`, `RightUpperArm`, `LeftToe`), and a spine numbered
+//! from the hips (`spine_01` … `spine_03`).
 
 /// The canonical parts, in hierarchy order.
 pub const CANONICAL: [&str; 22] = [
@@ -38,9 +39,12 @@ pub const CANONICAL: [&str; 22] = [
 /// Side-free part → its aliases (lower case, no separators).
 const ALIASES: &[(&str, &[&str])] = &[
     ("Hips", &["hips", "pelvis", "hip"]),
-    ("Spine", &["spine", "spine01", "waist", "lowerback"]),
-    ("Spine1", &["spine1", "spine02", "chest"]),
-    ("Spine2", &["spine2", "spine03", "upperchest", "spine3"]),
+    ("Spine", &["spine", "spine01", "waist", "lowerback", "l5"]),
+    ("Spine1", &["spine1", "spine02", "chest", "t12"]),
+    (
+        "Spine2",
+        &["spine2", "spine03", "upperchest", "spine3", "t8"],
+    ),
     ("Neck", &["neck", "neck01", "neck1"]),
     ("Head", &["head"]),
     ("Shoulder", &["shoulder", "clavicle", "collar"]),
@@ -206,6 +210,12 @@ mod tests {
             ("Waist", Some("Spine")),
             ("Chest", Some("Spine1")),
             ("LeftUpperLeg", Some("LeftUpLeg")),
+            // Xsens MVN segments.
+            ("L5", Some("Spine")),
+            ("T12", Some("Spine1")),
+            ("T8", Some("Spine2")),
+            ("RightUpperLeg", Some("RightUpLeg")),
+            ("LeftToe", Some("LeftToeBase")),
             // mocopi-style prefixes.
             ("l_up_arm", Some("LeftArm")),
             ("r_low_leg", Some("RightLeg")),

@@ -11,7 +11,11 @@ Writes, in OUT_DIR:
   global frame, x north, y west, z up: q_nwu_sensor = q_nwu_enu ⊗ q_enu_sensor. The walk has no
   head sensor: Head repeats T8's orientation. Three calibration frames (identity, tpose,
   tpose-isb) come first, and every normal frame has all 14 elements in MVN's order (the PyPI
-  `mvnx` parser reads them by position), segment data left at identity and zero.
+  `mvnx` parser reads them by position). The 23 segments move on their own (for
+  `--mvnx-segments`): a skeleton laid out in the identity frame (`SEGMENT_REST`, metres, x
+  forward, y left, z up), each segment turning from its parent by a few sines (`local_rotation`),
+  the pelvis walking forward and turning; `orientation` (w first) and `position` by forward
+  kinematics: q_j = q_parent ⊗ r_j, p_j = p_parent + q_parent · (rest_j − rest_parent).
   `footContacts` (LeftFoot_Heel, LeftFoot_Toe, RightFoot_Heel, RightFoot_Toe): the left foot's
   heel and toe are down when (n // 45) is even, the right foot's when it is odd.
 - `walk_upper.mvnx`: the same frames, configuration UpperBody: the first 11 sensors only.
@@ -33,6 +37,54 @@ SEGMENTS = [
     "RightUpperLeg", "RightLowerLeg", "RightFoot", "RightToe",
     "LeftUpperLeg", "LeftLowerLeg", "LeftFoot", "LeftToe",
 ]
+PARENT = {
+    "Pelvis": None, "L5": "Pelvis", "L3": "L5", "T12": "L3", "T8": "T12", "Neck": "T8", "Head": "Neck",
+    "RightShoulder": "T8", "RightUpperArm": "RightShoulder", "RightForeArm": "RightUpperArm",
+    "RightHand": "RightForeArm", "LeftShoulder": "T8", "LeftUpperArm": "LeftShoulder",
+    "LeftForeArm": "LeftUpperArm", "LeftHand": "LeftForeArm", "RightUpperLeg": "Pelvis",
+    "RightLowerLeg": "RightUpperLeg", "RightFoot": "RightLowerLeg", "RightToe": "RightFoot",
+    "LeftUpperLeg": "Pelvis", "LeftLowerLeg": "LeftUpperLeg", "LeftFoot": "LeftLowerLeg",
+    "LeftToe": "LeftFoot",
+}
+SEGMENT_REST = {
+    "Pelvis": (0, 0, 0.95), "L5": (0, 0, 1.05), "L3": (0, 0, 1.15), "T12": (0, 0, 1.25),
+    "T8": (0, 0, 1.35), "Neck": (0, 0, 1.55), "Head": (0, 0, 1.65),
+    "RightShoulder": (0, -0.03, 1.5), "RightUpperArm": (0, -0.18, 1.5),
+    "RightForeArm": (0, -0.48, 1.5), "RightHand": (0, -0.73, 1.5),
+    "LeftShoulder": (0, 0.03, 1.5), "LeftUpperArm": (0, 0.18, 1.5),
+    "LeftForeArm": (0, 0.48, 1.5), "LeftHand": (0, 0.73, 1.5),
+    "RightUpperLeg": (0, -0.1, 0.9), "RightLowerLeg": (0, -0.1, 0.5),
+    "RightFoot": (0, -0.1, 0.08), "RightToe": (0.15, -0.1, 0.0),
+    "LeftUpperLeg": (0, 0.1, 0.9), "LeftLowerLeg": (0, 0.1, 0.5),
+    "LeftFoot": (0, 0.1, 0.08), "LeftToe": (0.15, 0.1, 0.0),
+}
+
+
+def local_rotation(j, t):
+    """Segment j's turn from its parent at time t (the pelvis: from the global frame)."""
+    if j == 0:
+        return Rotation.from_rotvec([0, 0, 0.3 * np.sin(0.5 * t)])
+    return Rotation.from_rotvec([0.1 * np.sin(1.3 * t + j), 0.35 * np.sin(2 * t + 0.7 * j), 0.05 * np.cos(t + j)])
+
+
+def segment_frame(t):
+    """Every segment's orientation (w x y z) and position at time t, by forward kinematics."""
+    rots, pos = {}, {}
+    for j, name in enumerate(SEGMENTS):
+        parent = PARENT[name]
+        r = local_rotation(j, t)
+        rest = np.array(SEGMENT_REST[name], dtype=float)
+        if parent is None:
+            rots[name] = r
+            pos[name] = rest + np.array([0.5 * t, 0.0, 0.02 * np.sin(4 * t)])
+        else:
+            rots[name] = rots[parent] * r
+            pos[name] = pos[parent] + rots[parent].apply(rest - np.array(SEGMENT_REST[parent]))
+    quats = [v for name in SEGMENTS for v in wxyz(rots[name])]
+    positions = [v for name in SEGMENTS for v in pos[name]]
+    return quats, positions
+
+
 # MVN sensor label -> the walk's sensor (Head: the walk has none; it repeats the sternum's).
 SENSORS = [
     ("Pelvis", "pelvis"), ("T8", "sternum"), ("Head", "sternum"),
@@ -75,6 +127,7 @@ def mvnx(frames, labels, contacts, configuration):
     n_seg, n_sen = len(SEGMENTS), len(labels)
     seg_quats = fmt([1, 0, 0, 0] * n_seg, 6)
     seg_zeros = fmt([0] * 3 * n_seg, 6)
+    seg_rest = fmt([v for name in SEGMENTS for v in SEGMENT_REST[name]], 6)
     out = [
         '<?xml version="1.0" encoding="UTF-8"?>',
         '<mvnx xmlns="http://www.xsens.com/mvn/mvnx" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" version="4">',
@@ -101,15 +154,16 @@ def mvnx(frames, labels, contacts, configuration):
     out.append(f'<frames segmentCount="{n_seg}" sensorCount="{n_sen}" jointCount="1">')
     for kind in ["identity", "tpose", "tpose-isb"]:
         out.append(f'<frame time="0" tc="00:00:00:00" ms="0" type="{kind}"><orientation>{seg_quats}</orientation>'
-                   f"<position>{seg_zeros}</position></frame>")
+                   f"<position>{seg_rest}</position></frame>")
     ms0 = 1796119200000
     for n, quats in enumerate(frames):
         ms = ms0 + round(n * 1000 / RATE)
         left = (n // 45) % 2 == 0
         foot = [int(left), int(left), int(not left), int(not left)]
+        quats_n, positions_n = segment_frame(n / RATE)
         out.append(
             f'<frame time="{ms - ms0}" index="{n}" tc="10:00:00:{n % RATE:02d}" ms="{ms}" type="normal">'
-            f"<orientation>{seg_quats}</orientation><position>{seg_zeros}</position>"
+            f"<orientation>{fmt(quats_n)}</orientation><position>{fmt(positions_n)}</position>"
             f"<velocity>{seg_zeros}</velocity><acceleration>{seg_zeros}</acceleration>"
             f"<angularVelocity>{seg_zeros}</angularVelocity><angularAcceleration>{seg_zeros}</angularAcceleration>"
             f"<footContacts>{' '.join(map(str, foot))}</footContacts>"
