@@ -1,5 +1,6 @@
-//! A BVH take onto another rig: the motion of any suit's BVH (SlimeVR, Rokoko, Noitom Axis,
-//! mocopi, CMU) on a game rig.
+//! Motion on one skeleton onto another rig: any suit's BVH (SlimeVR, Rokoko, Noitom Axis,
+//! mocopi, CMU) on a game rig, and Xsens's own segments ([`mvnx_animation`]) as a skeleton of
+//! their own. A source is a [`SourceMotion`] (a BVH's forward kinematics, or an animation's).
 //!
 //! Each mapped source joint s drives one target bone j (same anatomical part,
 //! [`crate::rig::names`], or a bone map). With S_s(t) the source joint's world rotation (the
