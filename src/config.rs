@@ -16,6 +16,7 @@
 //! input_format: sou      # skip detection
 //! skip_lines: 0
 //! skip_seconds: 0
+//! rate_hz: 200           # recordings without timestamps (WitMotion without time packets)
 //! world: ned             # override the format's world
 //! causal: false          # run the take as a live stream would (causal smoothing, no look-ahead)
 //! bind_frame: false      # the rest pose as frame 0, the take from frame 1
@@ -65,6 +66,9 @@ pub struct Config {
     pub skip_lines: Option<u64>,
     #[serde(default, deserialize_with = "skip_seconds")]
     pub skip_seconds: Option<f64>,
+    /// Samples per second of recordings without timestamps (WitMotion without time packets).
+    #[serde(default, deserialize_with = "rate_hz")]
+    pub rate_hz: Option<f64>,
     pub world: Option<World>,
     #[serde(default, deserialize_with = "smoothing")]
     pub smoothing: Option<Smoothing>,
@@ -140,6 +144,15 @@ fn skip_seconds<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error
             "`skip_seconds`: expected seconds ≥ 0",
         )),
         s => Ok(s),
+    }
+}
+
+fn rate_hz<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+    match Option::<f64>::deserialize(d)? {
+        Some(r) if !(r.is_finite() && r > 0.0) => Err(serde::de::Error::custom(
+            "`rate_hz`: expected a rate above 0 Hz",
+        )),
+        r => Ok(r),
     }
 }
 
@@ -267,6 +280,7 @@ impl Config {
             input_format: self.input_format.or(below.input_format),
             skip_lines: self.skip_lines.or(below.skip_lines),
             skip_seconds: self.skip_seconds.or(below.skip_seconds),
+            rate_hz: self.rate_hz.or(below.rate_hz),
             world: self.world.or(below.world),
             smoothing: self.smoothing.or(below.smoothing),
             report: self.report || below.report,
@@ -333,6 +347,7 @@ impl Config {
         s.read.skip_lines = self.skip_lines.unwrap_or(0);
         s.read.skip_seconds = self.skip_seconds.unwrap_or(0.0);
         s.read.world = self.world;
+        s.read.rate_hz = self.rate_hz;
         s.world_from = self.world.map(|_| world_from);
         s.report = self.report;
         s

@@ -205,6 +205,9 @@ struct FingerprintInput<'a> {
     bvh_reference: Option<String>,
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     mvnx_segments: bool,
+    /// `--rate` of recordings without timestamps.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rate_hz: Option<f64>,
 }
 
 fn file_sha256(path: &Path) -> String {
@@ -252,6 +255,7 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         bvh_reference: (settings.bvh_reference != crate::retarget::Reference::Rest)
             .then(|| settings.bvh_reference.to_string()),
         mvnx_segments: settings.mvnx_segments,
+        rate_hz: settings.read.rate_hz,
     };
     let json = serde_json::to_vec(&input).expect("the fingerprint input serialises");
     format!("{FINGERPRINT_SCHEMA}:{}", hex(&Sha256::digest(&json)))

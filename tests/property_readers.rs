@@ -1,7 +1,7 @@
 //! Property tests: no reader panics on any input, and the SOU line check is exactly the paper's
 //! regular expression (checked against the `regex` crate, an independent implementation).
 
-use imubake::read::{ReadOptions, detect_bytes, imubake_csv, sou, xsens_mvnx};
+use imubake::read::{ReadOptions, detect_bytes, imubake_csv, sou, witmotion, xsens_mvnx};
 
 /// A small valid MVNX document (two sensors, a calibration frame, three normal frames).
 const MVNX: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
@@ -68,6 +68,51 @@ proptest! {
                 prop_assert!(times.iter().all(|t| t.is_finite() && *t >= 0.0));
             }
         }
+    }
+
+    /// WitMotion: arbitrary bytes (and valid packets among them) decode to the same packets
+    /// whatever pieces they arrive in, and a take of them is a take or an error, never a panic.
+    #[test]
+    fn witmotion_decoding_is_the_same_in_any_pieces(
+        noise in proptest::collection::vec(any::<u8>(), 0..400),
+        packets in proptest::collection::vec((0x50u8..0x5B, any::<[u8; 8]>(), any::<bool>()), 0..40),
+        cuts in proptest::collection::vec(0usize..64, 0..20),
+        rate in prop_oneof![Just(None), Just(Some(100.0))],
+    ) {
+        let mut bytes = noise;
+        for (kind, data, corrupt) in packets {
+            let mut p = vec![0x55, kind];
+            p.extend_from_slice(&data);
+            let sum = p.iter().fold(0u8, |s, &b| s.wrapping_add(b));
+            p.push(if corrupt { sum.wrapping_add(1) } else { sum });
+            bytes.extend(p);
+        }
+        let mut whole = witmotion::Decoder::new();
+        let mut all = Vec::new();
+        whole.push(&bytes, &mut all);
+        let mut pieces = witmotion::Decoder::new();
+        let mut got = Vec::new();
+        let mut rest = &bytes[..];
+        for cut in cuts {
+            let (a, b) = rest.split_at(cut.min(rest.len()));
+            pieces.push(a, &mut got);
+            rest = b;
+        }
+        pieces.push(rest, &mut got);
+        prop_assert_eq!(&all, &got);
+        prop_assert_eq!(whole.bad_checksums, pieces.bad_checksums);
+        let options = ReadOptions { rate_hz: rate, ..ReadOptions::default() };
+        let recordings = [witmotion::Recording { id: "a".into(), bytes: &bytes }];
+        if let Ok(take) = witmotion::take_of(&recordings, Path::new("w.bin"), &options) {
+            for s in take.sensors() {
+                let times = s.primary_times_s();
+                prop_assert!(times.windows(2).all(|w| w[0] < w[1]));
+            }
+        }
+        let mut lines = witmotion::CsvLines::new("a");
+        let mut out = Vec::new();
+        lines.push(&bytes, 0.0, &mut out);
+        lines.finish(1.0, &mut out);
     }
 
     #[test]

@@ -72,9 +72,12 @@ pub struct ReadArgs {
     /// Drop samples in the first S seconds; t = 0 moves to the earliest kept sample.
     #[arg(long, value_name = "S", value_parser = parse_seconds)]
     skip_seconds: Option<f64>,
-    /// The sensors' world frame, overriding the format's (enu, ned, nwu, opensim).
+    /// The sensors' world frame, overriding the format's (enu, ned, nwu, opensim, rig).
     #[arg(long, value_name = "WORLD")]
     world: Option<World>,
+    /// Samples per second of recordings without timestamps (WitMotion without time packets)
+    #[arg(long, value_name = "HZ", value_parser = parse_rate_hz)]
+    rate: Option<f64>,
 }
 
 impl ReadArgs {
@@ -90,6 +93,7 @@ impl ReadArgs {
             skip_lines: self.skip_lines,
             skip_seconds: self.skip_seconds,
             world: self.world,
+            rate_hz: self.rate,
             ..Config::default()
         }
     }
@@ -97,6 +101,13 @@ impl ReadArgs {
 
 fn parse_format(s: &str) -> Result<InputFormat, String> {
     s.parse()
+}
+
+fn parse_rate_hz(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a rate in Hz above 0")),
+    }
 }
 
 fn parse_seconds(s: &str) -> Result<f64, String> {

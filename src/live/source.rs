@@ -17,10 +17,16 @@ pub const MAX_LINE: usize = 64 * 1024;
 /// A source as given on the command line.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SourceSpec {
-    /// `serial:/dev/ttyUSB0[@115200]`.
-    Serial { path: PathBuf, baud: u32 },
-    /// `udp:[BIND_ADDR:]PORT` (the address defaults to 127.0.0.1): lines in datagrams.
-    Udp { bind: SocketAddr },
+    /// `serial:/dev/ttyUSB0[@115200][:witmotion]`.
+    Serial {
+        path: PathBuf,
+        baud: u32,
+        /// WitMotion's binary packets instead of lines.
+        witmotion: bool,
+    },
+    /// `udp:[BIND_ADDR:]PORT[:witmotion]` (the address defaults to 127.0.0.1): lines in
+    /// datagrams, or WitMotion packets.
+    Udp { bind: SocketAddr, witmotion: bool },
     /// `tcp:HOST:PORT`: a client that connects, and reconnects.
     Tcp { addr: String },
     /// `stdin`.
@@ -32,8 +38,21 @@ pub enum SourceSpec {
 impl std::fmt::Display for SourceSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            SourceSpec::Serial { path, baud } => write!(f, "serial:{}@{baud}", path.display()),
-            SourceSpec::Udp { bind } => write!(f, "udp:{bind}"),
+            SourceSpec::Serial {
+                path,
+                baud,
+                witmotion,
+            } => write!(
+                f,
+                "serial:{}@{baud}{}",
+                path.display(),
+                if *witmotion { ":witmotion" } else { "" }
+            ),
+            SourceSpec::Udp { bind, witmotion } => write!(
+                f,
+                "udp:{bind}{}",
+                if *witmotion { ":witmotion" } else { "" }
+            ),
             SourceSpec::Tcp { addr } => write!(f, "tcp:{addr}"),
             SourceSpec::Stdin => write!(f, "stdin"),
             SourceSpec::File { path, speed } => write!(f, "file:{}@{speed}", path.display()),
@@ -54,11 +73,20 @@ fn at_suffix(s: &str) -> (&str, Option<&str>) {
 impl std::str::FromStr for SourceSpec {
     type Err = String;
     fn from_str(s: &str) -> Result<SourceSpec, String> {
-        let usage = "expected serial:PATH[@BAUD], udp:[ADDR:]PORT, tcp:HOST:PORT, stdin or file:PATH[@SPEED]";
+        let usage = "expected serial:PATH[@BAUD][:witmotion], udp:[ADDR:]PORT[:witmotion], tcp:HOST:PORT, stdin or file:PATH[@SPEED]";
         if s == "stdin" || s == "-" {
             return Ok(SourceSpec::Stdin);
         }
         let (kind, rest) = s.split_once(':').ok_or_else(|| format!("`{s}`: {usage}"))?;
+        let (rest, witmotion) = match rest.strip_suffix(":witmotion") {
+            Some(r) if matches!(kind, "serial" | "udp") => (r, true),
+            Some(_) => {
+                return Err(format!(
+                    "`{s}`: `:witmotion` applies to serial and udp sources"
+                ));
+            }
+            None => (rest, false),
+        };
         match kind {
             "serial" => {
                 let (path, baud) = at_suffix(rest);
@@ -76,6 +104,7 @@ impl std::str::FromStr for SourceSpec {
                 Ok(SourceSpec::Serial {
                     path: path.into(),
                     baud,
+                    witmotion,
                 })
             }
             "udp" => {
@@ -85,7 +114,7 @@ impl std::str::FromStr for SourceSpec {
                         .parse()
                         .map_err(|_| format!("`{s}`: `{rest}` is not ADDR:PORT or PORT"))?,
                 };
-                Ok(SourceSpec::Udp { bind })
+                Ok(SourceSpec::Udp { bind, witmotion })
             }
             "tcp" => {
                 if !rest.contains(':') {
@@ -344,15 +373,20 @@ pub fn start(
             let stdin = std::io::stdin();
             read_stream(stdin.lock(), &link);
         }),
-        SourceSpec::Udp { bind } => {
+        SourceSpec::Udp { bind, witmotion } => {
             let socket = UdpSocket::bind(bind).map_err(io)?;
             socket
                 .set_read_timeout(Some(Duration::from_millis(100)))
                 .map_err(io)?;
-            std::thread::spawn(move || udp(socket, &link, &allow))
+            let framing = Framing::new(witmotion, &format!("udp{}", bind.port()));
+            std::thread::spawn(move || udp(socket, &link, &allow, framing))
         }
         SourceSpec::Tcp { addr } => std::thread::spawn(move || tcp(&addr, &link, &allow)),
-        SourceSpec::Serial { path, baud } => std::thread::spawn(move || serial(&path, baud, &link)),
+        SourceSpec::Serial {
+            path,
+            baud,
+            witmotion,
+        } => std::thread::spawn(move || serial(&path, baud, witmotion, &link)),
     };
     Ok(handle)
 }
@@ -377,10 +411,71 @@ fn transient(e: &std::io::Error) -> bool {
     )
 }
 
+/// How a source's bytes become lines: split at line ends, or WitMotion packets decoded into
+/// imubake CSV lines ([`crate::read::witmotion::CsvLines`]).
+enum Framing {
+    Lines(LineSplitter),
+    WitMotion {
+        lines: Box<crate::read::witmotion::CsvLines>,
+        started: Instant,
+        /// Bad checksums already said.
+        said: u64,
+    },
+}
+
+impl Framing {
+    /// `sensor`: the id a WitMotion device's lines carry.
+    fn new(witmotion: bool, sensor: &str) -> Framing {
+        if witmotion {
+            Framing::WitMotion {
+                lines: Box::new(crate::read::witmotion::CsvLines::new(sensor)),
+                started: Instant::now(),
+                said: 0,
+            }
+        } else {
+            Framing::Lines(LineSplitter::default())
+        }
+    }
+
+    fn push(&mut self, bytes: &[u8], out: &mut Vec<Vec<u8>>, link: &Link) {
+        match self {
+            Framing::Lines(split) => split.push(bytes, out),
+            Framing::WitMotion {
+                lines,
+                started,
+                said,
+            } => {
+                lines.push(bytes, started.elapsed().as_secs_f64(), out);
+                // Said when they start, and then once per 100 more.
+                let bad = lines.bad_checksums();
+                if bad > *said && (*said == 0 || bad >= *said + 100) {
+                    link.notice(format!(
+                        "{bad} WitMotion packets with a bad checksum dropped"
+                    ));
+                    *said = bad;
+                }
+            }
+        }
+    }
+
+    fn finish(&mut self, out: &mut Vec<Vec<u8>>, link: &Link) {
+        match self {
+            Framing::Lines(split) => {
+                split.finish(out);
+                link.counters
+                    .too_long
+                    .fetch_add(std::mem::take(&mut split.too_long), Ordering::Relaxed);
+            }
+            Framing::WitMotion { lines, started, .. } => {
+                lines.finish(started.elapsed().as_secs_f64(), out)
+            }
+        }
+    }
+}
+
 /// Reads until the end, a failure or the session's stop, sending complete lines as they come
 /// (and the last, unfinished one at the end: the parsers judge it).
-fn pump(reader: &mut impl Read, link: &Link) -> Pumped {
-    let mut split = LineSplitter::default();
+fn pump(reader: &mut impl Read, link: &Link, framing: &mut Framing) -> Pumped {
     let mut buf = vec![0u8; 64 * 1024];
     let how = loop {
         if link.stopped() {
@@ -390,7 +485,7 @@ fn pump(reader: &mut impl Read, link: &Link) -> Pumped {
             Ok(0) => break Pumped::Ended,
             Ok(n) => {
                 let mut lines = Vec::new();
-                split.push(&buf[..n], &mut lines);
+                framing.push(&buf[..n], &mut lines, link);
                 if !link.send(lines) {
                     break Pumped::Stopped;
                 }
@@ -400,17 +495,14 @@ fn pump(reader: &mut impl Read, link: &Link) -> Pumped {
         }
     };
     let mut lines = Vec::new();
-    split.finish(&mut lines);
+    framing.finish(&mut lines, link);
     link.send(lines);
-    link.counters
-        .too_long
-        .fetch_add(split.too_long, Ordering::Relaxed);
     how
 }
 
 /// A byte stream until its end (or the session's stop).
 fn read_stream(mut reader: impl Read, link: &Link) {
-    match pump(&mut reader, link) {
+    match pump(&mut reader, link, &mut Framing::new(false, "")) {
         Pumped::Stopped => {}
         Pumped::Ended => link.closed(None),
         Pumped::Lost(e) => link.closed(Some(e.to_string())),
@@ -425,6 +517,7 @@ fn reopening<R: Read>(
     mut open: impl FnMut() -> std::io::Result<R>,
     again: &str,
     back: &str,
+    mut framing: impl FnMut() -> Framing,
 ) {
     let mut delay = Duration::from_millis(200);
     let mut down = false;
@@ -443,7 +536,7 @@ fn reopening<R: Read>(
         link.notice(back.into());
         down = true;
         delay = Duration::from_millis(200);
-        match pump(&mut reader, link) {
+        match pump(&mut reader, link, &mut framing()) {
             Pumped::Stopped => return,
             Pumped::Ended => link.notice(format!("closed; {again}")),
             Pumped::Lost(e) => link.notice(format!("lost ({e}); {again}")),
@@ -486,7 +579,7 @@ fn replay(reader: impl BufRead, speed: f64, link: &Link) {
     link.closed(None);
 }
 
-fn udp(socket: UdpSocket, link: &Link, allow: &Allow) {
+fn udp(socket: UdpSocket, link: &Link, allow: &Allow, mut framing: Framing) {
     let mut buf = vec![0u8; 65_536];
     while !link.stopped() {
         match socket.recv_from(&mut buf) {
@@ -495,14 +588,12 @@ fn udp(socket: UdpSocket, link: &Link, allow: &Allow) {
                     link.counters.refused.fetch_add(1, Ordering::Relaxed);
                     continue;
                 }
-                // A datagram holds whole lines.
-                let mut split = LineSplitter::default();
+                // A datagram holds whole lines (WitMotion packets may run on into the next).
                 let mut lines = Vec::new();
-                split.push(&buf[..n], &mut lines);
-                split.finish(&mut lines);
-                link.counters
-                    .too_long
-                    .fetch_add(split.too_long, Ordering::Relaxed);
+                framing.push(&buf[..n], &mut lines, link);
+                if let Framing::Lines(_) = framing {
+                    framing.finish(&mut lines, link);
+                }
                 if !link.offer(lines) {
                     return;
                 }
@@ -543,10 +634,12 @@ fn tcp(addr: &str, link: &Link, allow: &Allow) {
         stream.set_read_timeout(Some(Duration::from_millis(100)))?;
         Ok(stream)
     };
-    reopening(link, open, "reconnecting", "connected");
+    reopening(link, open, "reconnecting", "connected", || {
+        Framing::new(false, "")
+    });
 }
 
-fn serial(path: &std::path::Path, baud: u32, link: &Link) {
+fn serial(path: &std::path::Path, baud: u32, witmotion: bool, link: &Link) {
     // A port with a timeout says "no data yet" as TimedOut; 0 bytes is its end (the device
     // gone, a pty whose other side closed).
     let open = || {
@@ -555,7 +648,13 @@ fn serial(path: &std::path::Path, baud: u32, link: &Link) {
             .open()
             .map_err(std::io::Error::from)
     };
-    reopening(link, open, "reopening", "opened");
+    // A WitMotion device's lines carry the port's name (`ttyUSB0`) as their sensor.
+    let sensor = path
+        .file_name()
+        .map_or_else(|| "witmotion".into(), |n| n.to_string_lossy().into_owned());
+    reopening(link, open, "reopening", "opened", || {
+        Framing::new(witmotion, &sensor)
+    });
 }
 
 #[cfg(test)]
@@ -568,26 +667,47 @@ mod tests {
             "serial:/dev/ttyUSB0".parse::<SourceSpec>().unwrap(),
             SourceSpec::Serial {
                 path: "/dev/ttyUSB0".into(),
-                baud: 115_200
+                baud: 115_200,
+                witmotion: false
             }
         );
         assert_eq!(
             "serial:/dev/ttyACM1@9600".parse::<SourceSpec>().unwrap(),
             SourceSpec::Serial {
                 path: "/dev/ttyACM1".into(),
-                baud: 9600
+                baud: 9600,
+                witmotion: false
+            }
+        );
+        assert_eq!(
+            "serial:/dev/ttyUSB0@115200:witmotion"
+                .parse::<SourceSpec>()
+                .unwrap(),
+            SourceSpec::Serial {
+                path: "/dev/ttyUSB0".into(),
+                baud: 115_200,
+                witmotion: true
+            }
+        );
+        assert_eq!(
+            "udp:9001:witmotion".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Udp {
+                bind: "127.0.0.1:9001".parse().unwrap(),
+                witmotion: true
             }
         );
         assert_eq!(
             "udp:9000".parse::<SourceSpec>().unwrap(),
             SourceSpec::Udp {
-                bind: "127.0.0.1:9000".parse().unwrap()
+                bind: "127.0.0.1:9000".parse().unwrap(),
+                witmotion: false
             }
         );
         assert_eq!(
             "udp:0.0.0.0:9000".parse::<SourceSpec>().unwrap(),
             SourceSpec::Udp {
-                bind: "0.0.0.0:9000".parse().unwrap()
+                bind: "0.0.0.0:9000".parse().unwrap(),
+                witmotion: false
             }
         );
         assert_eq!(
@@ -597,7 +717,16 @@ mod tests {
                 speed: 2.5
             }
         );
-        for bad in ["serial:", "udp:x", "tcp:host", "file:a@0", "nope:1", "x"] {
+        for bad in [
+            "serial:",
+            "udp:x",
+            "tcp:host",
+            "file:a@0",
+            "nope:1",
+            "x",
+            "tcp:h:1:witmotion",
+            "serial::witmotion",
+        ] {
             assert!(bad.parse::<SourceSpec>().is_err(), "{bad}");
         }
     }

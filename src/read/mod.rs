@@ -7,6 +7,7 @@ pub mod lines;
 pub mod opensense_sto;
 pub mod sou;
 pub mod stream;
+pub mod witmotion;
 pub mod xio_fusion_csv;
 pub mod xio_session;
 pub mod xsens_dot;
@@ -32,6 +33,8 @@ pub struct ReadOptions {
     pub skip_seconds: f64,
     /// Overrides the world the format declares.
     pub world: Option<World>,
+    /// Samples per second of a recording without timestamps (WitMotion without time packets).
+    pub rate_hz: Option<f64>,
 }
 
 /// Why a take could not be read. Every message names the file, the line when there is one, what
@@ -174,6 +177,9 @@ pub fn detect_format(path: &Path) -> Result<InputFormat, ReadError> {
         return detect_folder(path);
     }
     let head = sniff(path)?;
+    if witmotion::looks_like(&head) {
+        return Ok(InputFormat::WitMotion);
+    }
     check_text(path, &head)?;
     detect_bytes(&head).ok_or_else(|| unknown_format(path))
 }
@@ -183,7 +189,8 @@ fn unknown_format(path: &Path) -> ReadError {
         path,
         "unknown capture format; expected a SOU log (`timestamp_ms,SOU_ID,yaw1,...`), an imubake CSV \
          (header with time_s|time_ms|time_us and sensor), an OpenSense .sto, a Movella DOT CSV, an \
-         Xsens MTw .txt or an x-io Fusion CSV. Hint: name the format with --input-format",
+         Xsens MTw .txt, an Xsens MVN .mvnx, an x-io Fusion CSV, a WitMotion binary stream or a \
+         BVH. Hint: name the format with --input-format",
     )
 }
 
@@ -214,6 +221,13 @@ fn detect_folder(path: &Path) -> Result<InputFormat, ReadError> {
     // A session folder, or a single x-IMU3 device folder (read as a one-device session).
     if xio_session::looks_like_folder(path) || xio_session::is_device_folder(path) {
         return Ok(InputFormat::XioSession);
+    }
+    // One WitMotion recording per sensor.
+    if visible_files(path)?
+        .iter()
+        .any(|f| sniff(f).is_ok_and(|head| witmotion::looks_like(&head)))
+    {
+        return Ok(InputFormat::WitMotion);
     }
     let entries = visible_files(path)?;
     // The first file of a folder format decides; other files (notes, stray exports) are skipped
@@ -514,11 +528,17 @@ pub fn read_take_from_bytes(
     options: &ReadOptions,
 ) -> Result<Take, ReadError> {
     let head = &bytes[..bytes.len().min(SNIFF_BYTES)];
-    check_text(path, head)?;
     let format = match options.format {
         Some(f) => f,
-        None => detect_bytes(head).ok_or_else(|| unknown_format(path))?,
+        None if witmotion::looks_like(head) => InputFormat::WitMotion,
+        None => {
+            check_text(path, head)?;
+            detect_bytes(head).ok_or_else(|| unknown_format(path))?
+        }
     };
+    if format != InputFormat::WitMotion {
+        check_text(path, head)?;
+    }
     match format {
         InputFormat::Sou => sou::read_from(bytes, path, options),
         InputFormat::ImubakeCsv => imubake_csv::read_from(bytes, path, options),
@@ -532,6 +552,14 @@ pub fn read_take_from_bytes(
             "an x-IMU3 session is a folder; a stream cannot hold one. Hint: pass the session folder",
         )),
         InputFormat::Bvh => Err(bvh_is_motion(path)),
+        InputFormat::WitMotion => witmotion::take_of(
+            &[witmotion::Recording {
+                id: crate::convert::take_stem(path),
+                bytes,
+            }],
+            path,
+            options,
+        ),
     }
 }
 
@@ -554,6 +582,7 @@ pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> 
         InputFormat::XioFusionCsv => xio_fusion_csv::read(path, options),
         InputFormat::XsensMvnx => xsens_mvnx::read(path, options),
         InputFormat::Bvh => Err(bvh_is_motion(path)),
+        InputFormat::WitMotion => witmotion::read(path, options),
     }
 }
 

@@ -27,10 +27,12 @@ pub enum InputFormat {
     XsensMvnx,
     /// A BVH file's motion: not a sensor capture; `convert` retargets it onto the rig.
     Bvh,
+    /// WitMotion's binary serial stream (WT901 and relatives): one recording per sensor.
+    WitMotion,
 }
 
 impl InputFormat {
-    pub const ALL: [InputFormat; 9] = [
+    pub const ALL: [InputFormat; 10] = [
         InputFormat::Sou,
         InputFormat::ImubakeCsv,
         InputFormat::OpensenseSto,
@@ -40,6 +42,7 @@ impl InputFormat {
         InputFormat::XioFusionCsv,
         InputFormat::XsensMvnx,
         InputFormat::Bvh,
+        InputFormat::WitMotion,
     ];
 
     pub fn name(self) -> &'static str {
@@ -53,6 +56,7 @@ impl InputFormat {
             InputFormat::XioFusionCsv => "xio-fusion-csv",
             InputFormat::XsensMvnx => "xsens-mvnx",
             InputFormat::Bvh => "bvh",
+            InputFormat::WitMotion => "witmotion",
         }
     }
 
@@ -68,6 +72,7 @@ impl InputFormat {
             InputFormat::XioFusionCsv => "x-io Fusion raw-readings CSV",
             InputFormat::XsensMvnx => "Xsens MVN .mvnx export",
             InputFormat::Bvh => "BVH motion",
+            InputFormat::WitMotion => "WitMotion binary stream",
         }
     }
 }
