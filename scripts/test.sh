@@ -46,14 +46,19 @@ if [ ! -f "$CACHE/node/node_modules/gltf-validator/package.json" ] \
     "gltf-validator@$VALIDATOR_VERSION" "playwright-core@$PLAYWRIGHT_VERSION" >/dev/null
 fi
 
-# Debian's Chromium: the viewer's page runs in it, headless, WebGL through SwiftShader. A system
-# package (apt), installed once; playwright's own browser download does not work here.
-if [ ! -x /usr/bin/chromium ]; then
-  step "installing Debian's chromium (apt)"
+# Debian's packages, installed once with apt: Chromium (the viewer's page runs in it, headless,
+# WebGL through SwiftShader; playwright's own browser download does not work here) and libhdf5
+# (the `hdf5` feature: APDM Opal files).
+APT_PACKAGES=""
+[ -x /usr/bin/chromium ] || APT_PACKAGES="$APT_PACKAGES chromium"
+[ -f /usr/include/hdf5/serial/hdf5.h ] || APT_PACKAGES="$APT_PACKAGES libhdf5-dev"
+if [ -n "$APT_PACKAGES" ]; then
+  step "installing Debian's$APT_PACKAGES (apt)"
   SUDO=""
   if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
   $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
+  # shellcheck disable=SC2086
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $APT_PACKAGES >/dev/null
 fi
 /usr/bin/chromium --version
 
@@ -77,8 +82,11 @@ step "mdbook build docs (the reference, into target/book)"
 step "cargo fmt --check"
 cargo fmt --all -- --check
 
-step "cargo clippy (warnings are errors)"
-cargo clippy --all-targets --locked -- -D warnings
+step "cargo clippy (warnings are errors), with the hdf5 feature"
+cargo clippy --all-targets --locked --features hdf5 -- -D warnings
 
-step "cargo test"
-cargo test --locked
+step "cargo check without features (what a plain cargo install builds)"
+cargo check --locked
+
+step "cargo test, with the hdf5 feature"
+cargo test --locked --features hdf5

@@ -356,7 +356,10 @@ fn read_and_hash(input: &Path, options: &ReadOptions) -> Result<(Take, String), 
         return Ok((read_take_from_bytes(&bytes, input, options)?, sha256));
     }
     if input.is_file() {
-        check_text(input, &sniff(input)?)?;
+        let head = sniff(input)?;
+        if !crate::read::is_binary_format(&head, options.format) {
+            check_text(input, &head)?;
+        }
     }
     let (take, sha256) = std::thread::scope(|scope| {
         let hasher = scope.spawn(|| source_sha256(input));

@@ -210,3 +210,38 @@ fn a_live_witmotion_stream_is_recorded_as_decoded() {
     eprintln!("{} rows recorded, worst {worst:.2e} rad", rows.len());
     assert!(worst < 1e-8, "{worst}");
 }
+
+/// A WitMotion session converts onto mixamo with a mapping, like any capture.
+#[test]
+fn a_witmotion_session_converts() {
+    let Some(py) = python() else { return };
+    let (dir, _) = fixtures(&py);
+    let mapping = dir.path().join("mapping.json");
+    std::fs::write(
+        &mapping,
+        r#"{"rig": "mixamo", "world": "enu", "sensors": {
+            "left_thigh": {"bone": "LeftUpLeg", "mount": "calibrate"},
+            "left_shank": {"bone": "LeftLeg", "mount": "calibrate"}}}"#,
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(dir.path().join("session"))
+        .arg("--mapping")
+        .arg(&mapping)
+        .arg("--out")
+        .arg(&out));
+    let sidecar: Value =
+        serde_json::from_slice(&std::fs::read(out.join("session.imubake.json")).unwrap()).unwrap();
+    assert_eq!(sidecar["source"]["format"], "witmotion");
+    assert_eq!(sidecar["frames"], 60, "1.99 s at 30 fps");
+    assert!(
+        sidecar["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("bad checksum")),
+        "{sidecar}"
+    );
+}

@@ -1,6 +1,7 @@
 //! Readers: one module per capture format, each turning a file or session folder into a
 //! [`Take`]. The format is detected from content; [`ReadOptions::format`] overrides.
 
+pub mod apdm;
 pub mod clock;
 pub mod imubake_csv;
 pub mod lines;
@@ -154,6 +155,15 @@ pub(crate) fn sniff(path: &Path) -> Result<Vec<u8>, ReadError> {
     Ok(head)
 }
 
+/// Whether bytes that start like `head` are one of the binary formats (WitMotion's packets, HDF5),
+/// which the text check must let through.
+pub(crate) fn is_binary_format(head: &[u8], format: Option<InputFormat>) -> bool {
+    match format {
+        Some(f) => matches!(f, InputFormat::WitMotion | InputFormat::ApdmH5),
+        None => witmotion::looks_like(head) || apdm::looks_like(head),
+    }
+}
+
 /// Fails on an empty file or one with NUL bytes near the start: no text capture log has them.
 pub(crate) fn check_text(path: &Path, head: &[u8]) -> Result<(), ReadError> {
     if head.is_empty() {
@@ -179,6 +189,9 @@ pub fn detect_format(path: &Path) -> Result<InputFormat, ReadError> {
     let head = sniff(path)?;
     if witmotion::looks_like(&head) {
         return Ok(InputFormat::WitMotion);
+    }
+    if apdm::looks_like(&head) {
+        return Ok(InputFormat::ApdmH5);
     }
     check_text(path, &head)?;
     detect_bytes(&head).ok_or_else(|| unknown_format(path))
@@ -515,7 +528,9 @@ pub fn read_stream(path: &Path) -> Result<Vec<u8>, ReadError> {
         .take(STREAM_CHECK_BYTES as u64)
         .read_to_end(&mut bytes)
         .map_err(|e| ReadError::io(path, e))?;
-    check_text(path, &bytes)?;
+    if !is_binary_format(&bytes, None) {
+        check_text(path, &bytes)?;
+    }
     file.read_to_end(&mut bytes)
         .map_err(|e| ReadError::io(path, e))?;
     Ok(bytes)
@@ -531,12 +546,13 @@ pub fn read_take_from_bytes(
     let format = match options.format {
         Some(f) => f,
         None if witmotion::looks_like(head) => InputFormat::WitMotion,
+        None if apdm::looks_like(head) => InputFormat::ApdmH5,
         None => {
             check_text(path, head)?;
             detect_bytes(head).ok_or_else(|| unknown_format(path))?
         }
     };
-    if format != InputFormat::WitMotion {
+    if !matches!(format, InputFormat::WitMotion | InputFormat::ApdmH5) {
         check_text(path, head)?;
     }
     match format {
@@ -560,6 +576,10 @@ pub fn read_take_from_bytes(
             path,
             options,
         ),
+        InputFormat::ApdmH5 => Err(ReadError::format(
+            path,
+            "an HDF5 file is read from a file, not a stream (libhdf5 opens files). Hint: save it first",
+        )),
     }
 }
 
@@ -583,6 +603,7 @@ pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> 
         InputFormat::XsensMvnx => xsens_mvnx::read(path, options),
         InputFormat::Bvh => Err(bvh_is_motion(path)),
         InputFormat::WitMotion => witmotion::read(path, options),
+        InputFormat::ApdmH5 => apdm::read(path, options),
     }
 }
 

@@ -28,11 +28,14 @@ pub enum InputFormat {
     /// A BVH file's motion: not a sensor capture; `convert` retargets it onto the rig.
     Bvh,
     /// WitMotion's binary serial stream (WT901 and relatives): one recording per sensor.
+    #[serde(rename = "witmotion")]
     WitMotion,
+    /// APDM Opal `.h5` (HDF5; the cargo feature `hdf5`).
+    ApdmH5,
 }
 
 impl InputFormat {
-    pub const ALL: [InputFormat; 10] = [
+    pub const ALL: [InputFormat; 11] = [
         InputFormat::Sou,
         InputFormat::ImubakeCsv,
         InputFormat::OpensenseSto,
@@ -43,6 +46,7 @@ impl InputFormat {
         InputFormat::XsensMvnx,
         InputFormat::Bvh,
         InputFormat::WitMotion,
+        InputFormat::ApdmH5,
     ];
 
     pub fn name(self) -> &'static str {
@@ -57,6 +61,7 @@ impl InputFormat {
             InputFormat::XsensMvnx => "xsens-mvnx",
             InputFormat::Bvh => "bvh",
             InputFormat::WitMotion => "witmotion",
+            InputFormat::ApdmH5 => "apdm-h5",
         }
     }
 
@@ -73,6 +78,7 @@ impl InputFormat {
             InputFormat::XsensMvnx => "Xsens MVN .mvnx export",
             InputFormat::Bvh => "BVH motion",
             InputFormat::WitMotion => "WitMotion binary stream",
+            InputFormat::ApdmH5 => "APDM Opal .h5",
         }
     }
 }
