@@ -577,28 +577,10 @@ fn bvh_conversion(
             bvh.frame_time_s()
         ))
     })?;
-    let rig = rig_for(settings, None, subject)?;
     let source = crate::retarget::SourceMotion::of_bvh(&bvh, source_fps);
     drop(bvh);
-    let source_names: Vec<&str> = source.names.iter().map(String::as_str).collect();
-    let target_names: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
-    let pairs = match &settings.bone_map {
-        Some(path) => crate::retarget::load_bone_map(path, &source_names, &target_names),
-        None => crate::retarget::auto_pairs(&source_names, &rig),
-    }
-    .map_err(|e| fail(e.to_string()))?;
-    let animation = crate::retarget::retarget(
-        &source,
-        &rig,
-        &pairs,
-        settings.bvh_reference,
-        settings.pipeline.fps,
-    )
-    .map_err(|e| fail(e.to_string()))?;
-    let pairs: Vec<(String, String)> = pairs
-        .iter()
-        .map(|&(s, t)| (source_names[s].to_string(), target_names[t].to_string()))
-        .collect();
+    let (animation, pairs) =
+        retarget_onto_rig(&source, settings, subject, settings.bvh_reference, &fail)?;
     let source = SourceRecord {
         path: input.to_string_lossy().into_owned(),
         sha256,
@@ -616,6 +598,34 @@ fn bvh_conversion(
         warnings: Vec::new(),
     };
     Ok((motion.conversion(input, settings)?, source))
+}
+
+/// `source` onto the settings' rig (scaled to the subject): its joints paired with the rig's
+/// bones by `--bone-map`, else by anatomical part, then retargeted from `reference` at the
+/// settings' rate. The animation, and each (joint, bone) pair by name.
+fn retarget_onto_rig(
+    source: &crate::retarget::SourceMotion,
+    settings: &ConvertSettings,
+    subject: Option<&Subject>,
+    reference: crate::retarget::Reference,
+    fail: &dyn Fn(String) -> ConvertError,
+) -> Result<(Animation, Vec<(String, String)>), ConvertError> {
+    let rig = rig_for(settings, None, subject)?;
+    let source_names: Vec<&str> = source.names.iter().map(String::as_str).collect();
+    let target_names: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
+    let pairs = match &settings.bone_map {
+        Some(path) => crate::retarget::load_bone_map(path, &source_names, &target_names),
+        None => crate::retarget::auto_pairs(&source_names, &rig),
+    }
+    .map_err(|e| fail(e.to_string()))?;
+    let animation =
+        crate::retarget::retarget(source, &rig, &pairs, reference, settings.pipeline.fps)
+            .map_err(|e| fail(e.to_string()))?;
+    let named = pairs
+        .iter()
+        .map(|&(s, t)| (source_names[s].to_string(), target_names[t].to_string()))
+        .collect();
+    Ok((animation, named))
 }
 
 /// A take whose motion is already on a skeleton (a BVH, Xsens's segments), as a conversion: its
@@ -730,32 +740,22 @@ fn mvnx_segments_conversion(
     let segments = crate::read::xsens_mvnx::read_segments(input)?;
     let (mvn, mut warnings) = crate::retarget::mvnx_animation(&segments, settings.pipeline.fps)
         .map_err(|e| fail(e.to_string()))?;
-    let names: Vec<String> = mvn.rig().joints().iter().map(|j| j.name.clone()).collect();
     let (animation, pairs) = if settings.rig.is_some() || settings.bone_map.is_some() {
-        let rig = rig_for(settings, None, subject)?;
         let source = crate::retarget::SourceMotion::of_animation(&mvn);
-        let source_names: Vec<&str> = names.iter().map(String::as_str).collect();
-        let target_names: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
-        let pairs = match &settings.bone_map {
-            Some(path) => crate::retarget::load_bone_map(path, &source_names, &target_names),
-            None => crate::retarget::auto_pairs(&source_names, &rig),
-        }
-        .map_err(|e| fail(e.to_string()))?;
-        let animation = crate::retarget::retarget(
+        retarget_onto_rig(
             &source,
-            &rig,
-            &pairs,
+            settings,
+            subject,
             crate::retarget::Reference::Rest,
-            settings.pipeline.fps,
-        )
-        .map_err(|e| fail(e.to_string()))?;
-        let pairs = pairs
-            .iter()
-            .map(|&(s, t)| (names[s].clone(), target_names[t].to_string()))
-            .collect();
-        (animation, pairs)
+            &fail,
+        )?
     } else {
-        let pairs = names.iter().map(|n| (n.clone(), n.clone())).collect();
+        let pairs = mvn
+            .rig()
+            .joints()
+            .iter()
+            .map(|j| (j.name.clone(), j.name.clone()))
+            .collect();
         (mvn, pairs)
     };
     if !segments.dropped.is_empty() {

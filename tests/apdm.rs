@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{imubake_bin, python, repo_file, run};
+use common::{convert_with_mapping, python, repo_file, run};
 use hdf5_metno as hdf5;
 use imubake::read::{InputFormat, ReadOptions, read_take};
 use imubake::take::OrientationTrack;
@@ -116,24 +116,13 @@ fn bad_files_say_what_is_wrong() {
 fn an_opal_take_converts() {
     let Some(py) = python() else { return };
     let (dir, _) = fixtures(&py);
-    let mapping = dir.path().join("mapping.json");
-    std::fs::write(
-        &mapping,
+    let sidecar = convert_with_mapping(
+        &dir.path().join("opal.h5"),
         r#"{"rig": "mixamo", "world": "nwu", "sensors": {
             "left_thigh": {"bone": "LeftUpLeg", "mount": "calibrate"},
             "left_shank": {"bone": "LeftLeg", "mount": "calibrate"}}}"#,
-    )
-    .unwrap();
-    let out = dir.path().join("out");
-    run(Command::new(imubake_bin())
-        .arg("convert")
-        .arg(dir.path().join("opal.h5"))
-        .arg("--mapping")
-        .arg(&mapping)
-        .arg("--out")
-        .arg(&out));
-    let sidecar: Value =
-        serde_json::from_slice(&std::fs::read(out.join("opal.imubake.json")).unwrap()).unwrap();
+        dir.path(),
+    );
     assert_eq!(sidecar["source"]["format"], "apdm-h5");
     let sensors = sidecar["mapping"]["sensors"].as_array().unwrap();
     let origin = |id: &str| {

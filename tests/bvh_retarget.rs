@@ -33,16 +33,9 @@ fn check(
     step: u64,
     reference: &str,
 ) -> Value {
-    let pairs: Vec<[String; 2]> = sidecar["mapping"]["sensors"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|s| {
-            [
-                s["sensor"].as_str().unwrap().to_string(),
-                s["bone"].as_str().unwrap().to_string(),
-            ]
-        })
+    let pairs: Vec<[String; 2]> = common::sidecar_pairs(sidecar)
+        .into_iter()
+        .map(|(s, b)| [s, b])
         .collect();
     let dir = target.parent().unwrap();
     let pairs_path = dir.join("pairs.json");
@@ -108,13 +101,9 @@ fn shared_bvhs_onto_mixamo_follow_their_sources() {
         &std::fs::read(dir.path().join("cmu_01_01-rest/cmu_01_01.imubake.json")).unwrap(),
     )
     .unwrap();
-    let pairs: Vec<(&str, &str)> = sidecar["mapping"]["sensors"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|s| (s["sensor"].as_str().unwrap(), s["bone"].as_str().unwrap()))
-        .collect();
-    assert!(pairs.contains(&("LowerBack", "Spine")) && pairs.contains(&("LeftUpLeg", "LeftUpLeg")));
+    let pairs = common::sidecar_pairs(&sidecar);
+    let has = |s: &str, b: &str| pairs.contains(&(s.to_string(), b.to_string()));
+    assert!(has("LowerBack", "Spine") && has("LeftUpLeg", "LeftUpLeg"));
 }
 
 /// A bone map drives the bones it names (here mirrored arms), and a map naming a joint the BVH

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{imubake_bin, python, repo_file, run};
+use common::{convert_with_mapping, imubake_bin, python, repo_file, run};
 use imubake::read::{ReadOptions, read_take};
 use imubake::take::OrientationTrack;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -216,24 +216,13 @@ fn a_live_witmotion_stream_is_recorded_as_decoded() {
 fn a_witmotion_session_converts() {
     let Some(py) = python() else { return };
     let (dir, _) = fixtures(&py);
-    let mapping = dir.path().join("mapping.json");
-    std::fs::write(
-        &mapping,
+    let sidecar = convert_with_mapping(
+        &dir.path().join("session"),
         r#"{"rig": "mixamo", "world": "enu", "sensors": {
             "left_thigh": {"bone": "LeftUpLeg", "mount": "calibrate"},
             "left_shank": {"bone": "LeftLeg", "mount": "calibrate"}}}"#,
-    )
-    .unwrap();
-    let out = dir.path().join("out");
-    run(Command::new(imubake_bin())
-        .arg("convert")
-        .arg(dir.path().join("session"))
-        .arg("--mapping")
-        .arg(&mapping)
-        .arg("--out")
-        .arg(&out));
-    let sidecar: Value =
-        serde_json::from_slice(&std::fs::read(out.join("session.imubake.json")).unwrap()).unwrap();
+        dir.path(),
+    );
     assert_eq!(sidecar["source"]["format"], "witmotion");
     assert_eq!(sidecar["frames"], 60, "1.99 s at 30 fps");
     assert!(

@@ -434,12 +434,7 @@ fn mvnx_segments_are_xsens_own_skeleton() {
         .arg(&out));
     let sidecar: Value =
         serde_json::from_slice(&std::fs::read(out.join("walk.imubake.json")).unwrap()).unwrap();
-    let pairs: Vec<(&str, &str)> = sidecar["mapping"]["sensors"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|s| (s["sensor"].as_str().unwrap(), s["bone"].as_str().unwrap()))
-        .collect();
+    let pairs = common::sidecar_pairs(&sidecar);
     for pair in [
         ("Pelvis", "Hips"),
         ("L5", "Spine"),
@@ -447,6 +442,7 @@ fn mvnx_segments_are_xsens_own_skeleton() {
         ("RightUpperLeg", "RightUpLeg"),
         ("LeftToe", "LeftToeBase"),
     ] {
+        let pair = (pair.0.to_string(), pair.1.to_string());
         assert!(pairs.contains(&pair), "{pair:?} in {pairs:?}");
     }
     assert_eq!(sidecar["rig"]["name"], "mixamo");

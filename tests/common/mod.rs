@@ -229,3 +229,39 @@ pub fn run(cmd: &mut Command) -> std::process::Output {
     );
     out
 }
+
+/// The (sensor or joint, bone) pairs a sidecar's `mapping.sensors` lists.
+pub fn sidecar_pairs(sidecar: &serde_json::Value) -> Vec<(String, String)> {
+    sidecar["mapping"]["sensors"]
+        .as_array()
+        .map(|sensors| {
+            sensors
+                .iter()
+                .map(|s| {
+                    (
+                        s["sensor"].as_str().unwrap_or_default().to_string(),
+                        s["bone"].as_str().unwrap_or_default().to_string(),
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// `imubake convert INPUT --mapping <mapping_json written into dir> --out dir/out`, which must
+/// succeed; the take's sidecar.
+pub fn convert_with_mapping(input: &Path, mapping_json: &str, dir: &Path) -> serde_json::Value {
+    let mapping = dir.join("mapping.json");
+    std::fs::write(&mapping, mapping_json).unwrap();
+    let out = dir.join("out");
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(input)
+        .arg("--mapping")
+        .arg(&mapping)
+        .arg("--out")
+        .arg(&out));
+    let stem = input.file_stem().unwrap().to_string_lossy();
+    serde_json::from_slice(&std::fs::read(out.join(format!("{stem}.imubake.json"))).unwrap())
+        .unwrap()
+}
