@@ -199,18 +199,7 @@ impl crate::diagnostic::Diagnostic for ConvertError {
     }
 }
 
-/// The name outputs of `input` are written under: the file name without its extension, or the
-/// folder name of a session folder.
-pub fn take_stem(input: &Path) -> String {
-    let name = if input.is_dir() {
-        input.file_name()
-    } else {
-        input.file_stem()
-    };
-    name.map(|n| n.to_string_lossy().into_owned())
-        .filter(|n| !n.is_empty() && n != "." && n != "..")
-        .unwrap_or_else(|| "take".to_string())
-}
+pub use crate::read::take_stem;
 
 /// SHA-256 of a file, or of a folder's files (sorted relative paths and contents).
 pub fn source_sha256(path: &Path) -> io::Result<String> {

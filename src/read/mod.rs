@@ -155,6 +155,19 @@ pub(crate) fn sniff(path: &Path) -> Result<Vec<u8>, ReadError> {
     Ok(head)
 }
 
+/// The name outputs of `input` are written under: the file name without its extension, or the
+/// folder name of a session folder.
+pub fn take_stem(input: &Path) -> String {
+    let name = if input.is_dir() {
+        input.file_name()
+    } else {
+        input.file_stem()
+    };
+    name.map(|n| n.to_string_lossy().into_owned())
+        .filter(|n| !n.is_empty() && n != "." && n != "..")
+        .unwrap_or_else(|| "take".to_string())
+}
+
 /// Whether bytes that start like `head` are one of the binary formats (WitMotion's packets, HDF5),
 /// which the text check must let through.
 pub(crate) fn is_binary_format(head: &[u8], format: Option<InputFormat>) -> bool {
@@ -570,7 +583,7 @@ pub fn read_take_from_bytes(
         InputFormat::Bvh => Err(bvh_is_motion(path)),
         InputFormat::WitMotion => witmotion::take_of(
             &[witmotion::Recording {
-                id: crate::convert::take_stem(path),
+                id: take_stem(path),
                 bytes,
             }],
             path,

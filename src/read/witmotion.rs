@@ -498,7 +498,7 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
         .iter()
         .map(|f| {
             let bytes = std::fs::read(f).map_err(|e| ReadError::io(f, e))?;
-            let id = crate::convert::take_stem(f);
+            let id = super::take_stem(f);
             Ok((id, bytes))
         })
         .collect::<Result<_, ReadError>>()?;
