@@ -458,6 +458,15 @@ impl Framing {
         }
     }
 
+    /// A new connection of the same source: a line or packet half received before it is gone;
+    /// a WitMotion stream keeps its header and clock.
+    fn restart(&mut self) {
+        match self {
+            Framing::Lines(split) => *split = LineSplitter::default(),
+            Framing::WitMotion { lines, .. } => lines.restart(),
+        }
+    }
+
     fn finish(&mut self, out: &mut Vec<Vec<u8>>, link: &Link) {
         match self {
             Framing::Lines(split) => {
@@ -517,7 +526,7 @@ fn reopening<R: Read>(
     mut open: impl FnMut() -> std::io::Result<R>,
     again: &str,
     back: &str,
-    mut framing: impl FnMut() -> Framing,
+    mut framing: Framing,
 ) {
     let mut delay = Duration::from_millis(200);
     let mut down = false;
@@ -536,7 +545,8 @@ fn reopening<R: Read>(
         link.notice(back.into());
         down = true;
         delay = Duration::from_millis(200);
-        match pump(&mut reader, link, &mut framing()) {
+        framing.restart();
+        match pump(&mut reader, link, &mut framing) {
             Pumped::Stopped => return,
             Pumped::Ended => link.notice(format!("closed; {again}")),
             Pumped::Lost(e) => link.notice(format!("lost ({e}); {again}")),
@@ -634,9 +644,13 @@ fn tcp(addr: &str, link: &Link, allow: &Allow) {
         stream.set_read_timeout(Some(Duration::from_millis(100)))?;
         Ok(stream)
     };
-    reopening(link, open, "reconnecting", "connected", || {
-        Framing::new(false, "")
-    });
+    reopening(
+        link,
+        open,
+        "reconnecting",
+        "connected",
+        Framing::new(false, ""),
+    );
 }
 
 fn serial(path: &std::path::Path, baud: u32, witmotion: bool, link: &Link) {
@@ -652,9 +666,13 @@ fn serial(path: &std::path::Path, baud: u32, witmotion: bool, link: &Link) {
     let sensor = path
         .file_name()
         .map_or_else(|| "witmotion".into(), |n| n.to_string_lossy().into_owned());
-    reopening(link, open, "reopening", "opened", || {
-        Framing::new(witmotion, &sensor)
-    });
+    reopening(
+        link,
+        open,
+        "reopening",
+        "opened",
+        Framing::new(witmotion, &sensor),
+    );
 }
 
 #[cfg(test)]
