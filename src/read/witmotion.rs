@@ -624,12 +624,22 @@ mod tests {
         lines.restart();
         lines.push(&[sample(300), sample(400)].concat(), 1.0, &mut out);
         lines.finish(1.01, &mut out);
-        let text: Vec<String> = out.iter().map(|l| String::from_utf8_lossy(l).into_owned()).collect();
-        assert_eq!(text[0], "time_s,sensor,qw,qx,qy,qz,gx_dps,gy_dps,gz_dps,ax_g,ay_g,az_g");
+        let text: Vec<String> = out
+            .iter()
+            .map(|l| String::from_utf8_lossy(l).into_owned())
+            .collect();
+        assert_eq!(
+            text[0],
+            "time_s,sensor,qw,qx,qy,qz,gx_dps,gy_dps,gz_dps,ax_g,ay_g,az_g"
+        );
         assert_eq!(text.iter().filter(|l| l.starts_with("time_s")).count(), 1);
         // Samples 0, 100, 300, 400 (the half one is gone): 4 rows. The second ends when the
         // half sample's 0x51 arrives; the last comes out at the end.
         assert_eq!(text.len(), 1 + 4, "{text:?}");
-        assert!(text[1].starts_with("0.000000,imu,1.000000000,"), "{}", text[1]);
+        assert!(
+            text[1].starts_with("0.000000,imu,1.000000000,"),
+            "{}",
+            text[1]
+        );
     }
 }
