@@ -516,21 +516,7 @@ fn conversion(
             quaternion_mode(input, take, settings, subject, mapping, None)?
         }
     };
-    let conversion = if settings.in_place {
-        conversion
-            .in_place()
-            .map_err(|source| ConvertError::Pipeline {
-                input: input.to_path_buf(),
-                source: source.into(),
-            })?
-    } else {
-        conversion
-    };
-    Ok(if settings.bind_frame {
-        conversion.with_bind_frame()
-    } else {
-        conversion
-    })
+    conversion.with_output_transforms(input, settings)
 }
 
 /// Is `input` a BVH take (`--input-format bvh`, else a file whose content is BVH)?
@@ -697,19 +683,7 @@ impl Motion {
             vendor_contacts: None,
             warnings,
         };
-        let conversion = if settings.in_place {
-            conversion.in_place().map_err(|e| ConvertError::Motion {
-                input: input.to_path_buf(),
-                reason: format!("--in-place: {e}"),
-            })?
-        } else {
-            conversion
-        };
-        Ok(if settings.bind_frame {
-            conversion.with_bind_frame()
-        } else {
-            conversion
-        })
+        conversion.with_output_transforms(input, settings)
     }
 }
 
@@ -804,6 +778,27 @@ struct Conversion {
 }
 
 impl Conversion {
+    /// `--in-place`, then `--bind-frame`, as the settings ask.
+    fn with_output_transforms(
+        self,
+        input: &Path,
+        settings: &ConvertSettings,
+    ) -> Result<Conversion, ConvertError> {
+        let conversion = if settings.in_place {
+            self.in_place().map_err(|source| ConvertError::Pipeline {
+                input: input.to_path_buf(),
+                source: source.into(),
+            })?
+        } else {
+            self
+        };
+        Ok(if settings.bind_frame {
+            conversion.with_bind_frame()
+        } else {
+            conversion
+        })
+    }
+
     /// `--in-place` ([`Animation::in_place`]): a `root` joint at floor level carries the hips'
     /// horizontal motion; the BVH channels (a zero row for the new joint in paper 002's mode)
     /// and the report's unsmoothed rotations get the new joint.
