@@ -5,23 +5,12 @@
 
 mod common;
 
-use common::{imubake_bin, python, repo_file, shared};
+use common::{imubake_bin, python, repo_file, run, shared};
 use imubake::intrinsics::SensorCalibration;
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Output};
-
-fn run(cmd: &mut Command) -> Output {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd:?}\n{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
 
 fn matrix(v: &Value) -> Matrix3<f64> {
     Matrix3::from_fn(|r, c| v[r][c].as_f64().unwrap())
