@@ -111,14 +111,14 @@ struct Foot {
 /// The foot joints of a rig, found by name: `LeftFoot`/`RightFoot` (any prefix such as
 /// `mixamorig:`), `l_foot`, `LeftAnkle`, `lFoot`, … Returns `[left, right]`.
 pub fn foot_joints(rig: &Rig) -> Option<[usize; 2]> {
+    foot_names(rig.joints().iter().map(|j| j.name.as_str()))
+}
+
+/// [`foot_joints`] among joint names in order (a skeleton that is not a rig: a GLB's skin).
+pub fn foot_names<'a>(names: impl Iterator<Item = &'a str> + Clone) -> Option<[usize; 2]> {
     let find = |side: char| {
-        rig.joints().iter().position(|j| {
-            let name = j
-                .name
-                .rsplit(':')
-                .next()
-                .unwrap_or(&j.name)
-                .to_ascii_lowercase();
+        names.clone().position(|j| {
+            let name = j.rsplit(':').next().unwrap_or(j).to_ascii_lowercase();
             let name = name.replace(['_', ' ', '.'], "");
             let sided = match side {
                 'l' => name

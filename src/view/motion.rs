@@ -455,21 +455,6 @@ fn glb_timing(bytes: &[u8]) -> Result<(Fps, usize, Vec<String>), String> {
 
 /// The feet among joint names, as [`crate::pipeline::root::foot_joints`] finds them on a rig.
 fn foot_names(joints: &[String]) -> Option<[String; 2]> {
-    let rig = Rig::new(
-        "glb",
-        LengthUnit::Metres,
-        joints
-            .iter()
-            .enumerate()
-            .map(|(i, name)| crate::rig::Joint {
-                name: name.clone(),
-                parent: i.checked_sub(1).map(|_| 0),
-                offset: nalgebra::Vector3::zeros(),
-                order: crate::rotation::EulerOrder::ZXY,
-                end_site: None,
-            })
-            .collect(),
-    )
-    .ok()?;
-    skeleton(&rig).1
+    crate::pipeline::root::foot_names(joints.iter().map(String::as_str))
+        .map(|[l, r]| [joints[l].clone(), joints[r].clone()])
 }
