@@ -28,6 +28,7 @@ use crate::anim::{Animation, AnimationError};
 use crate::bvh::Bvh;
 use crate::fps::Fps;
 use crate::rig::Rig;
+use crate::rotation::quat::slerp_shortest;
 use nalgebra::{UnitQuaternion, Vector3};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -275,9 +276,7 @@ pub fn retarget(
         for (j, bone) in bones.iter().enumerate() {
             let parent = bone.parent.map_or(UnitQuaternion::identity(), |p| w[p]);
             w[j] = match source_of[j] {
-                Some(m) => change[i][m]
-                    .try_slerp(&change[i1][m], a, 1e-12)
-                    .unwrap_or(change[i][m]),
+                Some(m) => slerp_shortest(&change[i][m], &change[i1][m], a),
                 None => parent,
             };
             local[j].push(parent.inverse() * w[j]);
@@ -401,10 +400,11 @@ pub fn mvnx_animation(
             0.0
         };
         for (j, &(k, parent)) in kept.iter().enumerate() {
-            let q0 = segments.orientations[i][k];
-            let q = q0
-                .try_slerp(&segments.orientations[i1][k], s, 1e-12)
-                .unwrap_or(q0);
+            let q = slerp_shortest(
+                &segments.orientations[i][k],
+                &segments.orientations[i1][k],
+                s,
+            );
             w[j] = a * q * a.inverse();
             let parent = parent.map_or(UnitQuaternion::identity(), |p| w[p]);
             local[j].push(parent.inverse() * w[j]);
