@@ -243,6 +243,15 @@ pub fn run(
         }
         None => None,
     };
+    // Each frame out: the VMC bundle and the browser preview, as asked.
+    let send_out = |pose: &Pose| {
+        if let Some((socket, skeleton)) = &vmc_out {
+            let _ = socket.send(&skeleton.frame(pose, &rig));
+        }
+        if let Some(preview) = &settings.preview {
+            preview.pose(pose);
+        }
+    };
     let clock = settings.clock.unwrap_or(if settings.sources.len() > 1 {
         Clock::Host
     } else {
@@ -452,12 +461,7 @@ pub fn run(
                             .map_err(|e| LiveError::Stream(e.to_string()))?;
                         feed(run, &mut samples, &mut per_sensor, &mut |pose: &Pose| {
                             frames += 1;
-                            if let Some((socket, skeleton)) = &vmc_out {
-                                let _ = socket.send(&skeleton.frame(pose, &rig));
-                            }
-                            if let Some(preview) = &settings.preview {
-                                preview.pose(pose);
-                            }
+                            send_out(pose);
                             latencies.push(at.elapsed().as_secs_f64() * 1e3);
                         });
                     }
@@ -572,12 +576,7 @@ pub fn run(
     if let Some(run) = &mut running {
         let mut send = |pose: &Pose| {
             frames += 1;
-            if let Some((socket, skeleton)) = &vmc_out {
-                let _ = socket.send(&skeleton.frame(pose, &rig));
-            }
-            if let Some(preview) = &settings.preview {
-                preview.pose(pose);
-            }
+            send_out(pose);
         };
         let _ = run.lines.finish(&mut samples);
         feed(run, &mut samples, &mut per_sensor, &mut send);
