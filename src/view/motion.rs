@@ -295,24 +295,20 @@ impl ViewTake {
     pub fn chunk_glb(&self, k: usize) -> Option<Result<Vec<u8>, ViewError>> {
         let (start, end) = self.chunk_window(k)?;
         let fail = |reason: String| ViewError::Chunk { chunk: k, reason };
-        Some(match &self.motion {
-            Motion::Glb(bytes) => Ok(bytes.clone()),
+        let window = match &self.motion {
+            Motion::Glb(bytes) => return Some(Ok(bytes.clone())),
             Motion::Animation(anim) => anim
                 .window(start, end)
-                .ok_or_else(|| fail("outside the take".into()))
-                .and_then(|w| {
-                    crate::write::gltf::to_glb_from(&w, &self.name, start as u64)
-                        .map_err(|e| fail(e.to_string()))
-                }),
+                .ok_or_else(|| fail("outside the take".into())),
             Motion::Bvh { bvh, units } => {
                 Animation::from_bvh_window(bvh, &self.name, *units, self.fps, start..=end)
                     .map_err(|e| fail(e.to_string()))
-                    .and_then(|w| {
-                        crate::write::gltf::to_glb_from(&w, &self.name, start as u64)
-                            .map_err(|e| fail(e.to_string()))
-                    })
             }
-        })
+        };
+        Some(window.and_then(|w| {
+            crate::write::gltf::to_glb_from(&w, &self.name, start as u64)
+                .map_err(|e| fail(e.to_string()))
+        }))
     }
 
     /// `/take.json`.
