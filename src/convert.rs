@@ -866,18 +866,8 @@ fn vendor_contacts_record(
             None => [false; 2],
         })
         .collect();
-    let runs = |side: usize| {
-        let mut out: Vec<[usize; 2]> = Vec::new();
-        for (n, p) in planted.iter().enumerate() {
-            if p[side] {
-                match out.last_mut() {
-                    Some(last) if last[1] + 1 == n => last[1] = n,
-                    _ => out.push([n, n]),
-                }
-            }
-        }
-        out
-    };
+    // Every run, however short: the system's own contacts, as it gave them.
+    let runs = |side: usize| pipeline::root::runs(planted.iter().map(|p| p[side]), 1);
     crate::write::sidecar::VendorContactsRecord {
         vendor: v.vendor,
         left: runs(0),

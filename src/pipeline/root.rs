@@ -471,6 +471,11 @@ impl RootCore {
 
 /// Frame ranges `[start, end]` (inclusive) where `flags` holds for at least [`MIN_FRAMES`].
 pub fn intervals(flags: impl Iterator<Item = bool>) -> Vec<[usize; 2]> {
+    runs(flags, MIN_FRAMES)
+}
+
+/// Frame ranges `[start, end]` (inclusive) where `flags` holds for at least `min_frames`.
+pub fn runs(flags: impl Iterator<Item = bool>, min_frames: usize) -> Vec<[usize; 2]> {
     let mut out = Vec::new();
     let mut start = None;
     let mut n = 0;
@@ -479,7 +484,7 @@ pub fn intervals(flags: impl Iterator<Item = bool>) -> Vec<[usize; 2]> {
         match (f, start) {
             (true, None) => start = Some(i),
             (false, Some(s)) => {
-                if i - s >= MIN_FRAMES {
+                if i - s >= min_frames {
                     out.push([s, i - 1]);
                 }
                 start = None;
@@ -488,7 +493,7 @@ pub fn intervals(flags: impl Iterator<Item = bool>) -> Vec<[usize; 2]> {
         }
     }
     if let Some(s) = start
-        && n - s >= MIN_FRAMES
+        && n - s >= min_frames
     {
         out.push([s, n - 1]);
     }
