@@ -3,10 +3,11 @@
 //! [`write_bvh_scaled`] for the exact layout, the End Sites it adds and the checks it makes, and
 //! [`write_bvh_in`] for writing another unit (`--units cm`: lengths × 100 from a metre rig).
 
+use super::decimal::push_fixed6;
 use crate::fps::Fps;
 use crate::rig::{LengthUnit, Rig};
 use nalgebra::Vector3;
-use std::fmt::Write as _;
+use rayon::prelude::*;
 use std::io::{self, BufWriter, Write};
 
 /// Motion to write: a rig, a frame rate, and per frame the root position and every joint's
@@ -115,8 +116,8 @@ pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io:
     }
 
     let mut out = BufWriter::new(out);
-    let mut buf = String::with_capacity(256);
-    buf.push_str("HIERARCHY\n");
+    let mut buf = Vec::with_capacity(256);
+    buf.extend_from_slice(b"HIERARCHY\n");
 
     // Depth-first: an explicit stack of (joint, depth, entered).
     let mut order: Vec<usize> = Vec::with_capacity(joints.len());
@@ -126,78 +127,112 @@ pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io:
         if entered {
             if let Some(end) = end_site(rig, j, &children[j]) {
                 indent(&mut buf, depth + 1);
-                buf.push_str("End Site\n");
+                buf.extend_from_slice(b"End Site\n");
                 indent(&mut buf, depth + 1);
-                buf.push_str("{\n");
+                buf.extend_from_slice(b"{\n");
                 indent(&mut buf, depth + 2);
-                buf.push_str("OFFSET");
+                buf.extend_from_slice(b"OFFSET");
                 push_vector(&mut buf, &(end * scale));
-                buf.push('\n');
+                buf.push(b'\n');
                 indent(&mut buf, depth + 1);
-                buf.push_str("}\n");
+                buf.extend_from_slice(b"}\n");
             }
             indent(&mut buf, depth);
-            buf.push_str("}\n");
-            out.write_all(buf.as_bytes())?;
+            buf.extend_from_slice(b"}\n");
+            out.write_all(&buf)?;
             buf.clear();
             continue;
         }
         order.push(j);
         indent(&mut buf, depth);
-        buf.push_str(if j == 0 { "ROOT " } else { "JOINT " });
-        buf.push_str(&joint.name);
-        buf.push('\n');
+        buf.extend_from_slice(if j == 0 { b"ROOT " } else { b"JOINT " });
+        buf.extend_from_slice(joint.name.as_bytes());
+        buf.push(b'\n');
         indent(&mut buf, depth);
-        buf.push_str("{\n");
+        buf.extend_from_slice(b"{\n");
         indent(&mut buf, depth + 1);
-        buf.push_str("OFFSET");
+        buf.extend_from_slice(b"OFFSET");
         push_vector(&mut buf, &(joint.offset * scale));
-        buf.push('\n');
+        buf.push(b'\n');
         indent(&mut buf, depth + 1);
         if j == 0 || motion.translations.iter().any(|(t, _)| *t == j) {
-            buf.push_str("CHANNELS 6 Xposition Yposition Zposition");
+            buf.extend_from_slice(b"CHANNELS 6 Xposition Yposition Zposition");
         } else {
-            buf.push_str("CHANNELS 3");
+            buf.extend_from_slice(b"CHANNELS 3");
         }
         for c in joint.order.bvh_channels() {
-            buf.push(' ');
-            buf.push_str(c);
+            buf.push(b' ');
+            buf.extend_from_slice(c.as_bytes());
         }
-        buf.push('\n');
+        buf.push(b'\n');
         stack.push((j, depth, true));
         for &c in children[j].iter().rev() {
             stack.push((c, depth + 1, false));
         }
-        out.write_all(buf.as_bytes())?;
+        out.write_all(&buf)?;
         buf.clear();
     }
 
-    let _ = writeln!(
+    writeln!(
         buf,
         "MOTION\nFrames: {frames}\nFrame Time: {}",
         motion.fps.frame_time_s()
-    );
-    out.write_all(buf.as_bytes())?;
+    )?;
+    out.write_all(&buf)?;
     buf.clear();
 
-    for f in 0..frames {
-        push_vector(&mut buf, &(motion.root_positions[f] * scale));
-        for &j in &order {
-            if let Some((_, t)) = motion.translations.iter().find(|(t, _)| *t == j && j != 0) {
-                push_vector(&mut buf, &(t[f] * scale));
+    // The motion lines, formatted in blocks of frames on every core and written in order.
+    let translations: Vec<Option<&[Vector3<f64>]>> = order
+        .iter()
+        .map(|&j| {
+            motion
+                .translations
+                .iter()
+                .find(|(t, _)| *t == j && j != 0)
+                .map(|(_, t)| t.as_slice())
+        })
+        .collect();
+    let lines = |frames: std::ops::Range<usize>| {
+        let mut text = Vec::with_capacity(frames.len() * (order.len() * 30 + 32));
+        for f in frames {
+            // The root's position first, the line starting with its number.
+            let root = motion.root_positions[f] * scale;
+            push_fixed6(&mut text, root.x);
+            for x in [root.y, root.z] {
+                text.push(b' ');
+                push_fixed6(&mut text, x);
             }
-            for a in motion.euler_deg[j][f] {
-                buf.push(' ');
-                push_number(&mut buf, a);
+            for (&j, translation) in order.iter().zip(&translations) {
+                if let Some(t) = translation {
+                    push_vector(&mut text, &(t[f] * scale));
+                }
+                for a in motion.euler_deg[j][f] {
+                    text.push(b' ');
+                    push_fixed6(&mut text, a);
+                }
             }
+            text.push(b'\n');
         }
-        buf.push('\n');
-        // `push_vector` starts with a space; drop it so lines start with a number.
-        out.write_all(&buf.as_bytes()[1..])?;
-        buf.clear();
+        text
+    };
+    let group = BLOCK_FRAMES * 2 * rayon::current_num_threads();
+    for start in (0..frames).step_by(group) {
+        let end = (start + group).min(frames);
+        let blocks: Vec<Vec<u8>> = (start..end)
+            .step_by(BLOCK_FRAMES)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|b| lines(b..(b + BLOCK_FRAMES).min(end)))
+            .collect();
+        for block in blocks {
+            out.write_all(&block)?;
+        }
     }
     out.flush()
 }
+
+/// Frames formatted together: big enough to keep a core busy, small enough to stay in cache.
+const BLOCK_FRAMES: usize = 256;
 
 fn validate(motion: &BvhMotion, scale: f64) -> io::Result<()> {
     let rig = motion.rig;
@@ -287,25 +322,17 @@ fn end_site(rig: &Rig, j: usize, children: &[usize]) -> Option<Vector3<f64>> {
     Some(Vector3::new(0.0, 0.1 / rig.units().metres_per_unit(), 0.0))
 }
 
-fn indent(buf: &mut String, depth: usize) {
+fn indent(buf: &mut Vec<u8>, depth: usize) {
     for _ in 0..depth {
-        buf.push('\t');
+        buf.push(b'\t');
     }
 }
 
-/// ` x y z` (each preceded by a space).
-fn push_vector(buf: &mut String, v: &Vector3<f64>) {
+/// ` x y z` (each preceded by a space), six decimals; a value that rounds to zero is written as
+/// `0.000000` whatever its sign ([`push_fixed6`]).
+fn push_vector(buf: &mut Vec<u8>, v: &Vector3<f64>) {
     for x in v.iter() {
-        buf.push(' ');
-        push_number(buf, *x);
-    }
-}
-
-/// A number with 6 decimals; negative zero is written as `0.000000`.
-fn push_number(buf: &mut String, v: f64) {
-    let start = buf.len();
-    let _ = write!(buf, "{v:.6}");
-    if buf[start..] == *"-0.000000" {
-        buf.remove(start);
+        buf.push(b' ');
+        push_fixed6(buf, *x);
     }
 }

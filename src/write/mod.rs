@@ -3,6 +3,7 @@
 //! in the same folder, renamed into place).
 
 pub mod bvh;
+pub mod decimal;
 pub mod error_report;
 pub mod gltf;
 pub mod orientation_csv;
