@@ -26,7 +26,8 @@ const FAST_LIMIT: f64 = (1u64 << 40) as f64;
 /// Appends `v` with exactly six decimals (see the module documentation).
 #[inline]
 pub fn push_fixed6(out: &mut Vec<u8>, v: f64) {
-    if !(v.abs() < FAST_LIMIT) {
+    // NaN fails the comparison too.
+    if v.is_nan() || v.abs() >= FAST_LIMIT {
         return push_slow(out, v);
     }
     let bits = v.to_bits();
