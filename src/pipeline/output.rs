@@ -6,14 +6,16 @@
 
 use crate::anim::Animation;
 use crate::rotation::euler::filter_track;
+use rayon::prelude::*;
 
 /// Euler angles in degrees, `[joint][frame]`, each joint in its own channel order, with the
 /// discontinuity filter applied.
 pub fn euler_degrees(animation: &Animation) -> Vec<Vec<[f64; 3]>> {
+    // Joints are independent: one per core at a time.
     animation
         .rig()
         .joints()
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(j, joint)| {
             filter_track(animation.local(j), joint.order)

@@ -83,7 +83,7 @@ pub fn to_quaternion(angles: [f64; 3], order: EulerOrder) -> UnitQuaternion<f64>
 ///
 /// This is Blender's first solution `eul1`; it never returns NaN for a finite quaternion.
 pub fn from_quaternion(q: &UnitQuaternion<f64>, order: EulerOrder) -> [f64; 3] {
-    two_solutions(q, order).0
+    Solutions::of(q, order).principal()
 }
 
 /// What `mathutils.Quaternion.to_euler(blender_order)` returns (without `euler_compat`): of the
@@ -103,13 +103,31 @@ pub fn from_quaternion_blender(q: &UnitQuaternion<f64>, order: EulerOrder) -> [f
 ///
 /// A non-finite `previous` (which Blender would turn into garbage) gives [`from_quaternion`].
 pub fn compatible(q: &UnitQuaternion<f64>, order: EulerOrder, previous: [f64; 3]) -> [f64; 3] {
-    let (mut e1, mut e2) = two_solutions(q, order);
+    let solutions = Solutions::of(q, order);
+    let principal = solutions.principal();
+    let mut e1 = principal;
     if !previous.iter().all(|v| v.is_finite()) {
         return e1;
     }
     compatible_eul(&mut e1, &previous);
-    compatible_eul(&mut e2, &previous);
     let d1 = l1_distance(&e1, &previous);
+    if solutions.locked() {
+        // Both solutions are e1: a tie, which e1 wins.
+        return e1;
+    }
+    // The second solution's distance is known to within rounding from e1 alone (it is
+    // (a + π, π − b, c + π), and compatible_eul leaves each angle at its circular distance): its
+    // three atan2 are computed only when it may win. The margin is ~10⁶ times the rounding.
+    let [a, b, c] = principal;
+    let d2_estimate = circular_distance(a + PI, previous[0])
+        + circular_distance(PI - b, previous[1])
+        + circular_distance(c + PI, previous[2]);
+    const MARGIN: f64 = 1e-9;
+    if d1 + MARGIN < d2_estimate {
+        return e1;
+    }
+    let mut e2 = solutions.second();
+    compatible_eul(&mut e2, &previous);
     let d2 = l1_distance(&e2, &previous);
     if d1 > d2 { e2 } else { e1 }
 }
@@ -165,42 +183,96 @@ pub fn to_blender_xyz(angles: [f64; 3], order: EulerOrder) -> [f64; 3] {
 
 /// Blender's `mat3_normalized_to_eulo2`, in application order: (principal, second solution).
 fn two_solutions(q: &UnitQuaternion<f64>, order: EulerOrder) -> ([f64; 3], [f64; 3]) {
-    let m: Matrix3<f64> = q.to_rotation_matrix().into_inner();
-    let axes = order.axes();
-    // Blender's (i, j, k) are its own order string's axes, i.e. ours reversed.
-    let (i, j, k) = (axes[2], axes[1], axes[0]);
-    // Odd permutations of (x, y, z) (Blender's `parity`) negate all angles.
-    let parity_odd = j != (i + 1) % 3;
-    // Blender's column-major `mat[c][r]` is `m[(r, c)]`; `r(a, b)` reads Blender's `mat[a][b]`.
-    let r = |a: usize, b: usize| m[(b, a)];
+    let s = Solutions::of(q, order);
+    (s.principal(), s.second())
+}
 
-    let cy = r(i, i).hypot(r(i, j));
-    let mut e1 = [0.0; 3];
-    let mut e2 = [0.0; 3];
-    if cy > GIMBAL_LOCK_EPSILON {
-        e1[i] = r(j, k).atan2(r(k, k));
-        e1[j] = (-r(i, k)).atan2(cy);
-        e1[k] = r(i, j).atan2(r(i, i));
+/// The rotation matrix entries and axes that both of Blender's solutions are computed from, so
+/// that each is computed only when it is needed (three `atan2` each).
+struct Solutions {
+    order: EulerOrder,
+    m: Matrix3<f64>,
+    /// Blender's axis triple: its own order string's axes, i.e. ours reversed.
+    ijk: (usize, usize, usize),
+    /// `cos(middle angle)`.
+    cy: f64,
+}
 
-        e2[i] = (-r(j, k)).atan2(-r(k, k));
-        e2[j] = (-r(i, k)).atan2(-cy);
-        e2[k] = (-r(i, j)).atan2(-r(i, i));
-    } else {
-        e1[i] = (-r(k, j)).atan2(r(j, j));
-        e1[j] = (-r(i, k)).atan2(cy);
-        e1[k] = 0.0;
-        e2 = e1;
+impl Solutions {
+    fn of(q: &UnitQuaternion<f64>, order: EulerOrder) -> Solutions {
+        let m: Matrix3<f64> = q.to_rotation_matrix().into_inner();
+        let axes = order.axes();
+        let (i, j, k) = (axes[2], axes[1], axes[0]);
+        let mut s = Solutions {
+            order,
+            m,
+            ijk: (i, j, k),
+            cy: 0.0,
+        };
+        s.cy = s.r(i, i).hypot(s.r(i, j));
+        s
     }
-    for v in e1.iter_mut().chain(e2.iter_mut()) {
-        if parity_odd {
-            *v = -*v;
+
+    /// Blender's column-major `mat[a][b]` is `m[(b, a)]`.
+    #[inline]
+    fn r(&self, a: usize, b: usize) -> f64 {
+        self.m[(b, a)]
+    }
+
+    /// At gimbal lock both solutions are the same.
+    fn locked(&self) -> bool {
+        self.cy <= GIMBAL_LOCK_EPSILON
+    }
+
+    /// Blender's `eul1`.
+    fn principal(&self) -> [f64; 3] {
+        let (i, j, k) = self.ijk;
+        let mut e = [0.0; 3];
+        if !self.locked() {
+            e[i] = self.r(j, k).atan2(self.r(k, k));
+            e[j] = (-self.r(i, k)).atan2(self.cy);
+            e[k] = self.r(i, j).atan2(self.r(i, i));
+        } else {
+            e[i] = (-self.r(k, j)).atan2(self.r(j, j));
+            e[j] = (-self.r(i, k)).atan2(self.cy);
+            e[k] = 0.0;
         }
-        // atan2(-0.0, -1.0) is -π and negation turns π into -π: report +π so that the
-        // principal range is (-π, π] whatever the sign of a zero; and no -0.0 in outputs.
-        *v = if *v == -PI { PI } else { *v + 0.0 };
+        self.finish(e)
     }
-    // Per-axis (x, y, z) storage → application order.
-    (from_blender_xyz(e1, order), from_blender_xyz(e2, order))
+
+    /// Blender's `eul2`: the same rotation as `(a + π, π − b, c + π)` (application order).
+    fn second(&self) -> [f64; 3] {
+        if self.locked() {
+            return self.principal();
+        }
+        let (i, j, k) = self.ijk;
+        let mut e = [0.0; 3];
+        e[i] = (-self.r(j, k)).atan2(-self.r(k, k));
+        e[j] = (-self.r(i, k)).atan2(-self.cy);
+        e[k] = (-self.r(i, j)).atan2(-self.r(i, i));
+        self.finish(e)
+    }
+
+    /// Per-axis angles → application order, negated for odd permutations (Blender's `parity`).
+    fn finish(&self, mut e: [f64; 3]) -> [f64; 3] {
+        let (i, j, _) = self.ijk;
+        let parity_odd = j != (i + 1) % 3;
+        for v in &mut e {
+            if parity_odd {
+                *v = -*v;
+            }
+            // atan2(-0.0, -1.0) is -π and negation turns π into -π: report +π so that the
+            // principal range is (-π, π] whatever the sign of a zero; and no -0.0 in outputs.
+            *v = if *v == -PI { PI } else { *v + 0.0 };
+        }
+        from_blender_xyz(e, self.order)
+    }
+}
+
+/// The distance from `a` to the nearest angle equal to `b` modulo 2π, in [0, π]: what
+/// [`compatible_eul`] leaves between an angle and the previous one, up to rounding.
+fn circular_distance(a: f64, b: f64) -> f64 {
+    ((a - b + PI).rem_euclid(TAU) - PI).abs()
 }
 
 /// Blender's `compatible_eul`: shift each angle by multiples of 2π towards `old`, then the
@@ -547,6 +619,34 @@ mod tests {
                     }
                 }
             }
+        }
+
+        /// Computing the second solution only when it may win changes nothing: the same answer,
+        /// bit for bit, as computing both always (Blender's way), for any previous angles and
+        /// for previous angles almost equally far from both solutions (the ties).
+        #[test]
+        fn compatible_equals_both_solutions_computed(
+            q in quat_strategy(),
+            order in order_strategy(),
+            previous in prop::array::uniform3(-20.0f64..20.0),
+            blend in 0.0f64..1.0,
+            nudge in prop::array::uniform3(-1e-12f64..1e-12),
+        ) {
+            let both = |previous: [f64; 3]| {
+                let (mut e1, mut e2) = two_solutions(&q, order);
+                compatible_eul(&mut e1, &previous);
+                compatible_eul(&mut e2, &previous);
+                if l1_distance(&e1, &previous) > l1_distance(&e2, &previous) { e2 } else { e1 }
+            };
+            let bits = |e: [f64; 3]| e.map(f64::to_bits);
+            prop_assert_eq!(bits(compatible(&q, order, previous)), bits(both(previous)));
+            // Between the two solutions' representations nearest to each other.
+            let (e1, e2) = two_solutions(&q, order);
+            let tie: [f64; 3] = std::array::from_fn(|n| {
+                let e2n = e1[n] + (e2[n] - e1[n] + PI).rem_euclid(TAU) - PI;
+                e1[n] + blend * (e2n - e1[n]) + nudge[n]
+            });
+            prop_assert_eq!(bits(compatible(&q, order, tie)), bits(both(tie)));
         }
 
         /// Smooth input away from gimbal lock: no Euler jump larger than the rotation step times
