@@ -172,3 +172,80 @@ fn empty_binary_and_header_only_inputs() {
         "{msg}"
     );
 }
+
+/// A log much longer than the reader's blocks (parsed on every core, merged in file order), with
+/// damage spread through it: every report names the line where the damage was written, with its
+/// reason and text, in line order; late rows are sorted into place; a recalibration comment deep
+/// in the file is kept. The expected lines are those the generator wrote the damage on.
+#[test]
+fn damage_far_into_a_long_log_is_reported_at_its_own_lines() {
+    use std::fmt::Write as _;
+    let mut text = String::from("# world: enu\ntime_s,sensor,qw,qx,qy,qz\n");
+    let mut line = 2u64;
+    let (mut dropped, mut repaired) = (Vec::new(), Vec::new());
+    let mut calibrate_at = None;
+    let rows = 120_000;
+    for i in 0..rows {
+        for sensor in ["hips", "head"] {
+            line += 1;
+            let t = i as f64 * 0.01;
+            let row = match i {
+                _ if i % 9_973 == 5 && sensor == "head" => {
+                    dropped.push((line, "column qx is not a number"));
+                    format!("{t:.4},{sensor},1,x,0,0")
+                }
+                _ if i % 15_013 == 7 && sensor == "hips" => {
+                    dropped.push((line, "expected 6 comma-separated fields"));
+                    format!("{t:.4},{sensor},1,0,0")
+                }
+                _ if i % 20_011 == 3 && sensor == "hips" => {
+                    // Written after the next row's time: late, sorted into place.
+                    repaired.push((line, "earlier than the previous sample"));
+                    format!("{:.4},{sensor},1,0,0,0", t - 0.015)
+                }
+                _ if i % 25_013 == 11 && sensor == "head" => {
+                    dropped.push((line, "repeats the time of an earlier sample"));
+                    format!("{:.4},{sensor},1,0,0,0", t - 0.01)
+                }
+                _ => format!("{t:.4},{sensor},1,0,0,0"),
+            };
+            text.push_str(&row);
+            text.push('\n');
+        }
+        if i == 70_000 {
+            line += 1;
+            calibrate_at = Some(line);
+            let _ = writeln!(text, "# calibrate t=700.5");
+        }
+    }
+    assert!(
+        text.len() > 8 * imubake::read::blocks::BLOCK_BYTES,
+        "spans many blocks"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("long.csv");
+    std::fs::write(&path, &text).unwrap();
+    let take = read_take(&path, &ReadOptions::default()).unwrap();
+    assert!(calibrate_at.is_some());
+    assert_eq!(take.recalibrations_s(), &[700.5]);
+    let check = |reports: &[imubake::take::LineReport], expected: &[(u64, &str)]| {
+        let got: Vec<u64> = reports.iter().map(|r| r.line).collect();
+        let want: Vec<u64> = expected.iter().map(|e| e.0).collect();
+        assert_eq!(got, want);
+        for (r, (line, reason)) in reports.iter().zip(expected) {
+            assert!(r.reason.starts_with(reason), "line {line}: {}", r.reason);
+            let written = text.lines().nth(*line as usize - 1).unwrap();
+            assert_eq!(r.text, written, "line {line}");
+        }
+    };
+    dropped.sort();
+    check(take.dropped_lines(), &dropped);
+    check(take.repaired_lines(), &repaired);
+    let (t, _) = quats(&take, "hips");
+    assert!(t.windows(2).all(|w| w[0] < w[1]), "sorted into place");
+    let damaged_hips = dropped
+        .iter()
+        .filter(|d| d.1.starts_with("expected"))
+        .count();
+    assert_eq!(t.len(), rows - damaged_hips);
+}

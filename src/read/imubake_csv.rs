@@ -11,6 +11,7 @@
 //! Lines starting with `#` are comments; `# world: ned` before the header declares the world
 //! (default `enu`). Blank lines are ignored.
 
+use super::blocks::{BlockError, Observed, lines_of, parse_in_blocks};
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
 use super::{InputFormat, ReadError, ReadOptions, check_text, sniff, warn_if_denormalised};
 use crate::take::{ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg};
@@ -277,27 +278,52 @@ pub fn looks_like(head: &[u8]) -> bool {
 }
 
 pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    read_observed(path, options, &mut |_| {})
+}
+
+/// [`read`], showing every byte of the file to `observe` in order as it is read (the caller's
+/// SHA-256 of the source, without a second pass over the file).
+pub fn read_observed(
+    path: &Path,
+    options: &ReadOptions,
+    observe: &mut (dyn FnMut(&[u8]) + Send),
+) -> Result<Take, ReadError> {
     check_text(path, &sniff(path)?)?;
     let file = File::open(path).map_err(|e| ReadError::io(path, e))?;
     let size_hint = file.metadata().map(|m| m.len()).unwrap_or(0);
-    read_sized(file, size_hint, path, options)
+    let source = Observed {
+        inner: file,
+        observe,
+    };
+    read_sized(source, size_hint, path, options)
 }
 
 /// Reads an imubake CSV from any reader; `path` names it in reports.
-pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+pub fn read_from(
+    reader: impl Read + Send,
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Take, ReadError> {
     read_sized(reader, 0, path, options)
 }
 
 /// Looks a sensor id up; the previous row's successor is tried first, as sensors usually take
 /// turns.
-struct SensorTable {
-    ids: Vec<(Box<[u8]>, SensorIdx)>,
+struct SensorTable<T> {
+    ids: Vec<(Box<[u8]>, T)>,
     next_guess: usize,
 }
 
-impl SensorTable {
+impl<T: Copy> SensorTable<T> {
+    fn new() -> Self {
+        SensorTable {
+            ids: Vec::new(),
+            next_guess: 0,
+        }
+    }
+
     #[inline]
-    fn find(&mut self, id: &[u8]) -> Option<SensorIdx> {
+    fn find(&mut self, id: &[u8]) -> Option<T> {
         let n = self.ids.len();
         if n == 0 {
             return None;
@@ -311,13 +337,95 @@ impl SensorTable {
         self.next_guess = pos + 1;
         Some(self.ids[pos].1)
     }
+
+    fn insert(&mut self, id: &[u8], value: T) {
+        self.ids.push((id.into(), value));
+    }
 }
 
 /// Rows read before the per-sensor capacity is estimated from the file size.
 const ROWS_BEFORE_RESERVE: u64 = 4096;
 
+/// A line of a block as a worker parsed it; `line` counts from the block's first line, `span`
+/// is the line's bytes in the block (for reports).
+enum Item {
+    Row {
+        line: u32,
+        span: (u32, u32),
+        /// Index into the block's sensor ids.
+        sensor: u32,
+        values: Values,
+    },
+    Dropped {
+        line: u32,
+        span: (u32, u32),
+        reason: String,
+    },
+    /// A `#` line: a directive or a comment, decided when merged.
+    Comment { line: u32, span: (u32, u32) },
+}
+
+/// A block's lines, parsed.
+struct ParsedBlock {
+    items: Vec<Item>,
+    /// The sensor ids named in the block, in order of first appearance.
+    ids: Vec<Box<[u8]>>,
+}
+
+/// Parses a block of whole lines (on any thread): everything about each line that does not
+/// depend on the lines before it.
+fn parse_block(layout: &Layout, block: &[u8]) -> (ParsedBlock, u64) {
+    let mut items = Vec::with_capacity(block.len() / 40);
+    let mut ids: SensorTable<u32> = SensorTable::new();
+    let mut lines = 0;
+    for (index, line) in lines_of(block) {
+        lines += 1;
+        let start = line.as_ptr() as usize - block.as_ptr() as usize;
+        let span = (start as u32, (start + line.len()) as u32);
+        let line_index = index as u32;
+        if line.trim_ascii().starts_with(b"#") {
+            items.push(Item::Comment {
+                line: line_index,
+                span,
+            });
+            continue;
+        }
+        match parse_row(layout, line) {
+            Ok(None) => {}
+            Err(reason) => items.push(Item::Dropped {
+                line: line_index,
+                span,
+                reason,
+            }),
+            Ok(Some(Row { id, values })) => {
+                let sensor = ids.find(id).unwrap_or_else(|| {
+                    let next = ids.ids.len() as u32;
+                    ids.insert(id, next);
+                    next
+                });
+                items.push(Item::Row {
+                    line: line_index,
+                    span,
+                    sensor,
+                    values,
+                });
+            }
+        }
+    }
+    let ids = ids.ids.into_iter().map(|(id, _)| id).collect();
+    (ParsedBlock { items, ids }, lines)
+}
+
+/// A block's sensor id, once looked up in the take.
+#[derive(Clone, Copy)]
+enum Known {
+    Unknown,
+    Sensor(SensorIdx),
+    NotUtf8,
+}
+
 fn read_sized(
-    reader: impl Read,
+    reader: impl Read + Send,
     size_hint: u64,
     path: &Path,
     options: &ReadOptions,
@@ -354,90 +462,129 @@ fn read_sized(
             "line {header_line}: column `{name}` is not an imubake CSV column; ignored"
         ));
     }
-    let mut sensors = SensorTable {
-        ids: Vec::new(),
-        next_guess: 0,
-    };
+    // The data lines: parsed in blocks on every core, merged here in file order, so the take's
+    // cleaning rules and line reports are exactly those of a line-by-line read. (The header
+    // comes after --skip-lines, so no data line is skipped.)
+    let mut bytes_before = lines.bytes_consumed();
+    let (reader, pending) = lines.into_pending();
+    let mut sensors: SensorTable<SensorIdx> = SensorTable::new();
     let mut rows: u64 = 0;
     let mut reserved = size_hint == 0;
     let mut worst_norm_error: f64 = 0.0;
-    while let Some((line_no, line)) = lines.next_line().map_err(|e| ReadError::lines(path, e))? {
-        if line_no <= options.skip_lines {
-            take.drop_line(line_no, "skipped by --skip-lines", line);
-            continue;
-        }
-        if let Some(comment) = line.trim_ascii().strip_prefix(b"#") {
-            match super::calibrate_directive(comment) {
-                Some(Ok(t)) => take.recalibrate_at(t),
-                Some(Err(reason)) => take.drop_line(line_no, reason, line),
-                None => {}
+    let merge = |first_line: u64, block: &[u8], parsed: ParsedBlock| -> Result<(), ReadError> {
+        let mut known = vec![Known::Unknown; parsed.ids.len()];
+        let raw = |(start, end): (u32, u32)| &block[start as usize..end as usize];
+        for item in parsed.items {
+            match item {
+                Item::Comment { line, span } => {
+                    let text = raw(span);
+                    let comment = text.trim_ascii().strip_prefix(b"#").unwrap_or_default();
+                    match super::calibrate_directive(comment) {
+                        Some(Ok(t)) => take.recalibrate_at(t),
+                        Some(Err(reason)) => {
+                            take.drop_line(first_line + u64::from(line), reason, text)
+                        }
+                        None => {}
+                    }
+                }
+                Item::Dropped { line, span, reason } => {
+                    take.drop_line(first_line + u64::from(line), reason, raw(span))
+                }
+                Item::Row {
+                    line,
+                    span,
+                    sensor,
+                    values,
+                } => {
+                    let line_no = first_line + u64::from(line);
+                    let text = raw(span);
+                    let slot = &mut known[sensor as usize];
+                    if let Known::Unknown = slot {
+                        let id = &parsed.ids[sensor as usize];
+                        *slot = match sensors.find(id) {
+                            Some(s) => Known::Sensor(s),
+                            None => match std::str::from_utf8(id) {
+                                Ok(name) => {
+                                    let idx = take.sensor(name);
+                                    sensors.insert(id, idx);
+                                    Known::Sensor(idx)
+                                }
+                                Err(_) => Known::NotUtf8,
+                            },
+                        };
+                    }
+                    let sensor = match *slot {
+                        Known::Sensor(s) => s,
+                        _ => {
+                            take.drop_line(line_no, "sensor is not UTF-8 text", text);
+                            continue;
+                        }
+                    };
+                    let Values {
+                        time,
+                        quaternion,
+                        ypr,
+                        imu,
+                        mag,
+                    } = values;
+                    let q = quaternion.map(|(q, norm)| {
+                        worst_norm_error = worst_norm_error.max((norm - 1.0).abs());
+                        q
+                    });
+                    let push = |r: Result<(), _>| r.map_err(|e| ReadError::take(path, e));
+                    if let Some(q) = q {
+                        push(take.push_quaternion(sensor, time, q, line_no, text))?;
+                    }
+                    if let Some(ypr) = ypr {
+                        push(take.push_yaw_pitch_roll(sensor, time, ypr, line_no, text))?;
+                    }
+                    if let Some(imu) = imu {
+                        push(take.push_inertial(sensor, time, imu, line_no, text))?;
+                    }
+                    if let Some(mag) = mag {
+                        push(take.push_magnetometer(sensor, time, mag, line_no, text))?;
+                    }
+                    rows += 1;
+                    if !reserved && rows == ROWS_BEFORE_RESERVE {
+                        reserved = true;
+                        let consumed = bytes_before + u64::from(span.1) + 1;
+                        let bytes_per_row = consumed as f64 / line_no as f64;
+                        let expected_rows = size_hint as f64 / bytes_per_row;
+                        let per_sensor = expected_rows / take.sensor_count() as f64 * 1.02;
+                        take.reserve_orientation(per_sensor as usize);
+                    }
+                }
             }
-            continue;
         }
-        let row = match parse_row(&layout, line) {
-            Ok(Some(row)) => row,
-            Ok(None) => continue,
-            Err(reason) => {
-                take.drop_line(line_no, reason, line);
-                continue;
-            }
-        };
-        let Row {
-            time,
-            id,
-            quaternion,
-            ypr,
-            imu,
-            mag,
-        } = row;
-        let sensor = match sensors.find(id) {
-            Some(s) => s,
-            None => {
-                let Ok(name) = std::str::from_utf8(id) else {
-                    take.drop_line(line_no, "sensor is not UTF-8 text", line);
-                    continue;
-                };
-                let idx = take.sensor(name);
-                sensors.ids.push((id.into(), idx));
-                idx
-            }
-        };
-        let q = quaternion.map(|(q, norm)| {
-            worst_norm_error = worst_norm_error.max((norm - 1.0).abs());
-            q
-        });
-        let push = |r: Result<(), _>| r.map_err(|e| ReadError::take(path, e));
-        if let Some(q) = q {
-            push(take.push_quaternion(sensor, time, q, line_no, line))?;
-        }
-        if let Some(ypr) = ypr {
-            push(take.push_yaw_pitch_roll(sensor, time, ypr, line_no, line))?;
-        }
-        if let Some(imu) = imu {
-            push(take.push_inertial(sensor, time, imu, line_no, line))?;
-        }
-        if let Some(mag) = mag {
-            push(take.push_magnetometer(sensor, time, mag, line_no, line))?;
-        }
-        rows += 1;
-        if !reserved && rows == ROWS_BEFORE_RESERVE {
-            reserved = true;
-            let bytes_per_row = lines.bytes_consumed() as f64 / line_no as f64;
-            let expected_rows = size_hint as f64 / bytes_per_row;
-            let per_sensor = expected_rows / take.sensor_count() as f64 * 1.02;
-            take.reserve_orientation(per_sensor as usize);
-        }
-    }
+        bytes_before += block.len() as u64;
+        Ok(())
+    };
+    parse_in_blocks(
+        reader,
+        pending,
+        header_line + 1,
+        |block| parse_block(&layout, block),
+        merge,
+    )
+    .map_err(|e| match e {
+        BlockError::Lines(e) => ReadError::lines(path, e),
+        BlockError::Merge(e) => e,
+    })?;
     warn_if_denormalised(&mut take, worst_norm_error, None);
     take.finish(options.skip_seconds)
         .map_err(|e| ReadError::take(path, e))
 }
 
-/// One data row's values.
+/// One data row: its sensor id and values.
 pub(crate) struct Row<'a> {
-    pub time: f64,
     /// The sensor id as written (trimmed, never empty).
     pub id: &'a [u8],
+    pub values: Values,
+}
+
+/// A data row's values.
+pub(crate) struct Values {
+    pub time: f64,
     /// The quaternion normalised, and the norm it had.
     pub quaternion: Option<(UnitQuaternion<f64>, f64)>,
     pub ypr: Option<YawPitchRollDeg>,
@@ -512,12 +659,14 @@ pub(crate) fn parse_row<'a>(layout: &Layout, line: &'a [u8]) -> Result<Option<Ro
         None => None,
     };
     Ok(Some(Row {
-        time,
         id,
-        quaternion,
-        ypr,
-        imu,
-        mag,
+        values: Values {
+            time,
+            quaternion,
+            ypr,
+            imu,
+            mag,
+        },
     }))
 }
 

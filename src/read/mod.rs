@@ -2,6 +2,7 @@
 //! [`Take`]. The format is detected from content; [`ReadOptions::format`] overrides.
 
 pub mod apdm;
+pub mod blocks;
 pub mod clock;
 pub mod imubake_csv;
 pub mod lines;

@@ -71,7 +71,7 @@ impl LineClock {
             LineFormat::ImubakeCsv => {
                 let layout = self.csv.as_ref()?;
                 let row = imubake_csv::parse_row(layout, line).ok()??;
-                Some(row.time * layout.clock.seconds_per_unit())
+                Some(row.values.time * layout.clock.seconds_per_unit())
             }
         }
     }
@@ -266,11 +266,14 @@ impl LineStream {
                 return Ok(());
             }
         };
-        let value = match (row.quaternion, row.ypr, row.imu) {
+        let value = match (row.values.quaternion, row.values.ypr, row.values.imu) {
             (Some((q, _)), _, _) => StreamValue::Quaternion(q),
             (None, Some(ypr), _) => StreamValue::YawPitchRoll(ypr),
             // Raw readings, fused by the pose stream.
-            (None, None, Some(imu)) => StreamValue::Raw { imu, mag: row.mag },
+            (None, None, Some(imu)) => StreamValue::Raw {
+                imu,
+                mag: row.values.mag,
+            },
             (None, None, None) => return Ok(()),
         };
         let take = self.take.as_mut().expect("the header set the clock");
@@ -291,7 +294,7 @@ impl LineStream {
                 s
             }
         };
-        take.push(sensor, row.time, value, line_no, line, out)
+        take.push(sensor, row.values.time, value, line_no, line, out)
             .map_err(|e| ReadError::take(&self.name, e))
     }
 

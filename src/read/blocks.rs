@@ -1,0 +1,376 @@
+//! A line-based text parsed on every core: the source is cut into blocks at line boundaries, the
+//! blocks are parsed in parallel, and their results are merged strictly in file order on the
+//! calling thread, so whatever the merge decides (a take's cleaning rules, dropped-line reports
+//! with their line numbers) is decided exactly as a line-by-line reader would.
+//!
+//! Three kinds of work overlap: one thread reads blocks (the source may be an [`Observed`] reader,
+//! which shows each read to the hasher of the sidecar's SHA-256), workers parse them, the caller
+//! merges them. At
+//! most [`IN_FLIGHT_PER_WORKER`] blocks per worker exist at once, so memory stays bounded however
+//! slow the merge is. Lines are those of [`LineReader`](super::lines::LineReader): split at `\n`,
+//! a `\r` before it removed, a last line without a newline kept, none longer than
+//! [`MAX_LINE_BYTES`].
+
+use super::lines::{LineError, MAX_LINE_BYTES};
+use std::collections::BTreeMap;
+use std::io::{self, Read};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::{Arc, Mutex};
+
+/// Bytes read per block (the last line is carried into the next block).
+pub const BLOCK_BYTES: usize = 1 << 19;
+
+/// Blocks in flight (read, being parsed, or waiting to be merged) per worker.
+const IN_FLIGHT_PER_WORKER: usize = 4;
+
+/// The lines of a block: `(index within the block, line)`, without terminators.
+pub fn lines_of(block: &[u8]) -> impl Iterator<Item = (usize, &[u8])> {
+    let mut rest = block;
+    let mut index = 0;
+    std::iter::from_fn(move || {
+        if rest.is_empty() {
+            return None;
+        }
+        let (mut line, next) = match memchr::memchr(b'\n', rest) {
+            Some(pos) => (&rest[..pos], &rest[pos + 1..]),
+            None => (rest, &rest[rest.len()..]),
+        };
+        rest = next;
+        if let [head @ .., b'\r'] = line {
+            line = head;
+        }
+        index += 1;
+        Some((index - 1, line))
+    })
+}
+
+/// A reader that shows every byte read through it to `observe`, in order.
+pub struct Observed<'a, R> {
+    pub inner: R,
+    pub observe: &'a mut (dyn FnMut(&[u8]) + Send),
+}
+
+impl<R: Read> Read for Observed<'_, R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        (self.observe)(&buf[..n]);
+        Ok(n)
+    }
+}
+
+/// A block read from the source: its bytes (whole lines) and its place in the file.
+struct Block {
+    seq: usize,
+    bytes: Vec<u8>,
+}
+
+/// What went wrong reading the source, at which block.
+enum ReadFailure {
+    Io(io::Error),
+    /// The line after the blocks sent is longer than [`MAX_LINE_BYTES`].
+    TooLong,
+}
+
+/// Parses `source` (whose first `first_line - 1` lines were already consumed; `pending` holds
+/// bytes already read from it) in blocks: `parse(block)` on any thread gives each block's result
+/// and its number of lines; `merge(first_line_number, block, result)` takes them in file order.
+///
+/// The first error of `merge` stops the reading and is returned; an I/O error or an over-long
+/// line is returned as a [`LineError`] after the blocks before it were merged.
+pub fn parse_in_blocks<R, P, E>(
+    source: R,
+    pending: Vec<u8>,
+    first_line: u64,
+    parse: impl Fn(&[u8]) -> (P, u64) + Sync,
+    mut merge: impl FnMut(u64, &[u8], P) -> Result<(), E>,
+) -> Result<(), BlockError<E>>
+where
+    R: Read + Send,
+    P: Send,
+{
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let in_flight = workers * IN_FLIGHT_PER_WORKER;
+    // Buffers go round: the reader takes one to fill, the merge gives it back. Holding one is
+    // the permit to read a block.
+    let (free_tx, free_rx) = sync_channel::<Vec<u8>>(in_flight);
+    for _ in 0..in_flight {
+        free_tx
+            .send(Vec::with_capacity(BLOCK_BYTES + BLOCK_BYTES / 4))
+            .expect("the channel has room for every buffer");
+    }
+    let (block_tx, block_rx) = sync_channel::<Block>(in_flight);
+    let block_rx = Arc::new(Mutex::new(block_rx));
+    let (done_tx, done_rx) = sync_channel::<(Block, P, u64)>(in_flight);
+
+    std::thread::scope(|scope| {
+        let reader = scope.spawn(move || read_blocks(source, pending, free_rx, block_tx));
+        for _ in 0..workers {
+            let block_rx = Arc::clone(&block_rx);
+            let done_tx = done_tx.clone();
+            let parse = &parse;
+            scope.spawn(move || {
+                loop {
+                    // The lock is held only while taking a block.
+                    let next = block_rx.lock().unwrap_or_else(|e| e.into_inner()).recv();
+                    let Ok(block) = next else { return };
+                    let (parsed, lines) = parse(&block.bytes);
+                    if done_tx.send((block, parsed, lines)).is_err() {
+                        return;
+                    }
+                }
+            });
+        }
+        drop(done_tx);
+        let merged = merge_in_order(done_rx, &free_tx, first_line, &mut merge);
+        // Whatever the merge ended with, the reader and the workers stop: without buffers to
+        // fill and with nobody to hand parsed blocks to, each returns.
+        drop(free_tx);
+        let read = reader
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        match (merged, read) {
+            (Err(MergeEnd::Merge(e)), _) => Err(BlockError::Merge(e)),
+            (Ok(_), Ok(_)) => Ok(()),
+            (Ok(next_line), Err(failure)) | (Err(MergeEnd::Gap(next_line)), Err(failure)) => {
+                Err(BlockError::Lines(match failure {
+                    ReadFailure::Io(e) => LineError::Io(e),
+                    ReadFailure::TooLong => LineError::TooLong { line: next_line },
+                }))
+            }
+            (Err(MergeEnd::Gap(_)), Ok(_)) => {
+                unreachable!("blocks are missing only after a failure")
+            }
+        }
+    })
+}
+
+/// Why [`parse_in_blocks`] failed.
+#[derive(Debug)]
+pub enum BlockError<E> {
+    Lines(LineError),
+    Merge(E),
+}
+
+enum MergeEnd<E> {
+    Merge(E),
+    /// The blocks stopped before the one expected next (the reader failed): the line it starts.
+    Gap(u64),
+}
+
+/// Merges parsed blocks in sequence order; returns the number of the line after the last merged.
+fn merge_in_order<P, E>(
+    done_rx: Receiver<(Block, P, u64)>,
+    free_tx: &SyncSender<Vec<u8>>,
+    first_line: u64,
+    merge: &mut impl FnMut(u64, &[u8], P) -> Result<(), E>,
+) -> Result<u64, MergeEnd<E>> {
+    let mut waiting: BTreeMap<usize, (Block, P, u64)> = BTreeMap::new();
+    let mut next_seq = 0;
+    let mut line = first_line;
+    for done in done_rx {
+        waiting.insert(done.0.seq, done);
+        while let Some((block, parsed, lines)) = waiting.remove(&next_seq) {
+            merge(line, &block.bytes, parsed).map_err(MergeEnd::Merge)?;
+            line += lines;
+            next_seq += 1;
+            // The reader may have stopped; then the buffer is simply dropped.
+            let _ = free_tx.try_send(block.bytes);
+        }
+    }
+    if waiting.is_empty() {
+        Ok(line)
+    } else {
+        Err(MergeEnd::Gap(line))
+    }
+}
+
+/// Lines in a block: its newlines, and one more when it does not end with one.
+pub fn count_lines(block: &[u8]) -> u64 {
+    let newlines = memchr::memchr_iter(b'\n', block).count() as u64;
+    newlines + u64::from(block.last().is_some_and(|&b| b != b'\n'))
+}
+
+/// Reads whole-line blocks into free buffers and hands them to the workers, until the end of the
+/// source, a failure, or no more buffers (the merge stopped).
+fn read_blocks<R: Read>(
+    mut source: R,
+    mut carry: Vec<u8>,
+    free_rx: Receiver<Vec<u8>>,
+    block_tx: SyncSender<Block>,
+) -> Result<(), ReadFailure> {
+    let mut seq = 0;
+    let mut eof = false;
+    while !eof {
+        let Ok(mut bytes) = free_rx.recv() else {
+            return Ok(());
+        };
+        bytes.clear();
+        bytes.append(&mut carry);
+        // Where the line being read starts: after the last newline so far.
+        let mut line_start = memchr::memrchr(b'\n', &bytes).map_or(0, |p| p + 1);
+        let cut = loop {
+            if bytes.len() >= BLOCK_BYTES && line_start > 0 {
+                break line_start;
+            }
+            let start = bytes.len();
+            bytes.resize(start + BLOCK_BYTES / 2, 0);
+            let n = loop {
+                match source.read(&mut bytes[start..]) {
+                    Ok(n) => break n,
+                    Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                    Err(e) => {
+                        bytes.truncate(line_start);
+                        send_whole_lines(bytes, &mut seq, &block_tx);
+                        return Err(ReadFailure::Io(e));
+                    }
+                }
+            };
+            bytes.truncate(start + n);
+            if n == 0 {
+                eof = true;
+                break bytes.len();
+            }
+            let new = &bytes[start..];
+            // Every line is measured as it grows: the one being read ends in the new bytes or
+            // goes on past them.
+            let grown_to = memchr::memchr(b'\n', new).map_or(n, |p| p);
+            if start - line_start + grown_to > MAX_LINE_BYTES {
+                bytes.truncate(line_start);
+                send_whole_lines(bytes, &mut seq, &block_tx);
+                return Err(ReadFailure::TooLong);
+            }
+            if let Some(p) = memchr::memrchr(b'\n', new) {
+                line_start = start + p + 1;
+            }
+        };
+        carry.extend_from_slice(&bytes[cut..]);
+        bytes.truncate(cut);
+        if bytes.is_empty() {
+            continue;
+        }
+        if block_tx.send(Block { seq, bytes }).is_err() {
+            return Ok(());
+        }
+        seq += 1;
+    }
+    Ok(())
+}
+
+/// Sends the lines before a failure, so that they are merged and the failure's line number is
+/// known.
+fn send_whole_lines(bytes: Vec<u8>, seq: &mut usize, block_tx: &SyncSender<Block>) {
+    if !bytes.is_empty() && block_tx.send(Block { seq: *seq, bytes }).is_ok() {
+        *seq += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::read::lines::LineReader;
+
+    /// Every line with its number, through the blocks, as `LineReader` numbers them.
+    fn through_blocks(data: &[u8], split: usize) -> Result<Vec<(u64, Vec<u8>)>, String> {
+        let mut out = Vec::new();
+        let mut seen = Vec::new();
+        let (head, tail) = data.split_at(split);
+        let mut observe = |b: &[u8]| seen.extend_from_slice(b);
+        let source = Observed {
+            inner: tail,
+            observe: &mut observe,
+        };
+        parse_in_blocks(
+            source,
+            head.to_vec(),
+            1,
+            |block| {
+                let lines: Vec<Vec<u8>> = lines_of(block).map(|(_, l)| l.to_vec()).collect();
+                let n = lines.len() as u64;
+                (lines, n)
+            },
+            |first, _, lines: Vec<Vec<u8>>| -> Result<(), String> {
+                for (i, l) in lines.into_iter().enumerate() {
+                    out.push((first + i as u64, l));
+                }
+                Ok(())
+            },
+        )
+        .map_err(|e| match e {
+            BlockError::Lines(e) => e.to_string(),
+            BlockError::Merge(e) => e,
+        })?;
+        assert_eq!(seen, tail, "the observer sees every byte read, in order");
+        Ok(out)
+    }
+
+    fn line_reader(data: &[u8]) -> Result<Vec<(u64, Vec<u8>)>, String> {
+        let mut r = LineReader::new(data);
+        let mut out = vec![];
+        while let Some((n, l)) = r.next_line().map_err(|e| e.to_string())? {
+            out.push((n, l.to_vec()));
+        }
+        Ok(out)
+    }
+
+    #[test]
+    fn the_same_lines_and_numbers_as_the_line_reader() {
+        let mut text = Vec::new();
+        for i in 0..200_000 {
+            match i % 7 {
+                0 => text.extend_from_slice(b"\r\n"),
+                1 => text.extend_from_slice(format!("{i},a,1.5\r\n").as_bytes()),
+                _ => text
+                    .extend_from_slice(format!("{i},sensor,{}\n", "x".repeat(i % 50)).as_bytes()),
+            }
+        }
+        text.extend_from_slice(b"last line without a newline");
+        for split in [0, 1, 17, 100_000] {
+            assert_eq!(through_blocks(&text, split), line_reader(&text));
+        }
+        assert_eq!(through_blocks(b"", 0), Ok(vec![]));
+        assert_eq!(through_blocks(b"\n\n", 0), line_reader(b"\n\n"));
+    }
+
+    #[test]
+    fn a_line_longer_than_the_limit_is_an_error_with_its_number() {
+        let lines_before = 600_000;
+        for (length, fails) in [(MAX_LINE_BYTES, false), (MAX_LINE_BYTES + 1, true)] {
+            let mut text = b"a\nb\n".repeat(lines_before / 2);
+            text.extend(std::iter::repeat_n(b'x', length));
+            text.extend_from_slice(b"\nafter\n");
+            match through_blocks(&text, 0) {
+                Ok(lines) => {
+                    assert!(!fails, "a line of {length} bytes is refused");
+                    assert_eq!(lines.len(), lines_before + 2);
+                    assert_eq!(lines[lines_before].1.len(), length);
+                }
+                Err(e) => {
+                    assert!(fails, "a line of {length} bytes is accepted: {e}");
+                    let expected = format!("line {} is longer than", lines_before + 1);
+                    assert!(e.starts_with(&expected), "{e}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_merge_error_stops_everything() {
+        let text = b"1\n".repeat(2_000_000);
+        let mut merged = 0;
+        let result = parse_in_blocks(
+            &text[..],
+            Vec::new(),
+            1,
+            |block| ((), count_lines(block)),
+            |first, _, ()| {
+                merged += 1;
+                if first > 100_000 { Err(first) } else { Ok(()) }
+            },
+        );
+        assert!(matches!(result, Err(BlockError::Merge(line)) if line > 100_000));
+        assert!(
+            merged < 20,
+            "stopped soon after the error ({merged} blocks)"
+        );
+    }
+}
