@@ -334,10 +334,10 @@ fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// Reads the take and the SHA-256 of its source. A file or folder is hashed on the second core
-/// while the first parses it, once a file has passed the text check (so a huge binary file is
-/// refused without being read); a stream (FIFO, process substitution) is read once into memory,
-/// then hashed and parsed.
+/// Reads the take and the SHA-256 of its source. An imubake CSV is hashed as it is read; another
+/// file or a folder is hashed on a second core while it is parsed, once a file has passed the
+/// text check (so a huge binary file is refused without being read); a stream (FIFO, process
+/// substitution) is read once into memory, then hashed and parsed.
 fn read_and_hash(input: &Path, options: &ReadOptions) -> Result<(Take, String), ReadError> {
     if is_stream(input) {
         let bytes = read_stream(input)?;
@@ -348,6 +348,18 @@ fn read_and_hash(input: &Path, options: &ReadOptions) -> Result<(Take, String), 
         let head = sniff(input)?;
         if !crate::read::is_binary_format(&head, options.format) {
             check_text(input, &head)?;
+        }
+        let format = match options.format {
+            Some(f) => f,
+            None => crate::read::detect_format(input)?,
+        };
+        if format == crate::read::InputFormat::ImubakeCsv {
+            // Hashed by the reader's own reading thread, block by block, in one pass.
+            let mut hasher = Sha256::new();
+            let take = crate::read::imubake_csv::read_observed(input, options, &mut |bytes| {
+                hasher.update(bytes)
+            })?;
+            return Ok((take, hex(&hasher.finalize())));
         }
     }
     let (take, sha256) = std::thread::scope(|scope| {
