@@ -28,6 +28,7 @@ use crate::write::sidecar::{
 pub use crate::write::{Output, OutputFormat};
 use crate::write::{OutputError, TakeOutputs, remove_take_outputs, write_atomic};
 use nalgebra::UnitQuaternion;
+use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 use std::io::{self, Read};
 use std::path::{Path, PathBuf};
@@ -261,12 +262,11 @@ struct TakeFacts {
 }
 
 impl TakeFacts {
-    /// Takes the take, so its samples are freed here.
-    fn of(take: Take, pipeline_warnings: &[String]) -> TakeFacts {
-        let mut warnings = take.warnings().to_vec();
-        warnings.extend(pipeline_warnings.iter().cloned());
+    /// The take's own facts; the pipeline's warnings are added after them.
+    fn of(take: &Take) -> TakeFacts {
+        let warnings = take.warnings().to_vec();
         TakeFacts {
-            sensor_summaries: SensorSummaries::of(&take),
+            sensor_summaries: SensorSummaries::of(take),
             warnings,
             dropped_lines: take.dropped_lines().to_vec(),
             repaired_lines: take.repaired_lines().to_vec(),
@@ -441,21 +441,24 @@ fn convert_unclean(
         return write_take(input, out_dir, settings, subject, source, facts, conversion);
     }
     let (take, sha256) = read_and_hash(input, &settings.read)?;
-    let mut conversion = conversion(input, &take, settings, subject)?;
-    conversion.vendor_contacts = take
-        .vendor_contacts()
+    // What the sidecar and the report keep of the take; the pipeline then consumes it, so its
+    // samples are never held twice and are freed before the outputs are built.
+    let mut facts = TakeFacts::of(&take);
+    let vendor_contacts = take.vendor_contacts().cloned();
+    let source_info = take.source().clone();
+    let mut conversion = conversion(input, take, settings, subject)?;
+    facts.warnings.extend(conversion.warnings.iter().cloned());
+    conversion.vendor_contacts = vendor_contacts
+        .as_ref()
         .map(|v| vendor_contacts_record(v, &conversion));
     let source = SourceRecord {
         path: input.to_string_lossy().into_owned(),
         sha256,
-        format: take.source().format,
+        format: source_info.format,
         world: conversion.world.0,
         world_from: conversion.world.1,
-        start_timestamp: take.source().start_timestamp.clone(),
+        start_timestamp: source_info.start_timestamp,
     };
-    // What the sidecar and the report keep of the take; its samples are freed here, before the
-    // outputs are built (which halves the peak memory of a long take).
-    let facts = TakeFacts::of(take, &conversion.warnings);
     write_take(input, out_dir, settings, subject, source, facts, conversion)
 }
 
@@ -472,7 +475,7 @@ pub fn animate(input: &Path, settings: &ConvertSettings) -> Result<Animation, Co
             .animation);
     }
     let take = read_take(input, &settings.read)?;
-    Ok(conversion(input, &take, settings, subject.as_ref())?.animation)
+    Ok(conversion(input, take, settings, subject.as_ref())?.animation)
 }
 
 /// What a stream of `settings` runs on: the rig (scaled to the subject), the quaternion mapping
@@ -505,7 +508,7 @@ pub fn stream_setup(
 /// The take converted by its mapping's mode, then `--in-place` and `--bind-frame`.
 fn conversion(
     input: &Path,
-    take: &Take,
+    take: Take,
     settings: &ConvertSettings,
     subject: Option<&Subject>,
 ) -> Result<Conversion, ConvertError> {
@@ -514,7 +517,7 @@ fn conversion(
             MappingFile::Quaternion(m) => {
                 quaternion_mode(input, take, settings, subject, m, Some(path))?
             }
-            MappingFile::Legacy(m) => legacy_mode(input, take, settings, subject, &m, path)?,
+            MappingFile::Legacy(m) => legacy_mode(input, &take, settings, subject, &m, path)?,
         },
         None => {
             // Matching sensors to bones by name needs only the names: the rig unscaled.
@@ -906,7 +909,7 @@ fn rig_for(
 /// from; `None` when the sensors drive the bones named like them).
 fn quaternion_mode(
     input: &Path,
-    take: &Take,
+    take: Take,
     settings: &ConvertSettings,
     subject: Option<&Subject>,
     mapping: Mapping,
@@ -924,10 +927,10 @@ fn quaternion_mode(
             crate::intrinsics::SensorCalibration::load(path)?,
         ));
     }
-    let (world, world_from) = resolve_world(take, settings, mapping.world);
+    let (world, world_from) = resolve_world(&take, settings, mapping.world);
     options.world = Some(world);
     let converted =
-        pipeline::run(take, &rig, &mapping, &mapping_name, &options).map_err(|source| {
+        pipeline::run_owned(take, &rig, &mapping, &mapping_name, &options).map_err(|source| {
             ConvertError::Pipeline {
                 input: input.to_path_buf(),
                 source,
@@ -1145,10 +1148,14 @@ fn write_take(
                 .unwrap_or_default(),
         }),
     };
-    let mut outputs = Vec::new();
-    for output in settings.outputs() {
-        outputs.push(output.write(out_dir, &take_outputs)?);
-    }
+    // Each output is its own file: written side by side (the BVH's formatting and the GLB's
+    // buffer share the cores), their records kept in the settings' order.
+    let written: Vec<_> = settings
+        .outputs()
+        .into_par_iter()
+        .map(|output| output.write(out_dir, &take_outputs))
+        .collect();
+    let outputs = written.into_iter().collect::<Result<Vec<_>, _>>()?;
     drop(take_outputs);
     let out_rig = animation.rig();
     let sidecar = Sidecar {

@@ -34,7 +34,7 @@ use nalgebra::UnitQuaternion;
 use resample::FrameGrid;
 use root::RootMode;
 use smoothing::smooth_track;
-use sources::Sources;
+use sources::{Sources, TakeInput};
 use std::path::Path;
 
 /// A cut of the frame range, in seconds on the take's clock (both ends inclusive).
@@ -251,28 +251,68 @@ pub fn run(
     if options.causal {
         return run_causal(take, rig, mapping, mapping_file, options);
     }
+    run_on(
+        TakeInput::Borrowed(take),
+        rig,
+        mapping,
+        mapping_file,
+        options,
+    )
+}
+
+/// [`run`] on a take the pipeline may consume: the devices' orientation tracks are moved into
+/// stage 1 instead of copied, so a long take's samples are never held twice.
+pub fn run_owned(
+    mut take: Take,
+    rig: &Rig,
+    mapping: &Mapping,
+    mapping_file: &Path,
+    options: &PipelineOptions,
+) -> Result<Converted, PipelineError> {
+    if options.causal {
+        return run_causal(&take, rig, mapping, mapping_file, options);
+    }
+    run_on(
+        TakeInput::Owned(&mut take),
+        rig,
+        mapping,
+        mapping_file,
+        options,
+    )
+}
+
+fn run_on(
+    input: TakeInput,
+    rig: &Rig,
+    mapping: &Mapping,
+    mapping_file: &Path,
+    options: &PipelineOptions,
+) -> Result<Converted, PipelineError> {
     let file = mapping_file.display().to_string();
     let mut warnings = Vec::new();
+    // What stage 1 may take away from an owned take.
+    let take_last_s = input.take().last_time_s();
+    let recalibrations_s = input.take().recalibrations_s().to_vec();
     // 1. Sources, and the calibration window they call for.
     let (world, sources, window) =
-        sources_and_window(take, rig, mapping, mapping_file, options, &mut warnings)?;
+        sources_and_window(input, rig, mapping, mapping_file, options, &mut warnings)?;
     // 2. Calibration.
     let calibration = calibrate::calibrate(
         rig,
         &sources,
         window.as_ref(),
-        take.last_time_s(),
+        take_last_s,
         &file,
         &mut warnings,
     )?;
     // A live session's recalibrations: the same pose held again, each solved on its own window
     // and applying from the window's end.
     let mut later = Vec::new();
-    for &t in take.recalibrations_s() {
+    for &t in &recalibrations_s {
         let Some(again) = window.as_ref().map(|w| w.starting_at(t)) else {
             break;
         };
-        if again.end_s() > take.last_time_s() {
+        if again.end_s() > take_last_s {
             warnings.push(format!(
                 "the recalibration at {t:.3} s ends after the take; the calibration before it stays"
             ));
@@ -282,7 +322,7 @@ pub fn run(
             rig,
             &sources,
             Some(&again),
-            take.last_time_s(),
+            take_last_s,
             &file,
             &mut warnings,
         )?;
@@ -375,7 +415,7 @@ pub fn run(
 /// Stage 1 for both modes: the devices' world (the settings', else the mapping's, else the
 /// take's), the mapped sensors' tracks, and the calibration window.
 fn sources_and_window(
-    take: &Take,
+    input: TakeInput,
     rig: &Rig,
     mapping: &Mapping,
     mapping_file: &Path,
@@ -385,9 +425,9 @@ fn sources_and_window(
     let world = options
         .world
         .or(mapping.world)
-        .unwrap_or(take.source().world);
+        .unwrap_or(input.take().source().world);
     let resolved = mapping.resolve(rig, mapping_file)?;
-    let sources = sources::orientations(take, rig, mapping, resolved, world, options, warnings)?;
+    let sources = sources::orientations(input, rig, mapping, resolved, world, options, warnings)?;
     let window = calibrate::window(mapping, &sources.sensors, warnings);
     Ok((world, sources, window))
 }
@@ -404,8 +444,14 @@ fn run_causal(
 ) -> Result<Converted, PipelineError> {
     let file = mapping_file.display().to_string();
     let mut warnings = Vec::new();
-    let (world, sources, window) =
-        sources_and_window(take, rig, mapping, mapping_file, options, &mut warnings)?;
+    let (world, sources, window) = sources_and_window(
+        TakeInput::Borrowed(take),
+        rig,
+        mapping,
+        mapping_file,
+        options,
+        &mut warnings,
+    )?;
     let t_last = sources
         .tracks
         .iter()

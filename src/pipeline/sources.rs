@@ -53,25 +53,51 @@ pub struct Sources {
 }
 
 /// What a mapped sensor's orientation will come from.
-enum Plan<'a> {
+#[derive(Clone, Copy)]
+enum Plan {
     Missing,
-    Device(&'a crate::take::OrientationTrack),
-    Fuse(&'a Sensor),
-    /// Readings that cannot give an orientation, and why.
+    /// The device's own orientations.
+    Device,
+    /// Fused from its raw readings.
+    Fuse,
     Unusable(&'static str),
 }
 
-fn plan<'a>(sensor: Option<&'a Sensor>, fusion_asked: bool) -> Plan<'a> {
+fn plan(sensor: Option<&Sensor>, fusion_asked: bool) -> Plan {
     let Some(s) = sensor else {
         return Plan::Missing;
     };
     match (s.orientation(), s.inertial()) {
-        (Some(o), None) => Plan::Device(o),
-        (Some(o), Some(_)) if !fusion_asked => Plan::Device(o),
-        (_, Some(_)) => Plan::Fuse(s),
+        (Some(_), None) => Plan::Device,
+        (Some(_), Some(_)) if !fusion_asked => Plan::Device,
+        (_, Some(_)) => Plan::Fuse,
         (None, None) => Plan::Unusable(
             "has magnetometer readings only: fusion needs its gyroscope and accelerometer",
         ),
+    }
+}
+
+/// The take the orientations come from: borrowed (the device tracks are copied) or owned by the
+/// pipeline (they are moved out, so a long take is not held twice).
+pub enum TakeInput<'a> {
+    Borrowed(&'a Take),
+    Owned(&'a mut Take),
+}
+
+impl TakeInput<'_> {
+    pub fn take(&self) -> &Take {
+        match self {
+            TakeInput::Borrowed(t) => t,
+            TakeInput::Owned(t) => t,
+        }
+    }
+
+    /// A sensor's device orientations as quaternions.
+    fn device_track(&mut self, id: &str) -> Option<Track<UnitQuaternion<f64>>> {
+        match self {
+            TakeInput::Borrowed(t) => t.sensor(id)?.orientation().map(|o| o.to_quaternions()),
+            TakeInput::Owned(t) => t.remove_orientation(id).map(|o| o.into_quaternions()),
+        }
     }
 }
 
@@ -83,7 +109,7 @@ fn plan<'a>(sensor: Option<&'a Sensor>, fusion_asked: bool) -> Plan<'a> {
 /// orientations where there are some, the default filter elsewhere: offline, or online VQF in
 /// causal mode).
 pub fn orientations(
-    take: &Take,
+    mut input: TakeInput,
     rig: &Rig,
     mapping: &Mapping,
     resolved: Vec<ResolvedSensor>,
@@ -92,8 +118,6 @@ pub fn orientations(
     warnings: &mut Vec<String>,
 ) -> Result<Sources, PipelineError> {
     let (fusion, causal) = (options.fusion.as_ref(), options.causal);
-    // A whole take gets the offline fusion by default; causal mode (a stream's view) cannot look
-    // ahead, so it runs the online counterpart of whatever was asked for.
     let filter = match (fusion, causal) {
         (None, false) => Fusion::default(),
         (None, true) => Fusion::online_default(),
@@ -111,7 +135,7 @@ pub fn orientations(
     let mut kept = Vec::new();
     for s in resolved {
         let bone = &rig.joints()[s.bone].name;
-        match plan(take.sensor(&s.sensor), fusion.is_some()) {
+        match plan(input.take().sensor(&s.sensor), fusion.is_some()) {
             Plan::Missing => warnings.push(format!(
                 "sensor `{}` (mapped to `{bone}`) is not in the take; `{bone}` keeps its rest rotation",
                 s.sensor
@@ -123,15 +147,29 @@ pub fn orientations(
             plan => kept.push((s, plan)),
         }
     }
-    // Fusion is the costly part, and each sensor's is independent: spread over the cores.
-    let results = parallel_map(kept, |(s, plan)| {
-        let result = match plan {
-            Plan::Device(o) => Ok((
-                o.to_quaternions().map_in_place(|q| world.to_rig() * q),
+    // Device tracks first (moved out of an owned take), then everything in parallel.
+    let kept: Vec<_> = kept
+        .into_iter()
+        .map(|(s, plan)| {
+            let device = match plan {
+                Plan::Device => input.device_track(&s.sensor),
+                _ => None,
+            };
+            (s, plan, device)
+        })
+        .collect();
+    let take = input.take();
+    let results = parallel_map(kept, |(s, plan, device)| {
+        let result = match (plan, device) {
+            (Plan::Device, Some(track)) => Ok((
+                track.map_in_place(|q| world.to_rig() * q),
                 Origin::Device { world },
                 Vec::new(),
             )),
-            Plan::Fuse(sensor) => {
+            (Plan::Fuse, _) => {
+                let sensor = take
+                    .sensor(&s.sensor)
+                    .expect("planned for a sensor of the take");
                 let prepared = crate::intrinsics::prepare(
                     sensor.id(),
                     sensor.inertial().expect("planned for raw readings"),
@@ -183,7 +221,7 @@ pub fn orientations(
                     )
                 })
             }
-            Plan::Missing | Plan::Unusable(_) => unreachable!("filtered out above"),
+            _ => unreachable!("missing and unusable sensors were filtered out above"),
         };
         (s, result)
     });
@@ -267,7 +305,7 @@ mod tests {
             .unwrap();
         let mut warnings = Vec::new();
         let sources = orientations(
-            &take,
+            TakeInput::Borrowed(&take),
             &rig,
             &mapping,
             resolved,

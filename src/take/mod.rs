@@ -114,6 +114,14 @@ impl OrientationTrack {
         }
     }
 
+    /// [`Self::to_quaternions`] without a copy of quaternion tracks.
+    pub fn into_quaternions(self) -> Track<UnitQuaternion<f64>> {
+        match self {
+            OrientationTrack::Quaternion(t) => t,
+            OrientationTrack::YawPitchRollDeg(t) => t.map(|ypr| ypr.to_quaternion()),
+        }
+    }
+
     fn shift_times(&mut self, offset_s: f64) {
         match self {
             OrientationTrack::Quaternion(t) => t.shift_times(offset_s),
@@ -266,6 +274,15 @@ impl Take {
             .map(Sensor::last_time_s)
             .fold(0.0, f64::max)
     }
+    /// Moves a sensor's orientation track out of the take (for a pipeline that owns the take
+    /// and needs no copy); the sensor keeps its other streams.
+    pub(crate) fn remove_orientation(&mut self, id: &str) -> Option<OrientationTrack> {
+        self.sensors
+            .iter_mut()
+            .find(|s| s.id == id)
+            .and_then(|s| s.orientation.take())
+    }
+
     pub fn total_samples(&self) -> usize {
         self.sensors.iter().map(|s| s.primary_times_s().len()).sum()
     }

@@ -63,6 +63,42 @@ pub fn to_glb_from(
     name: &str,
     first_frame: u64,
 ) -> Result<Vec<u8>, GltfWriteError> {
+    let (head, chunk) = glb_parts(anim, name, first_frame)?;
+    let mut out = Vec::with_capacity(head.len() + chunk.len());
+    out.extend_from_slice(&head);
+    out.extend_from_slice(&chunk);
+    Ok(out)
+}
+
+/// Writes [`to_glb`]'s bytes to `out` without assembling them in memory first (a long take's
+/// buffer is tens of megabytes).
+pub fn write_glb(
+    out: &mut dyn std::io::Write,
+    anim: &Animation,
+    name: &str,
+) -> Result<(), GlbError> {
+    let (head, chunk) = glb_parts(anim, name, 0)?;
+    out.write_all(&head)?;
+    out.write_all(&chunk)?;
+    Ok(())
+}
+
+/// Why [`write_glb`] failed: the document, or the writing.
+#[derive(Debug, thiserror::Error)]
+pub enum GlbError {
+    #[error(transparent)]
+    Gltf(#[from] GltfWriteError),
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+}
+
+/// A GLB in two parts: the header, the JSON chunk (padded with spaces) and the BIN chunk's
+/// header; then the BIN chunk's bytes (padded with zeros), empty when there is no buffer.
+fn glb_parts(
+    anim: &Animation,
+    name: &str,
+    first_frame: u64,
+) -> Result<(Vec<u8>, Vec<u8>), GltfWriteError> {
     let (doc, bin) = document(anim, name, None, first_frame)?;
     let mut json = serde_json::to_vec(&doc)?;
     pad_to_4(&mut json, b' ');
@@ -79,20 +115,19 @@ pub fn to_glb_from(
     if total > u64::from(u32::MAX) {
         return Err(GltfWriteError::TooLarge(total));
     }
-    let mut out = Vec::with_capacity(total as usize);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json);
+    let mut head = Vec::with_capacity(json.len() + 28);
+    head.extend_from_slice(b"glTF");
+    head.extend_from_slice(&2u32.to_le_bytes());
+    head.extend_from_slice(&(total as u32).to_le_bytes());
+    head.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    head.extend_from_slice(b"JSON");
+    head.extend_from_slice(&json);
     if !chunk.is_empty() {
-        out.extend_from_slice(&(chunk.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
-        out.extend_from_slice(&chunk);
+        head.extend_from_slice(&(chunk.len() as u32).to_le_bytes());
+        head.extend_from_slice(b"BIN\0");
     }
-    debug_assert_eq!(out.len() as u64, total);
-    Ok(out)
+    debug_assert_eq!((head.len() + chunk.len()) as u64, total);
+    Ok((head, chunk))
 }
 
 /// The animation as a `.gltf` JSON text and the bytes of its buffer, which the JSON refers to
