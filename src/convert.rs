@@ -440,7 +440,9 @@ fn convert_unclean(
         };
         return write_take(input, out_dir, settings, subject, source, facts, conversion);
     }
+    let read_span = tracing::debug_span!("read and hash").entered();
     let (take, sha256) = read_and_hash(input, &settings.read)?;
+    drop(read_span);
     // What the sidecar and the report keep of the take; the pipeline then consumes it, so its
     // samples are never held twice and are freed before the outputs are built.
     let mut facts = TakeFacts::of(&take);
@@ -937,8 +939,11 @@ fn quaternion_mode(
             }
         })?;
     let heading = &converted.calibration;
+    let euler_span = tracing::debug_span!("euler angles").entered();
+    let euler_deg = pipeline::output::euler_degrees(&converted.animation);
+    drop(euler_span);
     Ok(Conversion {
-        euler_deg: pipeline::output::euler_degrees(&converted.animation),
+        euler_deg,
         mapping: mapping_record(&converted, &rig, &mapping, file),
         pipeline: PipelineRecord {
             fusion: fusion_record(settings, &converted),
@@ -1153,7 +1158,10 @@ fn write_take(
     let written: Vec<_> = settings
         .outputs()
         .into_par_iter()
-        .map(|output| output.write(out_dir, &take_outputs))
+        .map(|output| {
+            let _span = tracing::debug_span!("write", output = ?output).entered();
+            output.write(out_dir, &take_outputs)
+        })
         .collect();
     let outputs = written.into_iter().collect::<Result<Vec<_>, _>>()?;
     drop(take_outputs);

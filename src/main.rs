@@ -16,6 +16,8 @@ const LOG_VARS: [&str; 2] = ["IMUBAKE_LOG", "RUST_LOG"];
 /// The library logs through `tracing` (`watch` and `batch`: one line per take with its duration);
 /// this prints those events on stderr, one compact human-readable line each, coloured only on a
 /// terminal (and not with `NO_COLOR`), at `info` unless `IMUBAKE_LOG` or `RUST_LOG` says otherwise.
+/// At `debug`, each stage of a conversion is a span whose line at its end gives its wall time
+/// (`time.busy`): `IMUBAKE_LOG=imubake=debug imubake convert …` is a profile per stage.
 fn init_logging() {
     let mut filter = None;
     for var in LOG_VARS {
@@ -35,6 +37,7 @@ fn init_logging() {
     tracing_subscriber::fmt()
         .compact()
         .with_target(false)
+        .with_span_events(tracing_subscriber::fmt::format::FmtSpan::CLOSE)
         .with_ansi(ansi)
         .with_writer(std::io::stderr)
         .with_env_filter(filter.unwrap_or_else(|| EnvFilter::new("info")))

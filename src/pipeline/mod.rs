@@ -294,9 +294,12 @@ fn run_on(
     let take_last_s = input.take().last_time_s();
     let recalibrations_s = input.take().recalibrations_s().to_vec();
     // 1. Sources, and the calibration window they call for.
+    let stage = tracing::debug_span!("sources").entered();
     let (world, sources, window) =
         sources_and_window(input, rig, mapping, mapping_file, options, &mut warnings)?;
     // 2. Calibration.
+    drop(stage);
+    let stage = tracing::debug_span!("calibrate").entered();
     let calibration = calibrate::calibrate(
         rig,
         &sources,
@@ -336,6 +339,8 @@ fn run_on(
     } = sources;
 
     // 3. Bone world orientations, on each sensor's own sample times.
+    drop(stage);
+    let stage = tracing::debug_span!("bone world").entered();
     let bone_tracks = bone_world::bone_world_recalibrated(tracks, &calibration, &later);
 
     // The frame grid, and what to say about it.
@@ -351,6 +356,8 @@ fn run_on(
 
     // 4. Smoothing at each sensor's own rate (`smoothing` explains why), 5. resampling onto the
     // frame grid: per sensor, independent, so spread over the cores.
+    drop(stage);
+    let stage = tracing::debug_span!("smooth and resample").entered();
     let per_sensor = parallel_map(sensors.iter().zip(bone_tracks).collect(), |(s, track)| {
         let raw = options
             .keep_unsmoothed
@@ -382,12 +389,16 @@ fn run_on(
     warnings.extend(smoothing::not_smoothed_warnings(&not_smoothed));
 
     // 6. Local rotations; 7. the root.
+    drop(stage);
+    let stage = tracing::debug_span!("local rotations").entered();
     let held = calibrate::held_pose(rig, window.as_ref());
     let local = relative::to_local(rig, &world_tracks, grid.frames, options.unsensed, &held);
     let unsmoothed =
         raw_tracks.map(|raw| relative::to_local(rig, &raw, grid.frames, options.unsensed, &held));
     let animated: Vec<bool> = world_tracks.iter().map(Option::is_some).collect();
     drop(world_tracks);
+    drop(stage);
+    let _stage = tracing::debug_span!("root").entered();
     let root_mode = root::resolve(options.root, rig, &animated);
     let (roots, contacts) =
         root::root_positions(rig, root_mode, &local, options.fps.frame_time_s());

@@ -24,6 +24,7 @@
 
 use crate::rig::Rig;
 use nalgebra::UnitQuaternion;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// What joints without a sensor do (`--unsensed`).
@@ -173,21 +174,43 @@ pub fn to_local(
     let n = rig.len();
     let sensed: Vec<bool> = world.iter().map(Option::is_some).collect();
     let plan = plan(rig, &sensed, unsensed, held);
-    let mut local = vec![vec![UnitQuaternion::identity(); frames]; n];
-    let mut frame_world = vec![UnitQuaternion::identity(); n];
-    let mut frame_local = vec![UnitQuaternion::identity(); n];
-    for f in 0..frames {
-        frame_to_local(
-            rig,
-            |j| world[j].as_ref().map(|track| track[f]),
-            &plan,
-            &mut frame_world,
-            &mut frame_local,
-        );
-        for (j, q) in frame_local.iter().enumerate() {
-            local[j][f] = *q;
+    // Allocated (and first touched) on every core too.
+    let mut local: Vec<Vec<UnitQuaternion<f64>>> = (0..n)
+        .into_par_iter()
+        .map(|_| vec![UnitQuaternion::identity(); frames])
+        .collect();
+    // Frames are independent: blocks of them on every core, each writing its own slice of every
+    // joint's track.
+    let block = frames.div_ceil(4 * rayon::current_num_threads()).max(1);
+    let mut blocks: Vec<Vec<&mut [UnitQuaternion<f64>]>> = (0..frames.div_ceil(block))
+        .map(|_| Vec::with_capacity(n))
+        .collect();
+    for track in &mut local {
+        for (b, piece) in track.chunks_mut(block).enumerate() {
+            blocks[b].push(piece);
         }
     }
+    blocks
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(b, mut pieces)| {
+            let mut frame_world = vec![UnitQuaternion::identity(); n];
+            let mut frame_local = vec![UnitQuaternion::identity(); n];
+            let len = pieces.first().map_or(0, |p| p.len());
+            for i in 0..len {
+                let f = b * block + i;
+                frame_to_local(
+                    rig,
+                    |j| world[j].as_ref().map(|track| track[f]),
+                    &plan,
+                    &mut frame_world,
+                    &mut frame_local,
+                );
+                for (piece, q) in pieces.iter_mut().zip(&frame_local) {
+                    piece[i] = *q;
+                }
+            }
+        });
     local
 }
 

@@ -21,10 +21,12 @@
 //! importers show them (gltf-json's `names` feature).
 
 use crate::anim::Animation;
+#[cfg(doc)]
 use crate::rotation::euler::make_hemisphere_continuous;
 use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 use nalgebra::{UnitQuaternion, Vector3};
+use rayon::prelude::*;
 use serde_json::Value;
 use std::collections::BTreeMap;
 
@@ -224,7 +226,12 @@ impl Bin {
 }
 
 fn f32_bytes(values: impl IntoIterator<Item = f32>) -> Vec<u8> {
-    values.into_iter().flat_map(f32::to_le_bytes).collect()
+    let values = values.into_iter();
+    let mut out = Vec::with_capacity(4 * values.size_hint().0);
+    for v in values {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out
 }
 
 /// Per-component min and max as JSON arrays. An f32 widened to f64 is exact, and serde_json
@@ -243,24 +250,25 @@ fn min_max<const N: usize>(items: &[[f32; N]]) -> (Value, Value) {
     (arr(min), arr(max))
 }
 
-/// The keys of one rotation track in glTF order x, y, z, w, each on the previous key's
-/// hemisphere (sign flipped when its dot product with the previous key is negative), so LINEAR
-/// interpolation takes the short way.
-fn rotation_keys(track: &[UnitQuaternion<f64>]) -> Vec<[f32; 4]> {
-    let mut track = track.to_vec();
-    make_hemisphere_continuous(&mut track);
-    // nalgebra stores a quaternion's coordinates as (i, j, k, w) = glTF's x, y, z, w.
-    track
-        .iter()
-        .map(|q| {
-            [
-                q.coords.x as f32,
-                q.coords.y as f32,
-                q.coords.z as f32,
-                q.coords.w as f32,
-            ]
-        })
-        .collect()
+/// The keys of one rotation track in glTF order x, y, z, w as little-endian `f32` bytes, each on
+/// the previous key's hemisphere (sign flipped when its dot product with the previous key, as
+/// written, is negative: [`make_hemisphere_continuous`]), so LINEAR interpolation takes the short
+/// way.
+fn rotation_key_bytes(track: &[UnitQuaternion<f64>]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(16 * track.len());
+    let mut previous: Option<nalgebra::Vector4<f64>> = None;
+    for q in track {
+        let mut c = q.coords;
+        if previous.is_some_and(|p| c.dot(&p) < 0.0) {
+            c = -c;
+        }
+        previous = Some(c);
+        // nalgebra stores a quaternion's coordinates as (i, j, k, w) = glTF's x, y, z, w.
+        for v in [c.x, c.y, c.z, c.w] {
+            out.extend_from_slice(&(v as f32).to_le_bytes());
+        }
+    }
+    out
 }
 
 /// The bone shapes of the skinned mesh, in the rest pose, metres.
@@ -621,14 +629,21 @@ fn document(
             T::Vec3,
         );
     }
-    for j in (0..joints.len()).filter(|&j| j == 0 || anim.is_animated(j)) {
-        let keys = rotation_keys(anim.local(j));
+    // Each joint's keys made on any core, added in joint order.
+    let rotated: Vec<usize> = (0..joints.len())
+        .filter(|&j| j == 0 || anim.is_animated(j))
+        .collect();
+    let keys: Vec<Vec<u8>> = rotated
+        .par_iter()
+        .map(|&j| rotation_key_bytes(anim.local(j)))
+        .collect();
+    for (j, bytes) in rotated.into_iter().zip(keys) {
         channel(
             &mut root,
             &mut bin,
             j,
             json::animation::Property::Rotation,
-            f32_bytes(keys.into_iter().flatten()),
+            bytes,
             T::Vec4,
         );
     }
