@@ -1159,7 +1159,13 @@ fn write_take(
         .outputs()
         .into_par_iter()
         .map(|output| {
-            let _span = tracing::debug_span!("write", output = ?output).entered();
+            let _span = match output {
+                Output::Animation(OutputFormat::Bvh) => tracing::debug_span!("write bvh"),
+                Output::Animation(OutputFormat::Glb) => tracing::debug_span!("write glb"),
+                Output::Animation(OutputFormat::Gltf) => tracing::debug_span!("write gltf"),
+                Output::Report => tracing::debug_span!("write report"),
+            }
+            .entered();
             output.write(out_dir, &take_outputs)
         })
         .collect();

@@ -121,11 +121,16 @@ pub fn smooth_quaternions_in_place(
     // turns by nearly 180° between samples, component averages lose their meaning, and such a
     // track is kept as it is (with the reason) rather than made worse. The largest step is the
     // smallest |dot| of neighbours (angle = 2·acos|dot|).
+    let out: Vec<UnitQuaternion<f64>> = values
+        .iter()
+        .enumerate()
+        .map(|(n, input)| smoothed(n, input))
+        .collect();
+    drop(components);
     let mut min_dot_in: f64 = 1.0;
     let mut min_dot_out: f64 = 1.0;
     let mut previous = None;
-    for (n, input) in values.iter().enumerate() {
-        let out = smoothed(n, input);
+    for (input, out) in values.iter().zip(&out) {
         if let Some((prev_in, prev_out)) = previous {
             min_dot_in = min_dot_in.min(input.coords.dot(&prev_in).abs());
             min_dot_out = min_dot_out.min(out.coords.dot(&prev_out).abs());
@@ -143,9 +148,7 @@ pub fn smooth_quaternions_in_place(
             step_in.to_degrees()
         )));
     }
-    for (n, q) in values.iter_mut().enumerate() {
-        *q = smoothed(n, q);
-    }
+    values.copy_from_slice(&out);
     Ok(())
 }
 

@@ -629,23 +629,26 @@ fn document(
             T::Vec3,
         );
     }
-    // Each joint's keys made on any core, added in joint order.
+    // The joints' keys made on every core, a few joints at a time (so that only those are held
+    // besides the buffer), added in joint order.
     let rotated: Vec<usize> = (0..joints.len())
         .filter(|&j| j == 0 || anim.is_animated(j))
         .collect();
-    let keys: Vec<Vec<u8>> = rotated
-        .par_iter()
-        .map(|&j| rotation_key_bytes(anim.local(j)))
-        .collect();
-    for (j, bytes) in rotated.into_iter().zip(keys) {
-        channel(
-            &mut root,
-            &mut bin,
-            j,
-            json::animation::Property::Rotation,
-            bytes,
-            T::Vec4,
-        );
+    for group in rotated.chunks(rayon::current_num_threads()) {
+        let keys: Vec<Vec<u8>> = group
+            .par_iter()
+            .map(|&j| rotation_key_bytes(anim.local(j)))
+            .collect();
+        for (&j, bytes) in group.iter().zip(keys) {
+            channel(
+                &mut root,
+                &mut bin,
+                j,
+                json::animation::Property::Rotation,
+                bytes,
+                T::Vec4,
+            );
+        }
     }
     // Foot contacts as per-frame 0/1 curves on the animation's own frames (frame n at n / fps,
     // from `first_frame` when not 0), for engines and IK setups that pin feet.
