@@ -213,19 +213,19 @@ fn read_blocks<R: Read>(
                 break line_start;
             }
             let start = bytes.len();
-            bytes.resize(start + BLOCK_BYTES / 2, 0);
-            let n = loop {
-                match source.read(&mut bytes[start..]) {
-                    Ok(n) => break n,
-                    Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-                    Err(e) => {
-                        bytes.truncate(line_start);
-                        send_whole_lines(bytes, &mut seq, &block_tx);
-                        return Err(ReadFailure::Io(e));
-                    }
+            // Into the buffer's spare room without zeroing it first (`read_to_end` keeps track
+            // of what is initialised); up to half a block, fewer only at the end of the source.
+            let read = (&mut source)
+                .take(BLOCK_BYTES as u64 / 2)
+                .read_to_end(&mut bytes);
+            let n = match read {
+                Ok(n) => n,
+                Err(e) => {
+                    bytes.truncate(line_start);
+                    send_whole_lines(bytes, &mut seq, &block_tx);
+                    return Err(ReadFailure::Io(e));
                 }
             };
-            bytes.truncate(start + n);
             if n == 0 {
                 eof = true;
                 break bytes.len();

@@ -595,12 +595,28 @@ pub(crate) struct Values {
 /// Parses a data row; `Ok(None)` for a blank or comment line, `Err` with the reason to drop it.
 #[inline]
 pub(crate) fn parse_row<'a>(layout: &Layout, line: &'a [u8]) -> Result<Option<Row<'a>>, String> {
+    // The fields' slots are set up for every row: as few as the layout needs.
+    if layout.columns <= FEW_COLUMNS {
+        parse_row_in::<FEW_COLUMNS>(layout, line)
+    } else {
+        parse_row_in::<MAX_COLUMNS>(layout, line)
+    }
+}
+
+/// Enough fields for quaternions, or raw readings with their time and sensor.
+const FEW_COLUMNS: usize = 12;
+
+#[inline]
+fn parse_row_in<'a, const N: usize>(
+    layout: &Layout,
+    line: &'a [u8],
+) -> Result<Option<Row<'a>>, String> {
     let first = line.iter().find(|b| !b.is_ascii_whitespace());
     match first {
         None | Some(b'#') => return Ok(None),
         _ => {}
     }
-    let mut fields = [&b""[..]; MAX_COLUMNS];
+    let mut fields = [&b""[..]; N];
     let n = split_fields(line, b',', &mut fields);
     if n != layout.columns {
         return Err(format!(

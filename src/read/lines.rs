@@ -165,28 +165,11 @@ fn parse_plain_decimal(field: &[u8]) -> Option<f64> {
         b'-' => (true, &field[1..]),
         _ => (false, field),
     };
-    let mut mantissa: u64 = 0;
-    let mut i = 0;
-    while let Some(&b) = digits.get(i) {
-        let d = b.wrapping_sub(b'0');
-        if d > 9 {
-            break;
-        }
-        mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d));
-        i += 1;
-    }
-    let whole = i;
+    let (whole, mut mantissa) = digit_run(digits, 0, 0);
+    let mut i = whole;
     let mut decimals = 0;
     if digits.get(i) == Some(&b'.') {
-        i += 1;
-        while let Some(&b) = digits.get(i) {
-            let d = b.wrapping_sub(b'0');
-            if d > 9 {
-                break;
-            }
-            mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d));
-            i += 1;
-        }
+        (i, mantissa) = digit_run(digits, i + 1, mantissa);
         decimals = i - whole - 1;
         // Digits on both sides of the point (`1.` and `.5` are the full parser's to judge).
         if whole == 0 || decimals == 0 {
@@ -203,6 +186,22 @@ fn parse_plain_decimal(field: &[u8]) -> Option<f64> {
     }
     let value = mantissa as f64 / EXACT_POWERS_OF_TEN[decimals];
     Some(if negative { -value } else { value })
+}
+
+/// The digits of `bytes` from `start` on, appended to `mantissa`'s: where they end, and the
+/// mantissa (wrapping; the caller bounds the digit count).
+#[inline]
+fn digit_run(bytes: &[u8], start: usize, mut mantissa: u64) -> (usize, u64) {
+    let mut i = start;
+    while let Some(&b) = bytes.get(i) {
+        let d = b.wrapping_sub(b'0');
+        if d > 9 {
+            break;
+        }
+        mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d));
+        i += 1;
+    }
+    (i, mantissa)
 }
 
 /// Explains why a field is not a finite number, for line reports.
