@@ -98,6 +98,9 @@ where
             .send(Vec::with_capacity(BLOCK_BYTES + BLOCK_BYTES / 4))
             .expect("the channel has room for every buffer");
     }
+    // As many block slots as buffers: the reader can never wait on a full block channel, so
+    // when the merge stops early (and nobody takes blocks any more) it still runs out of
+    // buffers and returns rather than blocking the scope's join.
     let (block_tx, block_rx) = sync_channel::<Block>(in_flight);
     let block_rx = Arc::new(Mutex::new(block_rx));
     let (done_tx, done_rx) = sync_channel::<(Block, P, u64)>(in_flight);
