@@ -349,12 +349,32 @@ const ROWS_BEFORE_RESERVE: u64 = 4096;
 /// A line of a block as a worker parsed it; `line` counts from the block's first line, `span`
 /// is the line's bytes in the block (for reports).
 enum Item {
-    Row {
+    /// A row with a quaternion only (the common case), kept small: blocks of items go from
+    /// the workers to the merge through memory.
+    Quaternion {
         line: u32,
         span: (u32, u32),
         /// Index into the block's sensor ids.
         sensor: u32,
-        values: Values,
+        time: f64,
+        q: UnitQuaternion<f64>,
+        norm: f64,
+    },
+    /// A row of raw readings only.
+    Raw {
+        line: u32,
+        span: (u32, u32),
+        sensor: u32,
+        time: f64,
+        imu: ImuSample,
+        mag: Option<Vector3<f64>>,
+    },
+    /// Any other row.
+    Row {
+        line: u32,
+        span: (u32, u32),
+        sensor: u32,
+        values: Box<Values>,
     },
     Dropped {
         line: u32,
@@ -403,11 +423,41 @@ fn parse_block(layout: &Layout, block: &[u8]) -> (ParsedBlock, u64) {
                     ids.insert(id, next);
                     next
                 });
-                items.push(Item::Row {
-                    line: line_index,
-                    span,
-                    sensor,
-                    values,
+                items.push(match values {
+                    Values {
+                        time,
+                        quaternion: Some((q, norm)),
+                        ypr: None,
+                        imu: None,
+                        mag: None,
+                    } => Item::Quaternion {
+                        line: line_index,
+                        span,
+                        sensor,
+                        time,
+                        q,
+                        norm,
+                    },
+                    Values {
+                        time,
+                        quaternion: None,
+                        ypr: None,
+                        imu: Some(imu),
+                        mag,
+                    } => Item::Raw {
+                        line: line_index,
+                        span,
+                        sensor,
+                        time,
+                        imu,
+                        mag,
+                    },
+                    values => Item::Row {
+                        line: line_index,
+                        span,
+                        sensor,
+                        values: Box::new(values),
+                    },
                 });
             }
         }
@@ -490,12 +540,54 @@ fn read_sized(
                 Item::Dropped { line, span, reason } => {
                     take.drop_line(first_line + u64::from(line), reason, raw(span))
                 }
-                Item::Row {
-                    line,
-                    span,
-                    sensor,
-                    values,
-                } => {
+                Item::Quaternion { .. } | Item::Raw { .. } | Item::Row { .. } => {
+                    let (line, span, sensor, values) = match item {
+                        Item::Quaternion {
+                            line,
+                            span,
+                            sensor,
+                            time,
+                            q,
+                            norm,
+                        } => (
+                            line,
+                            span,
+                            sensor,
+                            Values {
+                                time,
+                                quaternion: Some((q, norm)),
+                                ypr: None,
+                                imu: None,
+                                mag: None,
+                            },
+                        ),
+                        Item::Raw {
+                            line,
+                            span,
+                            sensor,
+                            time,
+                            imu,
+                            mag,
+                        } => (
+                            line,
+                            span,
+                            sensor,
+                            Values {
+                                time,
+                                quaternion: None,
+                                ypr: None,
+                                imu: Some(imu),
+                                mag,
+                            },
+                        ),
+                        Item::Row {
+                            line,
+                            span,
+                            sensor,
+                            values,
+                        } => (line, span, sensor, *values),
+                        _ => unreachable!("matched above"),
+                    };
                     let line_no = first_line + u64::from(line);
                     let text = raw(span);
                     let slot = &mut known[sensor as usize];
