@@ -246,14 +246,21 @@ pub fn sosfiltfilt(sos: &[Sos], x: &[f64]) -> Result<Vec<f64>, FilterError> {
 
     let x0 = ext[0];
     let mut state: Vec<[f64; 2]> = zi.iter().map(|z| [z[0] * x0, z[1] * x0]).collect();
-    let mut y = sosfilt_with_state(sos, &ext, &mut state);
+    let forward = sosfilt_with_state(sos, &ext, &mut state);
+    drop(ext);
 
-    let y0 = y[y.len() - 1];
-    y.reverse();
+    // The backward pass runs over the forward output from its end; its outputs land in place
+    // (reversed back), and only the samples of `x` are kept: no reversed copies.
+    let y0 = forward[forward.len() - 1];
     let mut state: Vec<[f64; 2]> = zi.iter().map(|z| [z[0] * y0, z[1] * y0]).collect();
-    let mut y = sosfilt_with_state(sos, &y, &mut state);
-    y.reverse();
-    Ok(y[edge..y.len() - edge].to_vec())
+    let mut y = vec![0.0; x.len()];
+    for (n, &v) in forward.iter().enumerate().rev() {
+        let out = sosfilt_step(sos, v, &mut state);
+        if let Some(slot) = n.checked_sub(edge).and_then(|k| y.get_mut(k)) {
+            *slot = out;
+        }
+    }
+    Ok(y)
 }
 
 /// `scipy.signal._arraytools.odd_ext(x, n)`; requires `1 <= n <= x.len() - 1`.
