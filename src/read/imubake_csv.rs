@@ -349,32 +349,12 @@ const ROWS_BEFORE_RESERVE: u64 = 4096;
 /// A line of a block as a worker parsed it; `line` counts from the block's first line, `span`
 /// is the line's bytes in the block (for reports).
 enum Item {
-    /// A row with a quaternion only (the common case), kept small: blocks of items go from
-    /// the workers to the merge through memory.
-    Quaternion {
+    Row {
         line: u32,
         span: (u32, u32),
         /// Index into the block's sensor ids.
         sensor: u32,
-        time: f64,
-        q: UnitQuaternion<f64>,
-        norm: f64,
-    },
-    /// A row of raw readings only.
-    Raw {
-        line: u32,
-        span: (u32, u32),
-        sensor: u32,
-        time: f64,
-        imu: ImuSample,
-        mag: Option<Vector3<f64>>,
-    },
-    /// Any other row.
-    Row {
-        line: u32,
-        span: (u32, u32),
-        sensor: u32,
-        values: Box<Values>,
+        values: Packed,
     },
     Dropped {
         line: u32,
@@ -383,6 +363,67 @@ enum Item {
     },
     /// A `#` line: a directive or a comment, decided when merged.
     Comment { line: u32, span: (u32, u32) },
+}
+
+/// A row's [`Values`] as they travel from a worker to the merge: blocks of items go through
+/// memory, so the common rows (a quaternion only; raw readings only) are kept small and unboxed,
+/// and any other row is boxed.
+enum Packed {
+    Quaternion {
+        time: f64,
+        q: UnitQuaternion<f64>,
+        norm: f64,
+    },
+    Raw {
+        time: f64,
+        imu: ImuSample,
+        mag: Option<Vector3<f64>>,
+    },
+    Other(Box<Values>),
+}
+
+impl From<Values> for Packed {
+    fn from(values: Values) -> Packed {
+        match values {
+            Values {
+                time,
+                quaternion: Some((q, norm)),
+                ypr: None,
+                imu: None,
+                mag: None,
+            } => Packed::Quaternion { time, q, norm },
+            Values {
+                time,
+                quaternion: None,
+                ypr: None,
+                imu: Some(imu),
+                mag,
+            } => Packed::Raw { time, imu, mag },
+            values => Packed::Other(Box::new(values)),
+        }
+    }
+}
+
+impl From<Packed> for Values {
+    fn from(packed: Packed) -> Values {
+        match packed {
+            Packed::Quaternion { time, q, norm } => Values {
+                time,
+                quaternion: Some((q, norm)),
+                ypr: None,
+                imu: None,
+                mag: None,
+            },
+            Packed::Raw { time, imu, mag } => Values {
+                time,
+                quaternion: None,
+                ypr: None,
+                imu: Some(imu),
+                mag,
+            },
+            Packed::Other(values) => *values,
+        }
+    }
 }
 
 /// A block's lines, parsed.
@@ -423,41 +464,11 @@ fn parse_block(layout: &Layout, block: &[u8]) -> (ParsedBlock, u64) {
                     ids.insert(id, next);
                     next
                 });
-                items.push(match values {
-                    Values {
-                        time,
-                        quaternion: Some((q, norm)),
-                        ypr: None,
-                        imu: None,
-                        mag: None,
-                    } => Item::Quaternion {
-                        line: line_index,
-                        span,
-                        sensor,
-                        time,
-                        q,
-                        norm,
-                    },
-                    Values {
-                        time,
-                        quaternion: None,
-                        ypr: None,
-                        imu: Some(imu),
-                        mag,
-                    } => Item::Raw {
-                        line: line_index,
-                        span,
-                        sensor,
-                        time,
-                        imu,
-                        mag,
-                    },
-                    values => Item::Row {
-                        line: line_index,
-                        span,
-                        sensor,
-                        values: Box::new(values),
-                    },
+                items.push(Item::Row {
+                    line: line_index,
+                    span,
+                    sensor,
+                    values: values.into(),
                 });
             }
         }
@@ -540,54 +551,12 @@ fn read_sized(
                 Item::Dropped { line, span, reason } => {
                     take.drop_line(first_line + u64::from(line), reason, raw(span))
                 }
-                Item::Quaternion { .. } | Item::Raw { .. } | Item::Row { .. } => {
-                    let (line, span, sensor, values) = match item {
-                        Item::Quaternion {
-                            line,
-                            span,
-                            sensor,
-                            time,
-                            q,
-                            norm,
-                        } => (
-                            line,
-                            span,
-                            sensor,
-                            Values {
-                                time,
-                                quaternion: Some((q, norm)),
-                                ypr: None,
-                                imu: None,
-                                mag: None,
-                            },
-                        ),
-                        Item::Raw {
-                            line,
-                            span,
-                            sensor,
-                            time,
-                            imu,
-                            mag,
-                        } => (
-                            line,
-                            span,
-                            sensor,
-                            Values {
-                                time,
-                                quaternion: None,
-                                ypr: None,
-                                imu: Some(imu),
-                                mag,
-                            },
-                        ),
-                        Item::Row {
-                            line,
-                            span,
-                            sensor,
-                            values,
-                        } => (line, span, sensor, *values),
-                        _ => unreachable!("matched above"),
-                    };
+                Item::Row {
+                    line,
+                    span,
+                    sensor,
+                    values,
+                } => {
                     let line_no = first_line + u64::from(line);
                     let text = raw(span);
                     let slot = &mut known[sensor as usize];
@@ -618,7 +587,7 @@ fn read_sized(
                         ypr,
                         imu,
                         mag,
-                    } = values;
+                    } = values.into();
                     let q = quaternion.map(|(q, norm)| {
                         worst_norm_error = worst_norm_error.max((norm - 1.0).abs());
                         q
