@@ -248,9 +248,6 @@ pub fn run(
     mapping_file: &Path,
     options: &PipelineOptions,
 ) -> Result<Converted, PipelineError> {
-    if options.causal {
-        return run_causal(take, rig, mapping, mapping_file, options);
-    }
     run_on(
         TakeInput::Borrowed(take),
         rig,
@@ -269,9 +266,6 @@ pub fn run_owned(
     mapping_file: &Path,
     options: &PipelineOptions,
 ) -> Result<Converted, PipelineError> {
-    if options.causal {
-        return run_causal(&take, rig, mapping, mapping_file, options);
-    }
     run_on(
         TakeInput::Owned(&mut take),
         rig,
@@ -288,6 +282,9 @@ fn run_on(
     mapping_file: &Path,
     options: &PipelineOptions,
 ) -> Result<Converted, PipelineError> {
+    if options.causal {
+        return run_causal(input.take(), rig, mapping, mapping_file, options);
+    }
     let file = mapping_file.display().to_string();
     let mut warnings = Vec::new();
     // What stage 1 may take away from an owned take.

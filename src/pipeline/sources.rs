@@ -60,6 +60,7 @@ enum Plan {
     Device,
     /// Fused from its raw readings.
     Fuse,
+    /// Readings that cannot give an orientation, and why.
     Unusable(&'static str),
 }
 
@@ -118,6 +119,8 @@ pub fn orientations(
     warnings: &mut Vec<String>,
 ) -> Result<Sources, PipelineError> {
     let (fusion, causal) = (options.fusion.as_ref(), options.causal);
+    // A whole take gets the offline fusion by default; causal mode (a stream's view) cannot look
+    // ahead, so it runs the online counterpart of whatever was asked for.
     let filter = match (fusion, causal) {
         (None, false) => Fusion::default(),
         (None, true) => Fusion::online_default(),
@@ -147,7 +150,8 @@ pub fn orientations(
             plan => kept.push((s, plan)),
         }
     }
-    // Device tracks first (moved out of an owned take), then everything in parallel.
+    // Device tracks first (moved out of an owned take); then fusion, the costly part, each
+    // sensor's independent: spread over the cores.
     let kept: Vec<_> = kept
         .into_iter()
         .map(|(s, plan)| {
@@ -221,7 +225,7 @@ pub fn orientations(
                     )
                 })
             }
-            _ => unreachable!("missing and unusable sensors were filtered out above"),
+            _ => unreachable!("planned only for sensors with orientations or raw readings"),
         };
         (s, result)
     });

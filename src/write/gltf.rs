@@ -65,38 +65,18 @@ pub fn to_glb_from(
     name: &str,
     first_frame: u64,
 ) -> Result<Vec<u8>, GltfWriteError> {
-    let (head, chunk) = glb_parts(anim, name, first_frame)?;
+    let (head, chunk) = to_glb_parts(anim, name, first_frame)?;
     let mut out = Vec::with_capacity(head.len() + chunk.len());
     out.extend_from_slice(&head);
     out.extend_from_slice(&chunk);
     Ok(out)
 }
 
-/// Writes [`to_glb`]'s bytes to `out` without assembling them in memory first (a long take's
-/// buffer is tens of megabytes).
-pub fn write_glb(
-    out: &mut dyn std::io::Write,
-    anim: &Animation,
-    name: &str,
-) -> Result<(), GlbError> {
-    let (head, chunk) = glb_parts(anim, name, 0)?;
-    out.write_all(&head)?;
-    out.write_all(&chunk)?;
-    Ok(())
-}
-
-/// Why [`write_glb`] failed: the document, or the writing.
-#[derive(Debug, thiserror::Error)]
-pub enum GlbError {
-    #[error(transparent)]
-    Gltf(#[from] GltfWriteError),
-    #[error(transparent)]
-    Io(#[from] std::io::Error),
-}
-
-/// A GLB in two parts: the header, the JSON chunk (padded with spaces) and the BIN chunk's
-/// header; then the BIN chunk's bytes (padded with zeros), empty when there is no buffer.
-fn glb_parts(
+/// [`to_glb`] in two parts, to be written one after the other without assembling them in memory
+/// (a long take's buffer is tens of megabytes): the header, the JSON chunk (padded with spaces)
+/// and the BIN chunk's header; then the BIN chunk's bytes (padded with zeros), empty when there
+/// is no buffer.
+pub fn to_glb_parts(
     anim: &Animation,
     name: &str,
     first_frame: u64,

@@ -182,21 +182,13 @@ impl Output {
             }
             Output::Animation(OutputFormat::Glb) => {
                 let path = dir.join(format!("{stem}.glb"));
-                // The document's error is kept aside: write_atomic carries only I/O errors.
-                let mut document_error = None;
-                let written =
-                    write_atomic(&path, |w| match gltf::write_glb(w, take.animation, stem) {
-                        Ok(()) => Ok(()),
-                        Err(gltf::GlbError::Io(e)) => Err(e),
-                        Err(gltf::GlbError::Gltf(e)) => {
-                            document_error = Some(e);
-                            Err(io::Error::other("the glTF document could not be made"))
-                        }
-                    });
-                if let Some(e) = document_error {
-                    return Err(gltf_error(&path)(e));
-                }
-                written.map_err(write_error(&path))?;
+                let (head, chunk) =
+                    gltf::to_glb_parts(take.animation, stem, 0).map_err(gltf_error(&path))?;
+                write_atomic(&path, |w| {
+                    w.write_all(&head)?;
+                    w.write_all(&chunk)
+                })
+                .map_err(write_error(&path))?;
                 Ok(record("glb", "glb"))
             }
             Output::Animation(OutputFormat::Gltf) => {
