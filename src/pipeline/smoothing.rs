@@ -12,6 +12,7 @@ use crate::rotation::{make_hemisphere_continuous, slerp_shortest};
 use crate::smooth::Method;
 use crate::smooth::butterworth::{
     design_lowpass_sos, sosfilt_step, sosfilt_with_state, sosfilt_zi, sosfiltfilt,
+    sosfiltfilt_lanes,
 };
 use crate::smooth::fft::{FftOptions, fft_filter};
 use crate::smooth::gaussian::gaussian_filter1d;
@@ -97,19 +98,11 @@ pub fn smooth_quaternions_in_place(
         return Ok(());
     }
     make_hemisphere_continuous(values);
-    let mut components = Vec::with_capacity(4);
-    for c in 0..4 {
-        let series: Vec<f64> = values.iter().map(|q| q.coords[c]).collect();
-        components.push(smooth_series(&series, rate_hz, method)?);
-    }
-    let smoothed = |n: usize, input: &UnitQuaternion<f64>| {
-        // nalgebra stores quaternions as (x, y, z, w).
-        let f = Quaternion::new(
-            components[3][n],
-            components[0][n],
-            components[1][n],
-            components[2][n],
-        );
+    // nalgebra stores quaternions as (x, y, z, w): four interleaved series, filtered in place.
+    let mut filtered: Vec<[f64; 4]> = values.iter().map(|q| q.coords.into()).collect();
+    filter_lanes(&mut filtered, rate_hz, method)?;
+    let smoothed = |f: [f64; 4], input: &UnitQuaternion<f64>| {
+        let f = Quaternion::new(f[3], f[0], f[1], f[2]);
         let norm = f.norm();
         if norm.is_finite() && norm > 0.1 {
             UnitQuaternion::new_unchecked(f / norm)
@@ -120,22 +113,19 @@ pub fn smooth_quaternions_in_place(
     // Smoothing must never add a jump. On real motion it only shrinks steps; on a track that
     // turns by nearly 180° between samples, component averages lose their meaning, and such a
     // track is kept as it is (with the reason) rather than made worse. The largest step is the
-    // smallest |dot| of neighbours (angle = 2·acos|dot|).
-    let out: Vec<UnitQuaternion<f64>> = values
-        .iter()
-        .enumerate()
-        .map(|(n, input)| smoothed(n, input))
-        .collect();
-    drop(components);
+    // smallest |dot| of neighbours (angle = 2·acos|dot|). The output replaces the filtered
+    // components as it is made.
     let mut min_dot_in: f64 = 1.0;
     let mut min_dot_out: f64 = 1.0;
     let mut previous = None;
-    for (input, out) in values.iter().zip(&out) {
+    for (input, f) in values.iter().zip(filtered.iter_mut()) {
+        let out = smoothed(*f, input);
         if let Some((prev_in, prev_out)) = previous {
             min_dot_in = min_dot_in.min(input.coords.dot(&prev_in).abs());
             min_dot_out = min_dot_out.min(out.coords.dot(&prev_out).abs());
         }
         previous = Some((input.coords, out.coords));
+        *f = out.coords.into();
     }
     let (step_in, step_out) = (
         2.0 * min_dot_in.min(1.0).acos(),
@@ -148,8 +138,37 @@ pub fn smooth_quaternions_in_place(
             step_in.to_degrees()
         )));
     }
-    values.copy_from_slice(&out);
+    for (value, f) in values.iter_mut().zip(&filtered) {
+        *value = UnitQuaternion::new_unchecked(Quaternion::new(f[3], f[0], f[1], f[2]));
+    }
     Ok(())
+}
+
+/// Filters four interleaved series sampled uniformly at `rate_hz`, in place: zero-phase
+/// Butterworth (the default) on all four at once, any other method one series at a time.
+fn filter_lanes(x: &mut [[f64; 4]], rate_hz: f64, method: &Method) -> Result<(), Unsmoothed> {
+    match method {
+        Method::Butterworth {
+            order,
+            cutoff_hz,
+            causal: false,
+        } if *cutoff_hz < rate_hz / 2.0 => {
+            let sos = design_lowpass_sos(*order, *cutoff_hz, rate_hz)
+                .map_err(|e| Unsmoothed(format!("{method} at {rate_hz:.1} Hz: {e}")))?;
+            sosfiltfilt_lanes(&sos, x, &mut Vec::new())
+                .map_err(|(_, e)| Unsmoothed(format!("{method}: {e}")))
+        }
+        _ => {
+            for lane in 0..4 {
+                let series: Vec<f64> = x.iter().map(|v| v[lane]).collect();
+                let y = smooth_series(&series, rate_hz, method)?;
+                for (v, y) in x.iter_mut().zip(y) {
+                    v[lane] = y;
+                }
+            }
+            Ok(())
+        }
+    }
 }
 
 /// How much larger than the input's largest step (radians) a smoothed track's largest step may be.
