@@ -12,11 +12,12 @@
 //! (default `enu`). Blank lines are ignored.
 
 use super::blocks::{BlockError, Observed, lines_of, parse_in_blocks};
-use super::lines::{LineReader, number_problem, parse_f64, split_fields};
+use super::lines::{LineReader, number_problem, parse_f64, plain_decimal_prefix, split_fields};
 use super::{InputFormat, ReadError, ReadOptions, check_text, sniff, warn_if_denormalised};
 use crate::take::{ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg};
 use crate::world::World;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use std::convert::Infallible;
 use std::fs::File;
 use std::io::Read;
 use std::path::Path;
@@ -43,6 +44,18 @@ pub(crate) struct Layout {
     accel: Option<([usize; 3], f64)>,
     mag: Option<([usize; 3], f64)>,
     ignored: Vec<String>,
+    /// What each column holds, for reading a row in one pass ([`plain_row`]).
+    roles: Vec<Role>,
+}
+
+/// What a column holds for the row reader.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Role {
+    /// A number the row's values are made of.
+    Number,
+    Sensor,
+    /// Not read (an ignored column, or gyro columns without accelerometer ones).
+    Skipped,
 }
 
 fn split_unit(name: &str) -> (&str, &str) {
@@ -247,7 +260,7 @@ impl Layout {
         let (Some(time), Some(sensor), Some(clock)) = (time_slot.map(|t| t.0), sensor, time) else {
             unreachable!("missing columns were reported above");
         };
-        Ok(Layout {
+        let mut layout = Layout {
             columns: names.len(),
             time,
             clock,
@@ -258,7 +271,28 @@ impl Layout {
             accel,
             mag: mag.filter(|_| gyro.is_some()),
             ignored,
-        })
+            roles: Vec::new(),
+        };
+        layout.roles = layout.roles();
+        Ok(layout)
+    }
+
+    /// The columns [`parse_row`] reads numbers from (those of `row_values` and the time), the
+    /// sensor's, and the rest.
+    fn roles(&self) -> Vec<Role> {
+        let mut roles = vec![Role::Skipped; self.columns];
+        roles[self.sensor] = Role::Sensor;
+        let mut numbers = vec![self.time];
+        numbers.extend(self.quaternion.into_iter().flatten());
+        numbers.extend(self.ypr.into_iter().flatten());
+        if let (Some((g, _)), Some((a, _))) = (self.gyro, self.accel) {
+            numbers.extend(g.into_iter().chain(a));
+        }
+        numbers.extend(self.mag.into_iter().flat_map(|(m, _)| m));
+        for column in numbers {
+            roles[column] = Role::Number;
+        }
+        roles
     }
 }
 
@@ -672,6 +706,12 @@ fn parse_row_in<'a, const N: usize>(
     layout: &Layout,
     line: &'a [u8],
 ) -> Result<Option<Row<'a>>, String> {
+    if N == FEW_COLUMNS
+        && let Some((id, numbers)) = plain_row(layout, line)
+    {
+        let Ok((q, ypr, imu, mag)) = row_values(layout, |i| Ok::<f64, Infallible>(numbers[i]));
+        return row(id, numbers[layout.time], q, ypr, imu, mag).map(Some);
+    }
     let first = line.iter().find(|b| !b.is_ascii_whitespace());
     match first {
         None | Some(b'#') => return Ok(None),
@@ -691,40 +731,125 @@ fn parse_row_in<'a, const N: usize>(
     if id.is_empty() {
         return Err("sensor is empty".into());
     }
-    let values = (|| {
-        let mut q = None;
-        if let Some(c) = layout.quaternion {
-            let v = Quaternion::new(number(c[0])?, number(c[1])?, number(c[2])?, number(c[3])?);
-            q = Some(v);
-        }
-        let mut ypr = None;
-        if let Some(c) = layout.ypr {
-            ypr = Some(YawPitchRollDeg {
-                yaw: number(c[0])?,
-                pitch: number(c[1])?,
-                roll: number(c[2])?,
-            });
-        }
-        let vec3 = |(c, scale): ([usize; 3], f64)| -> Result<Vector3<f64>, usize> {
-            Ok(Vector3::new(number(c[0])?, number(c[1])?, number(c[2])?) * scale)
-        };
-        let mut imu = None;
-        if let (Some(g), Some(a)) = (layout.gyro, layout.accel) {
-            imu = Some(ImuSample {
-                gyro_rad_s: vec3(g)?,
-                accel_m_s2: vec3(a)?,
-            });
-        }
-        let mag = layout.mag.map(vec3).transpose()?;
-        Ok((q, ypr, imu, mag))
-    })();
-    let (q, ypr, imu, mag) = values.map_err(|i: usize| {
+    let (q, ypr, imu, mag) = row_values(layout, number).map_err(|i: usize| {
         format!(
             "column {} {}",
             column_name(layout, i),
             number_problem(fields[i])
         )
     })?;
+    row(id, time, q, ypr, imu, mag).map(Some)
+}
+
+/// A row whose fields are all written plainly — every number read as
+/// [`plain_decimal_prefix`] reads it, the sensor id without spaces around it — read in one pass
+/// over the line instead of split first: the rows of a long log. `None` for any other line
+/// (blank, a comment, spaces, exponents, a wrong field count, …), which the general reader
+/// then reads; where this reads a row, the general reader reads the same numbers and id.
+/// The numbers are at their column's index.
+#[inline]
+fn plain_row<'a>(layout: &Layout, line: &'a [u8]) -> Option<(&'a [u8], [f64; FEW_COLUMNS])> {
+    // A first byte that is a space or `#` may make a blank or comment line.
+    if line
+        .first()
+        .is_none_or(|&b| b == b'#' || b.is_ascii_whitespace())
+    {
+        return None;
+    }
+    let mut numbers = [0.0; FEW_COLUMNS];
+    let mut id: &[u8] = b"";
+    let mut at = 0;
+    let last = layout.roles.len().checked_sub(1)?;
+    for (column, role) in layout.roles.iter().enumerate() {
+        let end = match role {
+            Role::Number => {
+                let (value, end) = plain_decimal_prefix(line, at)?;
+                *numbers.get_mut(column)? = value;
+                end
+            }
+            Role::Sensor | Role::Skipped => {
+                let end = line[at..]
+                    .iter()
+                    .position(|&b| b == b',')
+                    .map_or(line.len(), |p| at + p);
+                if *role == Role::Sensor {
+                    id = &line[at..end];
+                    let (first, last) = (id.first()?, id.last()?);
+                    if first.is_ascii_whitespace() || last.is_ascii_whitespace() {
+                        return None;
+                    }
+                }
+                end
+            }
+        };
+        if column == last {
+            return (end == line.len()).then_some((id, numbers));
+        }
+        if line.get(end) != Some(&b',') {
+            return None;
+        }
+        at = end + 1;
+    }
+    None
+}
+
+/// A row's values (but the time) from its number columns, in the general reader's order, so
+/// the first bad column is the one reported.
+#[allow(clippy::type_complexity)]
+#[inline]
+fn row_values<E>(
+    layout: &Layout,
+    number: impl Fn(usize) -> Result<f64, E>,
+) -> Result<
+    (
+        Option<Quaternion<f64>>,
+        Option<YawPitchRollDeg>,
+        Option<ImuSample>,
+        Option<Vector3<f64>>,
+    ),
+    E,
+> {
+    let mut q = None;
+    if let Some(c) = layout.quaternion {
+        q = Some(Quaternion::new(
+            number(c[0])?,
+            number(c[1])?,
+            number(c[2])?,
+            number(c[3])?,
+        ));
+    }
+    let mut ypr = None;
+    if let Some(c) = layout.ypr {
+        ypr = Some(YawPitchRollDeg {
+            yaw: number(c[0])?,
+            pitch: number(c[1])?,
+            roll: number(c[2])?,
+        });
+    }
+    let vec3 = |(c, scale): ([usize; 3], f64)| -> Result<Vector3<f64>, E> {
+        Ok(Vector3::new(number(c[0])?, number(c[1])?, number(c[2])?) * scale)
+    };
+    let mut imu = None;
+    if let (Some(g), Some(a)) = (layout.gyro, layout.accel) {
+        imu = Some(ImuSample {
+            gyro_rad_s: vec3(g)?,
+            accel_m_s2: vec3(a)?,
+        });
+    }
+    let mag = layout.mag.map(vec3).transpose()?;
+    Ok((q, ypr, imu, mag))
+}
+
+/// The row, its quaternion normalised (with the norm it had).
+#[inline]
+fn row(
+    id: &[u8],
+    time: f64,
+    q: Option<Quaternion<f64>>,
+    ypr: Option<YawPitchRollDeg>,
+    imu: Option<ImuSample>,
+    mag: Option<Vector3<f64>>,
+) -> Result<Row<'_>, String> {
     let quaternion = match q {
         Some(q) => {
             let norm = q.norm();
@@ -735,7 +860,7 @@ fn parse_row_in<'a, const N: usize>(
         }
         None => None,
     };
-    Ok(Some(Row {
+    Ok(Row {
         id,
         values: Values {
             time,
@@ -744,7 +869,7 @@ fn parse_row_in<'a, const N: usize>(
             imu,
             mag,
         },
-    }))
+    })
 }
 
 fn column_name(layout: &Layout, index: usize) -> String {
@@ -769,4 +894,130 @@ pub(crate) fn world_directive(comment: &[u8]) -> Option<Result<World, crate::wor
     let rest = text.strip_prefix("world")?.trim_start();
     let value = rest.strip_prefix(':').or_else(|| rest.strip_prefix('='))?;
     Some(value.trim().parse())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A row's outcome as text (Debug prints every double so it reads back to the same bits).
+    fn outcome(r: Result<Option<Row<'_>>, String>) -> String {
+        match r {
+            Ok(None) => "skipped".into(),
+            Err(e) => format!("dropped: {e}"),
+            Ok(Some(Row { id, values: v })) => format!(
+                "{id:?} {:?} {:?} {:?} {:?} {:?}",
+                v.time,
+                v.quaternion.map(|(q, n)| (q.coords, n)),
+                v.ypr.map(|y| (y.yaw, y.pitch, y.roll)),
+                v.imu.map(|i| (i.gyro_rad_s, i.accel_m_s2)),
+                v.mag
+            ),
+        }
+    }
+
+    const HEADERS: [&str; 5] = [
+        "time_s,sensor,qw,qx,qy,qz",
+        "sensor,qx,qy,time_ms,qz,qw,note",
+        "time_s,sensor,gx_dps,gy_dps,gz_dps,ax_g,ay_g,az_g,mx,my,mz",
+        "time_us,yaw,pitch,roll,sensor",
+        "time_s,sensor,mx,my,mz,qw,qx,qy,qz",
+    ];
+
+    /// Lines made of the pieces that matter to a row reader: plain and not-so-plain numbers,
+    /// ids, spaces, commas, comment marks.
+    fn line() -> impl Strategy<Value = String> {
+        let piece = prop_oneof![
+            4 => (-99_999i64..99_999, 0u32..8).prop_map(|(m, k)| {
+                let s = format!("{}", m.unsigned_abs());
+                let k = k as usize;
+                let digits = if s.len() <= k { format!("{}{s}", "0".repeat(k + 1 - s.len())) } else { s };
+                let (w, f) = digits.split_at(digits.len() - k);
+                let sign = if m < 0 { "-" } else { "" };
+                if f.is_empty() { format!("{sign}{w}") } else { format!("{sign}{w}.{f}") }
+            }),
+            1 => Just("pelvis".to_string()),
+            1 => Just(",".to_string()),
+            1 => prop::sample::select(vec![
+                " ", "#", "-", ".", "e5", "1e-3", "nan", "inf", "\t", "12345678901234567890",
+                "0.00000000000000000000001", "9007199254740993", "x y", "",
+            ]).prop_map(str::to_string),
+        ];
+        prop::collection::vec(piece, 0..14).prop_map(|p| p.join(""))
+    }
+
+    /// Rows as they are mostly written, with one piece perhaps changed.
+    fn near_plain_line(columns: usize) -> impl Strategy<Value = String> {
+        (
+            prop::collection::vec(-2.0f64..2.0, columns),
+            0..columns,
+            prop::sample::select(vec!["", " ", "pelvis", "1e2", "-", "1.", ".5", "#"]),
+            any::<bool>(),
+        )
+            .prop_map(|(values, at, other, change)| {
+                let fields: Vec<String> = values
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| match (change && i == at, i % 3) {
+                        (true, _) => other.to_string(),
+                        (false, 0) => format!("{v:.4}"),
+                        (false, 1) => format!("{v:.6}"),
+                        _ => format!("{v}"),
+                    })
+                    .collect();
+                fields.join(",")
+            })
+    }
+
+    fn check(header: &str, line: &str) -> Result<(), TestCaseError> {
+        let layout = Layout::from_header(header.as_bytes(), Path::new("t.csv"), 1).unwrap();
+        let bytes = line.as_bytes();
+        // The general reader alone (it has no one-pass path at this many slots) is the reference.
+        let general = outcome(parse_row_in::<MAX_COLUMNS>(&layout, bytes));
+        let read = outcome(parse_row(&layout, bytes));
+        prop_assert_eq!(read, general, "{} / {:?}", header, line);
+        Ok(())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(3000))]
+        #[test]
+        fn the_one_pass_row_reads_what_the_general_reader_reads(
+            header in prop::sample::select(HEADERS.to_vec()),
+            line in line(),
+        ) {
+            check(header, &line)?;
+        }
+
+        #[test]
+        fn near_plain_rows_too(
+            (header, line) in prop::sample::select(HEADERS.to_vec()).prop_flat_map(|h| {
+                (Just(h), near_plain_line(h.split(',').count()))
+            }),
+        ) {
+            check(header, &line)?;
+        }
+    }
+
+    #[test]
+    fn plain_rows_take_the_one_pass_path_and_others_do_not() {
+        let layout = Layout::from_header(HEADERS[0].as_bytes(), Path::new("t.csv"), 1).unwrap();
+        let (id, numbers) =
+            plain_row(&layout, b"62.4942,right_shank,0.854667,-0.311506,0,1").unwrap();
+        assert_eq!(id, b"right_shank");
+        assert_eq!(numbers[..6], [62.4942, 0.0, 0.854667, -0.311506, 0.0, 1.0]);
+        for other in [
+            " 1,a,1,0,0,0",
+            "1,a ,1,0,0,0",
+            "1,a,1,0,0,0,",
+            "1,a,1,0,0",
+            "1,a,1e0,0,0,0",
+            "#1,a,1,0,0,0",
+            "1,,1,0,0,0",
+            "1.,a,1,0,0,0",
+        ] {
+            assert!(plain_row(&layout, other.as_bytes()).is_none(), "{other}");
+        }
+    }
 }

@@ -161,31 +161,33 @@ const EXACT_POWERS_OF_TEN: [f64; 23] = [
 /// parser then reads.
 #[inline]
 fn parse_plain_decimal(field: &[u8]) -> Option<f64> {
-    let (negative, digits) = match field.first()? {
-        b'-' => (true, &field[1..]),
-        _ => (false, field),
-    };
-    let (whole, mut mantissa) = digit_run(digits, 0, 0);
-    let mut i = whole;
+    plain_decimal_prefix(field, 0).and_then(|(v, end)| (end == field.len()).then_some(v))
+}
+
+/// [`parse_plain_decimal`]'s number at the start of `bytes[start..]`, and where it ends: a row
+/// reader checks that a delimiter follows, and so reads a row in one pass. `None` where the
+/// plain form does not apply (not a digit after the sign, `1.` or more than 19 digits, …).
+#[inline]
+pub fn plain_decimal_prefix(bytes: &[u8], start: usize) -> Option<(f64, usize)> {
+    let negative = bytes.get(start)? == &b'-';
+    let digits_start = start + usize::from(negative);
+    let (whole_end, mut mantissa) = digit_run(bytes, digits_start, 0);
+    let whole = whole_end - digits_start;
+    let mut i = whole_end;
     let mut decimals = 0;
-    if digits.get(i) == Some(&b'.') {
-        (i, mantissa) = digit_run(digits, i + 1, mantissa);
-        decimals = i - whole - 1;
+    if bytes.get(i) == Some(&b'.') {
+        (i, mantissa) = digit_run(bytes, i + 1, mantissa);
+        decimals = i - whole_end - 1;
         // Digits on both sides of the point (`1.` and `.5` are the full parser's to judge).
         if whole == 0 || decimals == 0 {
             return None;
         }
     }
-    if i != digits.len()
-        || whole == 0
-        || whole + decimals > 19
-        || mantissa > 1 << 53
-        || decimals > 22
-    {
+    if whole == 0 || whole + decimals > 19 || mantissa > 1 << 53 || decimals > 22 {
         return None;
     }
     let value = mantissa as f64 / EXACT_POWERS_OF_TEN[decimals];
-    Some(if negative { -value } else { value })
+    Some((if negative { -value } else { value }, i))
 }
 
 /// The digits of `bytes` from `start` on, appended to `mantissa`'s: where they end, and the
