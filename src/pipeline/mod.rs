@@ -205,11 +205,21 @@ pub enum PipelineError {
 
 /// Maps `f` over `items` on up to as many threads as there are cores, keeping the order.
 fn parallel_map<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> Vec<R> {
+    parallel_map_with(items, |_: &mut (), item| f(item))
+}
+
+/// [`parallel_map`] where each thread keeps its own `S` (working memory, say) from item to
+/// item, made with `S::default()` and dropped when its items are done.
+fn parallel_map_with<T: Send, R: Send, S: Default>(
+    items: Vec<T>,
+    f: impl Fn(&mut S, T) -> R + Sync,
+) -> Vec<R> {
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(items.len().max(1));
     if threads <= 1 {
-        return items.into_iter().map(f).collect();
+        let mut state = S::default();
+        return items.into_iter().map(|t| f(&mut state, t)).collect();
     }
     let mut chunks: Vec<Vec<(usize, T)>> = (0..threads).map(|_| Vec::new()).collect();
     for (i, item) in items.into_iter().enumerate() {
@@ -221,9 +231,10 @@ fn parallel_map<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> V
             .into_iter()
             .map(|chunk| {
                 scope.spawn(move || {
+                    let mut state = S::default();
                     chunk
                         .into_iter()
-                        .map(|(i, t)| (i, f(t)))
+                        .map(|(i, t)| (i, f(&mut state, t)))
                         .collect::<Vec<_>>()
                 })
             })
@@ -355,7 +366,8 @@ fn run_on(
     // frame grid: per sensor, independent, so spread over the cores.
     drop(stage);
     let stage = tracing::debug_span!("smooth and resample").entered();
-    let per_sensor = parallel_map(sensors.iter().zip(bone_tracks).collect(), |(s, track)| {
+    let items = sensors.iter().zip(bone_tracks).collect();
+    let per_sensor = parallel_map_with(items, |scratch, (s, track)| {
         let raw = options
             .keep_unsmoothed
             .then(|| resample::resample(&track, &grid));
@@ -364,6 +376,7 @@ fn run_on(
             track,
             options.smoothing.for_bone(bone),
             options.sensor_rate_hz,
+            scratch,
         );
         let on_grid = resample::resample(&track, &grid);
         (

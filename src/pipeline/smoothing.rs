@@ -94,13 +94,36 @@ pub fn smooth_quaternions_in_place(
     rate_hz: f64,
     method: &Method,
 ) -> Result<(), Unsmoothed> {
+    smooth_quaternions_with(values, rate_hz, method, &mut Scratch::default())
+}
+
+/// The working memory of smoothing one track, kept from track to track by a caller that
+/// smooths many (a long take's track is millions of samples: fresh memory for each costs more
+/// than filtering it).
+#[derive(Debug, Default)]
+pub struct Scratch {
+    /// The four components as they are filtered, then the output.
+    filtered: Vec<[f64; 4]>,
+    /// The padded series the filter runs over.
+    padded: Vec<[f64; 4]>,
+}
+
+/// [`smooth_quaternions_in_place`] with working memory from `scratch`.
+pub fn smooth_quaternions_with(
+    values: &mut [UnitQuaternion<f64>],
+    rate_hz: f64,
+    method: &Method,
+    scratch: &mut Scratch,
+) -> Result<(), Unsmoothed> {
     if *method == Method::None {
         return Ok(());
     }
     make_hemisphere_continuous(values);
     // nalgebra stores quaternions as (x, y, z, w): four interleaved series, filtered in place.
-    let mut filtered: Vec<[f64; 4]> = values.iter().map(|q| q.coords.into()).collect();
-    filter_lanes(&mut filtered, rate_hz, method)?;
+    let filtered = &mut scratch.filtered;
+    filtered.clear();
+    filtered.extend(values.iter().map(|q| <[f64; 4]>::from(q.coords)));
+    filter_lanes(filtered, rate_hz, method, &mut scratch.padded)?;
     let smoothed = |f: [f64; 4], input: &UnitQuaternion<f64>| {
         let f = Quaternion::new(f[3], f[0], f[1], f[2]);
         let norm = f.norm();
@@ -138,7 +161,7 @@ pub fn smooth_quaternions_in_place(
             step_in.to_degrees()
         )));
     }
-    for (value, f) in values.iter_mut().zip(&filtered) {
+    for (value, f) in values.iter_mut().zip(filtered.iter()) {
         *value = UnitQuaternion::new_unchecked(Quaternion::new(f[3], f[0], f[1], f[2]));
     }
     Ok(())
@@ -146,7 +169,12 @@ pub fn smooth_quaternions_in_place(
 
 /// Filters four interleaved series sampled uniformly at `rate_hz`, in place: zero-phase
 /// Butterworth (the default) on all four at once, any other method one series at a time.
-fn filter_lanes(x: &mut [[f64; 4]], rate_hz: f64, method: &Method) -> Result<(), Unsmoothed> {
+fn filter_lanes(
+    x: &mut [[f64; 4]],
+    rate_hz: f64,
+    method: &Method,
+    padded: &mut Vec<[f64; 4]>,
+) -> Result<(), Unsmoothed> {
     match method {
         Method::Butterworth {
             order,
@@ -155,7 +183,7 @@ fn filter_lanes(x: &mut [[f64; 4]], rate_hz: f64, method: &Method) -> Result<(),
         } if *cutoff_hz < rate_hz / 2.0 => {
             let sos = design_lowpass_sos(*order, *cutoff_hz, rate_hz)
                 .map_err(|e| Unsmoothed(format!("{method} at {rate_hz:.1} Hz: {e}")))?;
-            sosfiltfilt_lanes(&sos, x, &mut Vec::new())
+            sosfiltfilt_lanes(&sos, x, padded)
                 .map_err(|(_, e)| Unsmoothed(format!("{method}: {e}")))
         }
         _ => {
@@ -242,6 +270,7 @@ pub fn smooth_track(
     track: Track<UnitQuaternion<f64>>,
     method: &Method,
     sensor_rate_hz: Option<f64>,
+    scratch: &mut Scratch,
 ) -> (Track<UnitQuaternion<f64>>, Option<Unsmoothed>) {
     if *method == Method::None {
         return (track, None);
@@ -257,7 +286,7 @@ pub fn smooth_track(
     };
     drop(track);
     let (times, mut values) = grid.into_parts();
-    let unsmoothed = smooth_quaternions_in_place(&mut values, rate, method).err();
+    let unsmoothed = smooth_quaternions_with(&mut values, rate, method, scratch).err();
     let track = Track::new(times, values).expect("the uniform grid's times are valid");
     (track, unsmoothed)
 }
