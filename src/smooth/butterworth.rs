@@ -280,16 +280,18 @@ pub fn sosfiltfilt_lanes<const N: usize>(
     Ok(())
 }
 
-/// The steady state `zi · x0` of each section, per lane: `[z0, z1]` of every lane.
-fn lane_state<const N: usize>(zi: &[[f64; 2]], x0: [f64; N]) -> Vec<[[f64; N]; 2]> {
+/// The steady state `zi · x0` of each section, per lane: `[z0, z1]` of every lane (the state
+/// [`sosfilt_step_lanes`] takes).
+pub fn lane_state<const N: usize>(zi: &[[f64; 2]], x0: [f64; N]) -> Vec<[[f64; N]; 2]> {
     zi.iter()
         .map(|z| [x0.map(|v| z[0] * v), x0.map(|v| z[1] * v)])
         .collect()
 }
 
-/// [`sosfilt_step`] on `N` lanes: the same expressions, lane by lane.
+/// [`sosfilt_step`] on `N` lanes: the same expressions, lane by lane (so each lane's output is
+/// [`sosfilt_step`]'s to the bit).
 #[inline]
-fn sosfilt_step_lanes<const N: usize>(
+pub fn sosfilt_step_lanes<const N: usize>(
     sos: &[Sos],
     sample: [f64; N],
     state: &mut [[[f64; N]; 2]],
