@@ -527,7 +527,7 @@ mod tests {
             let w = (a + PI).rem_euclid(TAU) - PI;
             if w == -PI { PI } else { w }
         };
-        let mut x = 0.318_309_886_f64;
+        let mut x = 0.377_777_f64;
         let mut values = vec![
             0.0,
             -0.0,
