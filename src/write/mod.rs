@@ -262,9 +262,9 @@ pub fn write_atomic(
         file
     };
     let result = (|| {
-        let mut out = io::BufWriter::with_capacity(1 << 20, file);
+        let mut out = io::BufWriter::with_capacity(1 << 20, Writeback::new(file));
         write(&mut out)?;
-        let file = out.into_inner().map_err(|e| e.into_error())?;
+        let file = out.into_inner().map_err(|e| e.into_error())?.file;
         file.sync_all()?;
         let mut temps = temps();
         temps.paths.retain(|p| p != &tmp);
@@ -280,9 +280,84 @@ pub fn write_atomic(
     result
 }
 
+/// A file being written that asks the kernel to start writing each 16 MB to disk as soon as
+/// it is written (Linux's `sync_file_range`), so that the `fsync` before the rename finds little
+/// left to wait for: a 140 MB BVH otherwise waits ~50 ms for all of it at the end.
+struct Writeback {
+    file: fs::File,
+    written: u64,
+    started: u64,
+}
+
+impl Writeback {
+    const STRIDE: u64 = 16 << 20;
+
+    fn new(file: fs::File) -> Writeback {
+        Writeback {
+            file,
+            written: 0,
+            started: 0,
+        }
+    }
+}
+
+impl Write for Writeback {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.written += n as u64;
+        if self.written - self.started >= Self::STRIDE {
+            start_writeback(&self.file, self.started, self.written - self.started);
+            self.started = self.written;
+        }
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.file.flush()
+    }
+}
+
+/// Starts writing `len` bytes at `offset` of `file` to disk, without waiting; a hint only, so a
+/// failure is ignored (the `fsync` that follows reports real errors).
+#[cfg(target_os = "linux")]
+fn start_writeback(file: &fs::File, offset: u64, len: u64) {
+    use std::os::fd::AsRawFd;
+    // SAFETY: a plain system call on an open descriptor; no memory is passed.
+    unsafe {
+        libc::sync_file_range(
+            file.as_raw_fd(),
+            offset as libc::off64_t,
+            len as libc::off64_t,
+            libc::SYNC_FILE_RANGE_WRITE,
+        );
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn start_writeback(_file: &fs::File, _offset: u64, _len: u64) {}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_large_write_starts_writeback_as_it_goes_and_lands_whole() {
+        // 40 MB in odd-sized pieces: writeback is started twice (every 16 MB) on the way.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("long.bvh");
+        let piece: Vec<u8> = (0..1_000_003u32).map(|i| (i % 251) as u8).collect();
+        write_atomic(&path, |w| {
+            for _ in 0..40 {
+                w.write_all(&piece)?;
+            }
+            Ok(())
+        })
+        .unwrap();
+        let back = fs::read(&path).unwrap();
+        assert_eq!(back.len(), 40 * piece.len());
+        assert!(back.chunks(piece.len()).all(|c| c == piece));
+        assert!(!temp_path(&path).exists());
+    }
 
     #[test]
     fn atomic_write_leaves_no_temp_file_and_cleans_up_on_error() {
