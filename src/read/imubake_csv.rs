@@ -21,6 +21,7 @@ use std::convert::Infallible;
 use std::fs::File;
 use std::io::Read;
 use std::path::Path;
+use std::sync::Mutex;
 
 /// Standard gravity, for accelerometer columns in g.
 pub const STANDARD_GRAVITY_M_S2: f64 = 9.80665;
@@ -469,8 +470,10 @@ struct ParsedBlock {
 
 /// Parses a block of whole lines (on any thread): everything about each line that does not
 /// depend on the lines before it.
-fn parse_block(layout: &Layout, block: &[u8]) -> (ParsedBlock, u64) {
-    let mut items = Vec::with_capacity(block.len() / 40);
+/// `items` is an emptied list from an earlier block, if there is one (its memory is reused).
+fn parse_block(layout: &Layout, block: &[u8], mut items: Vec<Item>) -> (ParsedBlock, u64) {
+    items.clear();
+    items.reserve(block.len() / 40);
     let mut ids: SensorTable<u32> = SensorTable::new();
     let mut lines = 0;
     for (index, line) in lines_of(block) {
@@ -566,10 +569,13 @@ fn read_sized(
     let mut rows: u64 = 0;
     let mut reserved = size_hint == 0;
     let mut worst_norm_error: f64 = 0.0;
-    let merge = |first_line: u64, block: &[u8], parsed: ParsedBlock| -> Result<(), ReadError> {
+    // The blocks' item lists go round like their buffers: emptied by the merge, refilled by a
+    // worker (a raw log's list is over a megabyte, and fresh memory costs page faults).
+    let spare_items: Mutex<Vec<Vec<Item>>> = Mutex::new(Vec::new());
+    let merge = |first_line: u64, block: &[u8], mut parsed: ParsedBlock| -> Result<(), ReadError> {
         let mut known = vec![Known::Unknown; parsed.ids.len()];
         let raw = |(start, end): (u32, u32)| &block[start as usize..end as usize];
-        for item in parsed.items {
+        for item in parsed.items.drain(..) {
             match item {
                 Item::Comment { line, span } => {
                     let text = raw(span);
@@ -652,13 +658,19 @@ fn read_sized(
             }
         }
         bytes_before += block.len() as u64;
+        if let Ok(mut spare) = spare_items.lock() {
+            spare.push(parsed.items);
+        }
         Ok(())
     };
     parse_in_blocks(
         reader,
         pending,
         header_line + 1,
-        |block| parse_block(&layout, block),
+        |block| {
+            let items = spare_items.lock().ok().and_then(|mut spare| spare.pop());
+            parse_block(&layout, block, items.unwrap_or_default())
+        },
         merge,
     )
     .map_err(|e| match e {
