@@ -34,6 +34,7 @@
 
 use crate::rig::Rig;
 use nalgebra::{UnitQuaternion, Vector3};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -221,6 +222,52 @@ fn foot_points(
     }
 }
 
+/// Forward kinematics with the hips at the origin into the buffers (world rotations,
+/// positions); the lowest point's height (joints and end sites).
+fn pose_relative_to_hips(
+    rig: &Rig,
+    local: &[UnitQuaternion<f64>],
+    world: &mut Vec<UnitQuaternion<f64>>,
+    positions: &mut Vec<Vector3<f64>>,
+) -> f64 {
+    world.clear();
+    positions.clear();
+    let mut low = f64::INFINITY;
+    for (i, j) in rig.joints().iter().enumerate() {
+        let (q, p) = match j.parent {
+            Some(parent) => (
+                world[parent] * local[i],
+                positions[parent] + world[parent] * j.offset,
+            ),
+            None => (local[i], Vector3::zeros()),
+        };
+        low = low.min(p.y);
+        if let Some(e) = j.end_site {
+            low = low.min(p.y + (q * e).y);
+        }
+        world.push(q);
+        positions.push(p);
+    }
+    low
+}
+
+/// What feet mode needs of a pose: its lowest point's height relative to the hips (returned)
+/// and each foot's points (into `now`). Depends on this frame alone.
+fn measure_feet(
+    rig: &Rig,
+    feet: &[Foot; 2],
+    local: &[UnitQuaternion<f64>],
+    world: &mut Vec<UnitQuaternion<f64>>,
+    positions: &mut Vec<Vector3<f64>>,
+    now: &mut [Vec<Vector3<f64>>; 2],
+) -> f64 {
+    let body_low = pose_relative_to_hips(rig, local, world, positions);
+    for (foot, out) in feet.iter().zip(now.iter_mut()) {
+        foot_points(rig, foot, positions, world, out);
+    }
+    body_low
+}
+
 fn lowest(points: &[Vector3<f64>]) -> (usize, f64) {
     points
         .iter()
@@ -296,56 +343,42 @@ impl RootCore {
                 airborne: false,
             },
             RootMode::Ground => {
-                let low = self.pose_relative_to_hips(local);
-                RootFrame {
-                    position: Vector3::new(self.rest_root.x, self.floor - low, self.rest_root.z),
-                    contact: [false; 2],
-                    airborne: false,
-                }
+                let low =
+                    pose_relative_to_hips(&self.rig, local, &mut self.world, &mut self.positions);
+                self.step_ground(low)
             }
-            RootMode::Feet | RootMode::Auto => self.push_feet(local),
+            RootMode::Feet | RootMode::Auto => {
+                let feet = self.feet.as_ref().expect("feet mode has feet");
+                let body_low = measure_feet(
+                    &self.rig,
+                    feet,
+                    local,
+                    &mut self.world,
+                    &mut self.positions,
+                    &mut self.now,
+                );
+                let now = std::mem::take(&mut self.now);
+                let frame = self.step_feet(body_low, [&now[0], &now[1]]);
+                self.now = now;
+                frame
+            }
         }
     }
 
-    /// Forward kinematics with the hips at the origin into the buffers (world rotations,
-    /// positions); the lowest point's height (joints and end sites).
-    fn pose_relative_to_hips(&mut self, local: &[UnitQuaternion<f64>]) -> f64 {
-        self.world.clear();
-        self.positions.clear();
-        let mut low = f64::INFINITY;
-        for (i, j) in self.rig.joints().iter().enumerate() {
-            let (q, p) = match j.parent {
-                Some(parent) => (
-                    self.world[parent] * local[i],
-                    self.positions[parent] + self.world[parent] * j.offset,
-                ),
-                None => (local[i], Vector3::zeros()),
-            };
-            low = low.min(p.y);
-            if let Some(e) = j.end_site {
-                low = low.min(p.y + (q * e).y);
-            }
-            self.world.push(q);
-            self.positions.push(p);
+    /// Ground mode's frame from the pose's lowest point relative to the hips.
+    fn step_ground(&self, low: f64) -> RootFrame {
+        RootFrame {
+            position: Vector3::new(self.rest_root.x, self.floor - low, self.rest_root.z),
+            contact: [false; 2],
+            airborne: false,
         }
-        low
     }
 
-    fn push_feet(&mut self, local: &[UnitQuaternion<f64>]) -> RootFrame {
+    /// Feet mode's next frame from what [`measure_feet`] found of the pose: the lowest point's
+    /// height and each foot's points, relative to the hips.
+    fn step_feet(&mut self, body_low: f64, now: [&[Vector3<f64>]; 2]) -> RootFrame {
         let h = self.height;
-        let body_low = self.pose_relative_to_hips(local);
-        let feet = self.feet.as_ref().expect("feet mode has feet");
-        for (f, foot) in feet.iter().enumerate() {
-            foot_points(
-                &self.rig,
-                foot,
-                &self.positions,
-                &self.world,
-                &mut self.now[f],
-            );
-        }
-        let now = &self.now;
-        let low = [lowest(&now[0]), lowest(&now[1])];
+        let low = [lowest(now[0]), lowest(now[1])];
         let Some(state) = self.state.as_mut() else {
             // The first frame: the body stands on the floor where the rest pose stood.
             let hips = Vector3::new(self.rest_root.x, self.floor - body_low, self.rest_root.z);
@@ -354,7 +387,7 @@ impl RootCore {
                 [0, 1].map(|f| self.floor - body_low + low[f].1 <= self.floor + PLANT_H * h);
             self.state = Some(FeetState {
                 hips,
-                previous: now.clone(),
+                previous: now.map(<[Vector3<f64>]>::to_vec),
                 level: [self.floor; 2],
                 rising: 0,
                 dominant: usize::from(w_left < 0.5),
@@ -552,19 +585,87 @@ pub fn root_positions(
     if core.mode() == RootMode::Fixed {
         return (vec![rig.joints()[0].offset; frames], None);
     }
-    let mut pose = vec![UnitQuaternion::identity(); rig.len()];
+    // What each frame's pose says (forward kinematics: the frame's own business) on every core,
+    // in blocks of frames; then the core steps through the frames in order.
+    let block = frames.div_ceil(4 * rayon::current_num_threads()).max(1);
+    let starts: Vec<usize> = (0..frames).step_by(block).collect();
+    let measured: Vec<Measured> = starts
+        .into_par_iter()
+        .map(|start| measure_frames(&core, local, start..(start + block).min(frames)))
+        .collect();
     let mut out = Vec::with_capacity(frames);
     let mut all = Vec::with_capacity(frames);
-    for n in 0..frames {
-        for (q, track) in pose.iter_mut().zip(local) {
-            *q = track[n];
+    for m in &measured {
+        for (i, &low) in m.low.iter().enumerate() {
+            let f = match &m.points {
+                None => core.step_ground(low),
+                Some(([left, right], per_foot)) => core.step_feet(
+                    low,
+                    [
+                        &left[i * per_foot[0]..(i + 1) * per_foot[0]],
+                        &right[i * per_foot[1]..(i + 1) * per_foot[1]],
+                    ],
+                ),
+            };
+            out.push(f.position);
+            all.push(f);
         }
-        let f = core.push(&pose);
-        out.push(f.position);
-        all.push(f);
     }
     let contacts = (core.mode() == RootMode::Feet).then(|| Contacts::from_frames(&all));
     (out, contacts)
+}
+
+/// A block of frames as [`measure_feet`] (feet mode) or [`pose_relative_to_hips`] (ground mode)
+/// saw them: each frame's lowest point, and in feet mode each foot's points, frame after frame
+/// (a foot has the same number of points in every frame).
+struct Measured {
+    low: Vec<f64>,
+    points: Option<([Vec<Vector3<f64>>; 2], [usize; 2])>,
+}
+
+fn measure_frames(
+    core: &RootCore,
+    local: &[Vec<UnitQuaternion<f64>>],
+    frames: std::ops::Range<usize>,
+) -> Measured {
+    let rig = &core.rig;
+    let mut pose = vec![UnitQuaternion::identity(); rig.len()];
+    let (mut world, mut positions) = (Vec::new(), Vec::new());
+    let mut now = [Vec::new(), Vec::new()];
+    let mut low = Vec::with_capacity(frames.len());
+    let mut points = [Vec::new(), Vec::new()];
+    let feet = core.feet.as_ref().filter(|_| core.mode == RootMode::Feet);
+    for n in frames {
+        for (q, track) in pose.iter_mut().zip(local) {
+            *q = track[n];
+        }
+        match feet {
+            Some(feet) => {
+                low.push(measure_feet(
+                    rig,
+                    feet,
+                    &pose,
+                    &mut world,
+                    &mut positions,
+                    &mut now,
+                ));
+                for (all, foot) in points.iter_mut().zip(&now) {
+                    all.extend_from_slice(foot);
+                }
+            }
+            None => low.push(pose_relative_to_hips(
+                rig,
+                &pose,
+                &mut world,
+                &mut positions,
+            )),
+        }
+    }
+    let per_foot = [now[0].len(), now[1].len()];
+    Measured {
+        low,
+        points: feet.map(|_| (points, per_foot)),
+    }
 }
 
 #[cfg(test)]
