@@ -597,9 +597,12 @@ pub fn root_positions(
     let mut all = Vec::with_capacity(frames);
     for m in &measured {
         for (i, &low) in m.low.iter().enumerate() {
-            let f = match &m.points {
+            let f = match &m.feet {
                 None => core.step_ground(low),
-                Some(([left, right], per_foot)) => core.step_feet(
+                Some(FeetPoints {
+                    points: [left, right],
+                    per_foot,
+                }) => core.step_feet(
                     low,
                     [
                         &left[i * per_foot[0]..(i + 1) * per_foot[0]],
@@ -620,7 +623,13 @@ pub fn root_positions(
 /// (a foot has the same number of points in every frame).
 struct Measured {
     low: Vec<f64>,
-    points: Option<([Vec<Vector3<f64>>; 2], [usize; 2])>,
+    feet: Option<FeetPoints>,
+}
+
+/// Each foot's points, frame after frame, and how many a frame has.
+struct FeetPoints {
+    points: [Vec<Vector3<f64>>; 2],
+    per_foot: [usize; 2],
 }
 
 fn measure_frames(
@@ -664,7 +673,7 @@ fn measure_frames(
     let per_foot = [now[0].len(), now[1].len()];
     Measured {
         low,
-        points: feet.map(|_| (points, per_foot)),
+        feet: feet.map(|_| FeetPoints { points, per_foot }),
     }
 }
 
