@@ -11,7 +11,7 @@
 use crate::rotation::{make_hemisphere_continuous, slerp_shortest};
 use crate::smooth::Method;
 use crate::smooth::butterworth::{
-    design_lowpass_sos, sosfilt_step, sosfilt_with_state, sosfilt_zi, sosfiltfilt,
+    Sos, design_lowpass_sos, sosfilt_step, sosfilt_with_state, sosfilt_zi, sosfiltfilt,
     sosfiltfilt_lanes,
 };
 use crate::smooth::fft::{FftOptions, fft_filter};
@@ -35,8 +35,7 @@ pub fn smooth_series(x: &[f64], rate_hz: f64, method: &Method) -> Result<Vec<f64
             cutoff_hz,
             causal,
         } => {
-            let sos = design_lowpass_sos(*order, *cutoff_hz, rate_hz)
-                .map_err(|e| Unsmoothed(format!("{method} at {rate_hz:.1} Hz: {e}")))?;
+            let sos = butterworth_sos(*order, *cutoff_hz, rate_hz, method)?;
             if *causal {
                 // From the steady state of the first sample, as a live filter that has been
                 // running would be: from a zero state every track would start at zero.
@@ -167,6 +166,17 @@ pub fn smooth_quaternions_with(
     Ok(())
 }
 
+/// The sections of `method`'s Butterworth low-pass at `rate_hz`, or why there are none.
+fn butterworth_sos(
+    order: usize,
+    cutoff_hz: f64,
+    rate_hz: f64,
+    method: &Method,
+) -> Result<Vec<Sos>, Unsmoothed> {
+    design_lowpass_sos(order, cutoff_hz, rate_hz)
+        .map_err(|e| Unsmoothed(format!("{method} at {rate_hz:.1} Hz: {e}")))
+}
+
 /// Filters four interleaved series sampled uniformly at `rate_hz`, in place: zero-phase
 /// Butterworth (the default) on all four at once, any other method one series at a time.
 fn filter_lanes(
@@ -181,8 +191,7 @@ fn filter_lanes(
             cutoff_hz,
             causal: false,
         } if *cutoff_hz < rate_hz / 2.0 => {
-            let sos = design_lowpass_sos(*order, *cutoff_hz, rate_hz)
-                .map_err(|e| Unsmoothed(format!("{method} at {rate_hz:.1} Hz: {e}")))?;
+            let sos = butterworth_sos(*order, *cutoff_hz, rate_hz, method)?;
             sosfiltfilt_lanes(&sos, x, padded)
                 .map_err(|(_, e)| Unsmoothed(format!("{method}: {e}")))
         }
