@@ -278,19 +278,17 @@ impl Layout {
         Ok(layout)
     }
 
-    /// The columns [`parse_row`] reads numbers from (those of `row_values` and the time), the
-    /// sensor's, and the rest.
+    /// The columns [`parse_row`] reads numbers from (the time, and those `row_values` asks
+    /// for: found by asking it), the sensor's, and the rest.
     fn roles(&self) -> Vec<Role> {
         let mut roles = vec![Role::Skipped; self.columns];
         roles[self.sensor] = Role::Sensor;
-        let mut numbers = vec![self.time];
-        numbers.extend(self.quaternion.into_iter().flatten());
-        numbers.extend(self.ypr.into_iter().flatten());
-        if let (Some((g, _)), Some((a, _))) = (self.gyro, self.accel) {
-            numbers.extend(g.into_iter().chain(a));
-        }
-        numbers.extend(self.mag.into_iter().flat_map(|(m, _)| m));
-        for column in numbers {
+        let read = std::cell::RefCell::new(vec![self.time]);
+        let Ok(_) = row_values(self, |column| {
+            read.borrow_mut().push(column);
+            Ok::<f64, Infallible>(0.0)
+        });
+        for column in read.into_inner() {
             roles[column] = Role::Number;
         }
         roles
