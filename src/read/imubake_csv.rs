@@ -650,7 +650,7 @@ fn read_sized(
                         let bytes_per_row = consumed as f64 / line_no as f64;
                         let expected_rows = size_hint as f64 / bytes_per_row;
                         let per_sensor = expected_rows / take.sensor_count() as f64 * 1.02;
-                        take.reserve_orientation(per_sensor as usize);
+                        take.reserve(per_sensor as usize);
                     }
                 }
             }

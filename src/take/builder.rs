@@ -397,12 +397,21 @@ impl TakeBuilder {
         self.sensors.len()
     }
 
-    /// Reserves room for `additional` more samples in every orientation stream (readers that can
-    /// estimate their row count use it to avoid growth spikes on large logs).
-    pub fn reserve_orientation(&mut self, additional: usize) {
+    /// Reserves room for `additional` more samples in every stream that already holds samples
+    /// (readers that can estimate their row count call it after their first rows: a growing
+    /// stream of a large log would otherwise copy itself and touch fresh memory at each doubling).
+    pub fn reserve(&mut self, additional: usize) {
+        fn reserve<T>(stream: &mut Stream<T>, additional: usize) {
+            if !stream.values.is_empty() {
+                stream.raw_times.reserve(additional);
+                stream.values.reserve(additional);
+            }
+        }
         for s in &mut self.sensors {
-            s.orientation_q.raw_times.reserve(additional);
-            s.orientation_q.values.reserve(additional);
+            reserve(&mut s.orientation_q, additional);
+            reserve(&mut s.orientation_ypr, additional);
+            reserve(&mut s.inertial, additional);
+            reserve(&mut s.magnetometer, additional);
         }
     }
 
