@@ -379,16 +379,22 @@ pub struct FusionStats {
 /// A filter's outputs at each step.
 struct Run {
     orientation: Vec<UnitQuaternion<f64>>,
-    bias: Vec<Option<Vector3<f64>>>,
+    bias: StepBias,
     rejected: Vec<Rejected>,
 }
 
-impl Run {
-    fn with_capacity(n: usize) -> Run {
-        Run {
-            orientation: Vec::with_capacity(n),
-            bias: Vec::with_capacity(n),
-            rejected: Vec::with_capacity(n),
+/// The gyro bias at each step, as the filter gave it (no copy of the offline fusion's).
+enum StepBias {
+    /// An online core's, where it estimates one.
+    Online(Vec<Option<Vector3<f64>>>),
+    Offline(Vec<Vector3<f64>>),
+}
+
+impl StepBias {
+    fn at(&self, k: usize) -> Option<Vector3<f64>> {
+        match self {
+            StepBias::Online(b) => b[k],
+            StepBias::Offline(b) => Some(b[k]),
         }
     }
 }
@@ -413,11 +419,11 @@ pub(crate) fn median(mut v: Vec<f64>) -> f64 {
 /// or another scale) are errors; a gyro that sits at its limit is a warning.
 fn check_units(sensor: &str, inertial: &Track<ImuSample>) -> Result<Vec<String>, FusionError> {
     let mut warnings = Vec::new();
-    let max_rate = inertial
-        .values()
-        .iter()
-        .flat_map(|s| s.gyro_rad_s.iter().copied())
-        .fold(0.0f64, |m, w| m.max(w.abs()));
+    // Each axis's largest magnitude, in one pass.
+    let peaks = inertial.values().iter().fold([0.0f64; 3], |m, s| {
+        std::array::from_fn(|axis| m[axis].max(s.gyro_rad_s[axis].abs()))
+    });
+    let max_rate = peaks[0].max(peaks[1]).max(peaks[2]);
     if max_rate > 35.0 {
         return Err(FusionError::GyroUnits {
             sensor: sensor.to_string(),
@@ -449,17 +455,17 @@ fn check_units(sensor: &str, inertial: &Track<ImuSample>) -> Result<Vec<String>,
         });
     }
     // A saturated axis: many readings at exactly the largest magnitude on that axis.
-    for axis in 0..3 {
-        let peak = inertial
-            .values()
-            .iter()
-            .map(|s| s.gyro_rad_s[axis].abs())
-            .fold(0.0f64, f64::max);
-        let at_peak = inertial
-            .values()
-            .iter()
-            .filter(|s| peak > 1.0 && s.gyro_rad_s[axis].abs() == peak)
-            .count();
+    let at_peaks = if peaks.iter().any(|&p| p > 1.0) {
+        inertial.values().iter().fold([0usize; 3], |n, s| {
+            std::array::from_fn(|axis| {
+                let peak = peaks[axis];
+                n[axis] + usize::from(peak > 1.0 && s.gyro_rad_s[axis].abs() == peak)
+            })
+        })
+    } else {
+        [0; 3]
+    };
+    for (axis, (&peak, &at_peak)) in peaks.iter().zip(&at_peaks).enumerate() {
         if at_peak >= 5 {
             warnings.push(format!(
                 "sensor `{sensor}`: the gyroscope's {} axis sits at {:.0} °/s on {at_peak} samples: \
@@ -622,7 +628,7 @@ pub fn fuse(
             let r = offline::fuse_offline(&steps, nominal_dt, nine_d, &params);
             Run {
                 orientation: r.orientation,
-                bias: r.bias.into_iter().map(Some).collect(),
+                bias: StepBias::Offline(r.bias),
                 rejected: r
                     .magnetic_disturbance
                     .into_iter()
@@ -641,35 +647,48 @@ pub fn fuse(
                 }
             })?;
             let mut core = fusion.core(q0, nominal_dt, nine_d);
-            let mut run = Run::with_capacity(steps.len());
+            let n = steps.len();
+            let (mut orientation, mut bias, mut rejected) = (
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+                Vec::with_capacity(n),
+            );
             for s in &steps {
                 core.update(&s.gyr, &s.acc, s.mag.as_ref(), s.dt);
-                run.orientation.push(core.orientation());
-                run.bias.push(core.gyro_bias());
-                run.rejected.push(core.rejected());
+                orientation.push(core.orientation());
+                bias.push(core.gyro_bias());
+                rejected.push(core.rejected());
             }
-            run
+            Run {
+                orientation,
+                bias: StepBias::Online(bias),
+                rejected,
+            }
         }
     };
     // What the track's own samples came to.
-    let mut out = Vec::with_capacity(inertial.len());
     let (mut mag_rejected, mut acc_rejected) = (0usize, 0usize);
     let mut series = Vec::new();
     let mut next_series_t = f64::NEG_INFINITY;
     let mut last_bias = None;
     let kept = (0..steps.len()).filter(|k| real[*k]);
-    for ((k, t), _) in kept.zip(times).zip(0..) {
-        out.push(run.orientation[k]);
+    for ((k, t), _) in kept.clone().zip(times).zip(0..) {
         let rejected = run.rejected[k];
         mag_rejected += usize::from(rejected.magnetic);
         acc_rejected += usize::from(rejected.acceleration);
-        last_bias = run.bias[k];
+        last_bias = run.bias.at(k);
         if *t >= next_series_t {
-            let bias = run.bias[k].map_or(0.0, |b| b.norm().to_degrees());
+            let bias = last_bias.map_or(0.0, |b| b.norm().to_degrees());
             series.push((*t, bias, rejected.magnetic, rejected.acceleration));
             next_series_t = t + 0.1;
         }
     }
+    // Without filled-in steps, every step is a sample: the run's orientations are the track's.
+    let out = if filled == 0 {
+        run.orientation
+    } else {
+        kept.map(|k| run.orientation[k]).collect()
+    };
     let n = inertial.len() as f64;
     let stats = FusionStats {
         variant: if nine_d { "9d" } else { "6d" },
@@ -789,7 +808,8 @@ mod tests {
 
     #[test]
     fn a_saturated_gyro_and_a_dead_magnetometer_are_warnings() {
-        // 20 samples, the gyro's x pinned at 2000 °/s on eight of them.
+        // 20 samples, the gyro's x pinned at 2000 °/s on eight of them, its z at −1000 °/s on
+        // six, its y reaching 1000 °/s once.
         let limit = 2000f64.to_radians();
         let samples: Vec<ImuSample> = (0..20)
             .map(|i| ImuSample {
@@ -799,8 +819,12 @@ mod tests {
                     } else {
                         0.1 * i as f64
                     },
-                    0.0,
-                    0.0,
+                    if i == 3 { limit / 2.0 } else { 0.0 },
+                    if (10..16).contains(&i) {
+                        -limit / 2.0
+                    } else {
+                        0.0
+                    },
                 ),
                 accel_m_s2: Vector3::new(0.0, 0.0, G),
             })
@@ -815,6 +839,11 @@ mod tests {
             text.contains("sensor `wrist`: the gyroscope's x axis sits at 2000 °/s on 8 samples"),
             "{text}"
         );
+        assert!(
+            text.contains("sensor `wrist`: the gyroscope's z axis sits at 1000 °/s on 6 samples"),
+            "{text}"
+        );
+        assert!(!text.contains("y axis"), "{text}");
         assert!(
             text.contains("sensor `wrist`: the magnetometer reads nothing"),
             "{text}"

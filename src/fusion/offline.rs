@@ -307,9 +307,11 @@ pub fn fuse_offline(
     let mut averaged = acc_inertial;
     lowpass_both_ways(&mut averaged, params.tau_acc, ts, at_start, at_end);
     let mut correction = UnitQuaternion::identity();
-    // q₆ in place of q₃.
+    // q₆ in place of q₃; in 9D, each field in that frame measured beside it (the correction is
+    // one long chain of dependent steps, which leaves the core room for the field's own work).
+    let mut fields: Vec<Option<Field>> = Vec::with_capacity(if nine_d { n } else { 0 });
     let mut q6 = q3;
-    for (q, a) in q6.iter_mut().zip(&averaged) {
+    for ((q, a), s) in q6.iter_mut().zip(&averaged).zip(steps) {
         *q = {
             let up = (correction * a)
                 .try_normalize(1e-12)
@@ -329,6 +331,9 @@ pub fn fuse_offline(
             correction = step * correction;
             correction * *q
         };
+        if nine_d {
+            fields.push(s.mag.and_then(|m| Field::of(*q * m)));
+        }
     }
     drop(averaged);
     if !nine_d {
@@ -342,32 +347,18 @@ pub fn fuse_offline(
 
     // 4. Heading offset, filtered forward and smoothed backward, from the samples whose field
     // is the take's own (disturbances found with hindsight).
-    let field: Vec<Option<Vector3<f64>>> = steps
-        .iter()
-        .zip(&q6)
-        .map(|(s, q)| s.mag.map(|m| q * m).filter(|m| m.x != 0.0 || m.y != 0.0))
-        .collect();
-    let disturbed = disturbances(&field);
-    let measurements: Vec<Option<(f64, f64)>> = field
-        .iter()
-        .enumerate()
-        .map(|(i, m)| {
-            let m = (*m)?;
-            if disturbed[i] {
-                return None;
-            }
-            let sigma = if rest[i] {
-                params.rest_deg
-            } else {
-                params.motion_deg
-            };
-            Some((m.x.atan2(m.y), sigma.to_radians().powi(2)))
-        })
-        .collect();
-    drop(field);
+    let disturbed = disturbances(&fields);
+    let (rest_var, motion_var) = (
+        params.rest_deg.to_radians().powi(2),
+        params.motion_deg.to_radians().powi(2),
+    );
+    let measurement = |i: usize| {
+        let f = fields[i].as_ref().filter(|_| !disturbed[i])?;
+        Some((f.heading, if rest[i] { rest_var } else { motion_var }))
+    };
     let drift = params.drift.to_radians().powi(2);
-    let delta = smooth_heading(&measurements, steps, drift);
-    drop(measurements);
+    let delta = smooth_heading(n, measurement, steps, drift);
+    drop(fields);
     // q₉ in place of q₆.
     let mut orientation = q6;
     for (q, d) in orientation.iter_mut().zip(&delta) {
@@ -381,6 +372,26 @@ pub fn fuse_offline(
     }
 }
 
+/// The field in the inclination-corrected frame, as the heading step uses it.
+struct Field {
+    /// `atan2(mₓ, m_y)`: the field's heading, radians.
+    heading: f64,
+    norm: f64,
+    /// `asin(m_z / |m|)`, radians.
+    dip: f64,
+}
+
+impl Field {
+    /// `None` for a field with no horizontal part (no heading).
+    fn of(m: Vector3<f64>) -> Option<Field> {
+        (m.x != 0.0 || m.y != 0.0).then(|| Field {
+            heading: m.x.atan2(m.y),
+            norm: m.norm(),
+            dip: (m.z / m.norm()).asin(),
+        })
+    }
+}
+
 /// The relative change of the field's norm, and the change of its dip, beyond which a sample's
 /// field is not the take's own (VQF's thresholds for the same test).
 pub const DISTURBED_NORM: f64 = 0.1;
@@ -390,24 +401,19 @@ pub const DISTURBED_DIP_DEG: f64 = 10.0;
 /// the take's median by more than [`DISTURBED_NORM`] or [`DISTURBED_DIP_DEG`]. Seen over the
 /// whole take, a disturbance is bounded from both ends, and no reference has to be accepted
 /// first (VQF online holds every field for disturbed until it has turned for about 5 s).
-fn disturbances(field: &[Option<Vector3<f64>>]) -> Vec<bool> {
-    // Norm and dip of each field, once.
-    let measured: Vec<Option<(f64, f64)>> = field
-        .iter()
-        .map(|m| m.map(|m| (m.norm(), (m.z / m.norm()).asin())))
-        .collect();
-    let norms: Vec<f64> = measured.iter().flatten().map(|m| m.0).collect();
+fn disturbances(fields: &[Option<Field>]) -> Vec<bool> {
+    let norms: Vec<f64> = fields.iter().flatten().map(|f| f.norm).collect();
     if norms.is_empty() {
-        return vec![false; field.len()];
+        return vec![false; fields.len()];
     }
     let norm = super::median(norms);
-    let dip = super::median(measured.iter().flatten().map(|m| m.1).collect());
-    measured
+    let dip = super::median(fields.iter().flatten().map(|f| f.dip).collect());
+    fields
         .iter()
-        .map(|m| {
-            m.is_some_and(|(n, d)| {
-                (n - norm).abs() > DISTURBED_NORM * norm
-                    || (d - dip).abs() > DISTURBED_DIP_DEG.to_radians()
+        .map(|f| {
+            f.as_ref().is_some_and(|f| {
+                (f.norm - norm).abs() > DISTURBED_NORM * norm
+                    || (f.dip - dip).abs() > DISTURBED_DIP_DEG.to_radians()
             })
         })
         .collect()
@@ -483,15 +489,20 @@ fn wrap(a: f64) -> f64 {
 /// A scalar random walk `δ` (process noise `drift · Δt`) seen through angle measurements with
 /// variances: a Kalman filter forward, a Rauch–Tung–Striebel pass backward; innovations wrapped.
 /// Before the first measurement the estimate is its value; without any, 0.
-fn smooth_heading(measurements: &[Option<(f64, f64)>], steps: &[Step], drift: f64) -> Vec<f64> {
-    let n = measurements.len();
-    let Some(first) = measurements.iter().flatten().next() else {
+fn smooth_heading(
+    n: usize,
+    measurement: impl Fn(usize) -> Option<(f64, f64)>,
+    steps: &[Step],
+    drift: f64,
+) -> Vec<f64> {
+    let Some(first) = (0..n).find_map(&measurement) else {
         return vec![0.0; n];
     };
     let (mut x, mut p) = (first.0, first.1);
     let mut filtered = Vec::with_capacity(n);
     let mut predicted_p = Vec::with_capacity(n);
-    for (i, m) in measurements.iter().enumerate() {
+    for i in 0..n {
+        let m = measurement(i);
         if i > 0 {
             p += drift * steps[i].dt;
         }
@@ -624,7 +635,7 @@ mod tests {
                 }
             })
             .collect();
-        let d = smooth_heading(&m, &steps, 0.02f64.to_radians().powi(2));
+        let d = smooth_heading(m.len(), |i| m[i], &steps, 0.02f64.to_radians().powi(2));
         assert!(
             d.iter().all(|x| (x - 0.3).abs() < 0.01),
             "{:?}",
@@ -634,7 +645,7 @@ mod tests {
         let m: Vec<Option<(f64, f64)>> = (0..1000)
             .map(|i| Some((if i % 2 == 0 { 3.1 } else { -3.1 }, 0.01)))
             .collect();
-        let d = smooth_heading(&m, &steps, 1e-6);
+        let d = smooth_heading(m.len(), |i| m[i], &steps, 1e-6);
         assert!(d.iter().all(|x| x.abs() > 3.0), "{:?}", &d[..4]);
     }
 
