@@ -501,10 +501,10 @@ fn smooth_heading(
     let (mut x, mut p) = (first.0, first.1);
     let mut filtered = Vec::with_capacity(n);
     let mut predicted_p = Vec::with_capacity(n);
-    for i in 0..n {
+    for (i, step) in steps[..n].iter().enumerate() {
         let m = measurement(i);
         if i > 0 {
-            p += drift * steps[i].dt;
+            p += drift * step.dt;
         }
         predicted_p.push(p);
         if let Some((z, r)) = m {
