@@ -12,15 +12,12 @@ pub fn bone_world(
     tracks: Vec<Track<UnitQuaternion<f64>>>,
     calibration: &Calibration,
 ) -> Vec<Track<UnitQuaternion<f64>>> {
-    tracks
-        .into_iter()
-        .enumerate()
-        .map(|(i, t)| {
-            let world_side = calibration.heading * calibration.align[i];
-            let inv = calibration.mounts[i].inverse();
-            t.map_in_place(|q| world_side * q * inv)
-        })
-        .collect()
+    // Each track on its own: spread over the cores.
+    super::parallel_map(tracks.into_iter().enumerate().collect(), |(i, t)| {
+        let world_side = calibration.heading * calibration.align[i];
+        let inv = calibration.mounts[i].inverse();
+        t.map_in_place(|q| world_side * q * inv)
+    })
 }
 
 /// [`bone_world`] for a take recalibrated live: `later` holds each recalibration's time from
