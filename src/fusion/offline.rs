@@ -486,9 +486,10 @@ fn wrap(a: f64) -> f64 {
     }
 }
 
-/// A scalar random walk `δ` (process noise `drift · Δt`) seen through angle measurements with
-/// variances: a Kalman filter forward, a Rauch–Tung–Striebel pass backward; innovations wrapped.
-/// Before the first measurement the estimate is its value; without any, 0.
+/// A scalar random walk `δ` (process noise `drift · Δt`) over the first `n` steps, seen through
+/// angle measurements with variances (`measurement(i)`: step i's, if it has one): a Kalman filter
+/// forward, a Rauch–Tung–Striebel pass backward; innovations wrapped. Before the first
+/// measurement the estimate is its value; without any, 0.
 fn smooth_heading(
     n: usize,
     measurement: impl Fn(usize) -> Option<(f64, f64)>,
