@@ -266,8 +266,9 @@ fn vqf_passes(steps: &[Step], ts: f64, params: &OfflineParams) -> (Vec<Vector3<f
 /// The bias passes' sampling period, seconds (about 25 Hz). Measured with the passes forced on
 /// BROAD's three trials (their rest set aside) and on a simulated walk without rest: 25 Hz and
 /// 50 Hz agree within 0.003° of RMS error, 10 Hz loses 0.005–0.04°; on the x-io lower-body take
-/// (50 Hz, forced too) 25 Hz keeps every leg within 0.002° of the bias its rest gives, where
-/// passes at the full 50 Hz put one shank 6.6° off.
+/// (50 Hz, forced too) 25 Hz keeps pelvis, thighs and shanks within 0.002° of what the take's
+/// rest gives (the feet within 0.3–0.65°, as at 50 Hz), where passes at the full 50 Hz put one
+/// shank 6.6° off.
 const PASS_PERIOD_S: f64 = 0.04;
 
 /// Fuses `steps` (sampled every `ts` seconds nominally) offline; `nine_d` uses the magnetometer.
