@@ -68,24 +68,23 @@ pub fn to_glb_from(
     let (head, chunk) = to_glb_parts(anim, name, first_frame)?;
     let mut out = Vec::with_capacity(head.len() + chunk.len());
     out.extend_from_slice(&head);
-    out.extend_from_slice(&chunk);
+    chunk.write_to(&mut out).expect("writing to memory");
     Ok(out)
 }
 
 /// [`to_glb`] in two parts, to be written one after the other without assembling them in memory
 /// (a long take's buffer is tens of megabytes): the header, the JSON chunk (padded with spaces)
-/// and the BIN chunk's header; then the BIN chunk's bytes (padded with zeros), empty when there
-/// is no buffer.
-pub fn to_glb_parts(
-    anim: &Animation,
+/// and the BIN chunk's header; then the BIN chunk (padded with zeros; empty when there is no
+/// buffer), whose rotation keys are made as it is written ([`Buffer::write_to`]).
+pub fn to_glb_parts<'a>(
+    anim: &'a Animation,
     name: &str,
     first_frame: u64,
-) -> Result<(Vec<u8>, Vec<u8>), GltfWriteError> {
-    let (doc, bin) = document(anim, name, None, first_frame)?;
+) -> Result<(Vec<u8>, Buffer<'a>), GltfWriteError> {
+    let (doc, mut chunk) = document(anim, name, None, first_frame)?;
     let mut json = serde_json::to_vec(&doc)?;
     pad_to_4(&mut json, b' ');
-    let mut chunk = bin;
-    pad_to_4(&mut chunk, 0);
+    chunk.pad();
     let total = 12
         + 8
         + json.len() as u64
@@ -122,7 +121,7 @@ pub fn to_gltf(
     let (doc, bin) = document(anim, name, Some(uri_encode(bin_file_name)), 0)?;
     let mut json = serde_json::to_string_pretty(&doc)?;
     json.push('\n');
-    Ok((json, bin))
+    Ok((json, bin.to_vec()))
 }
 
 fn pad_to_4(bytes: &mut Vec<u8>, with: u8) {
@@ -144,24 +143,102 @@ fn uri_encode(name: &str) -> String {
     out
 }
 
-/// The binary buffer being assembled: every view starts on a 4-byte boundary.
-struct Bin {
-    data: Vec<u8>,
+/// The binary buffer as it is laid out, every view on a 4-byte boundary. Small views' bytes are
+/// held; a rotation channel's keys (a long take's are most of the buffer: 16 bytes per joint per
+/// frame) are only counted, and made when the buffer is written, a few joints at a time on every
+/// core, so the whole buffer is never in memory at once.
+pub struct Buffer<'a> {
+    len: usize,
+    parts: Vec<Part<'a>>,
 }
 
-impl Bin {
+enum Part<'a> {
+    Bytes(Vec<u8>),
+    /// A joint's local rotations, written as [`rotation_key_bytes`].
+    Keys(&'a [UnitQuaternion<f64>]),
+}
+
+impl<'a> Buffer<'a> {
+    fn new() -> Buffer<'a> {
+        Buffer {
+            len: 0,
+            parts: Vec::new(),
+        }
+    }
+
+    /// Its length in bytes.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Zeros up to the next 4-byte boundary.
+    fn pad(&mut self) {
+        let pad = self.len.next_multiple_of(4) - self.len;
+        if pad > 0 {
+            self.push(Part::Bytes(vec![0; pad]), pad);
+        }
+    }
+
+    /// Appends `part` of `len` bytes; where it starts.
+    fn push(&mut self, part: Part<'a>, len: usize) -> usize {
+        let offset = self.len;
+        self.parts.push(part);
+        self.len += len;
+        offset
+    }
+
+    /// Writes the buffer's bytes: the held ones as they are, the rotation keys made on every core
+    /// a few joints at a time (so that only those are held) and written in order.
+    pub fn write_to(&self, w: &mut dyn std::io::Write) -> std::io::Result<()> {
+        let threads = rayon::current_num_threads().max(1);
+        let mut parts = self.parts.iter().peekable();
+        while let Some(part) = parts.next() {
+            match part {
+                Part::Bytes(bytes) => w.write_all(bytes)?,
+                Part::Keys(first) => {
+                    let mut group = vec![*first];
+                    while group.len() < threads
+                        && let Some(Part::Keys(next)) = parts.peek()
+                    {
+                        group.push(*next);
+                        parts.next();
+                    }
+                    let keys: Vec<Vec<u8>> = group
+                        .par_iter()
+                        .map(|track| rotation_key_bytes(track))
+                        .collect();
+                    for bytes in keys {
+                        w.write_all(&bytes)?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The buffer's bytes in memory.
+    pub fn to_vec(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.len);
+        self.write_to(&mut out).expect("writing to memory");
+        out
+    }
+
     fn view(
         &mut self,
         root: &mut json::Root,
-        bytes: &[u8],
+        part: Part<'a>,
+        len: usize,
         target: Option<json::buffer::Target>,
     ) -> json::Index<json::buffer::View> {
-        pad_to_4(&mut self.data, 0);
-        let offset = self.data.len();
-        self.data.extend_from_slice(bytes);
+        self.pad();
+        let offset = self.push(part, len);
         root.push(json::buffer::View {
             buffer: json::Index::new(0),
-            byte_length: USize64::from(bytes.len()),
+            byte_length: USize64::from(len),
             byte_offset: Some(USize64::from(offset)),
             byte_stride: None,
             target: target.map(Valid),
@@ -176,14 +253,39 @@ impl Bin {
     fn accessor(
         &mut self,
         root: &mut json::Root,
-        bytes: &[u8],
+        bytes: Vec<u8>,
         count: usize,
         component: json::accessor::ComponentType,
         type_: json::accessor::Type,
         target: Option<json::buffer::Target>,
         min_max: Option<(Value, Value)>,
     ) -> json::Index<json::Accessor> {
-        let view = self.view(root, bytes, target);
+        let len = bytes.len();
+        self.accessor_of(
+            root,
+            Part::Bytes(bytes),
+            len,
+            count,
+            component,
+            type_,
+            target,
+            min_max,
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn accessor_of(
+        &mut self,
+        root: &mut json::Root,
+        part: Part<'a>,
+        len: usize,
+        count: usize,
+        component: json::accessor::ComponentType,
+        type_: json::accessor::Type,
+        target: Option<json::buffer::Target>,
+        min_max: Option<(Value, Value)>,
+    ) -> json::Index<json::Accessor> {
+        let view = self.view(root, part, len, target);
         let (min, max) = match min_max {
             Some((min, max)) => (Some(min), Some(max)),
             None => (None, None),
@@ -355,12 +457,12 @@ fn strictly_increasing(times: &[f32]) -> Result<(), GltfWriteError> {
 }
 
 /// The glTF document and its binary buffer.
-fn document(
-    anim: &Animation,
+fn document<'a>(
+    anim: &'a Animation,
     name: &str,
     buffer_uri: Option<String>,
     first_frame: u64,
-) -> Result<(json::Root, Vec<u8>), GltfWriteError> {
+) -> Result<(json::Root, Buffer<'a>), GltfWriteError> {
     use json::accessor::{ComponentType as C, Type as T};
     use json::buffer::Target;
 
@@ -381,7 +483,7 @@ fn document(
         },
         ..Default::default()
     };
-    let mut bin = Bin { data: Vec::new() };
+    let mut bin = Buffer::new();
 
     // Joint nodes: node i is joint i.
     for (j, joint) in joints.iter().enumerate() {
@@ -411,7 +513,7 @@ fn document(
         .collect();
     let ibm = bin.accessor(
         &mut root,
-        &f32_bytes(ibm),
+        f32_bytes(ibm),
         joints.len(),
         C::F32,
         T::Mat4,
@@ -432,7 +534,7 @@ fn document(
     let count = mesh.positions.len();
     let position = bin.accessor(
         &mut root,
-        &f32_bytes(mesh.positions.iter().flatten().copied()),
+        f32_bytes(mesh.positions.iter().flatten().copied()),
         count,
         C::F32,
         T::Vec3,
@@ -441,7 +543,7 @@ fn document(
     );
     let normal = bin.accessor(
         &mut root,
-        &f32_bytes(mesh.normals.iter().flatten().copied()),
+        f32_bytes(mesh.normals.iter().flatten().copied()),
         count,
         C::F32,
         T::Vec3,
@@ -468,7 +570,7 @@ fn document(
     };
     let joint_acc = bin.accessor(
         &mut root,
-        &joint_bytes,
+        joint_bytes,
         count,
         joint_type,
         T::Vec4,
@@ -478,7 +580,7 @@ fn document(
     let weights = f32_bytes((0..count).flat_map(|_| [1.0, 0.0, 0.0, 0.0]));
     let weight_acc = bin.accessor(
         &mut root,
-        &weights,
+        weights,
         count,
         C::F32,
         T::Vec4,
@@ -499,7 +601,7 @@ fn document(
     };
     let indices = bin.accessor(
         &mut root,
-        &index_bytes,
+        index_bytes,
         count,
         index_type,
         T::Scalar,
@@ -556,7 +658,7 @@ fn document(
         let (min, max) = min_max(&times.iter().map(|&t| [t]).collect::<Vec<_>>());
         bin.accessor(
             &mut root,
-            &f32_bytes(times.iter().copied()),
+            f32_bytes(times.iter().copied()),
             times.len(),
             C::F32,
             T::Scalar,
@@ -566,31 +668,35 @@ fn document(
     };
     let mut channels = Vec::new();
     let mut samplers = Vec::new();
-    let mut channel =
-        |root: &mut json::Root, bin: &mut Bin, node: usize, path, bytes: Vec<u8>, type_| {
-            let output = bin.accessor(root, &bytes, times.len(), C::F32, type_, None, None);
-            let sampler = json::Index::push(
-                &mut samplers,
-                json::animation::Sampler {
-                    input,
-                    interpolation: Valid(json::animation::Interpolation::Linear),
-                    output,
-                    extensions: None,
-                    extras: Default::default(),
-                },
-            );
-            channels.push(json::animation::Channel {
-                sampler,
-                target: json::animation::Target {
-                    node: json::Index::new(node as u32),
-                    path: Valid(path),
-                    extensions: None,
-                    extras: Default::default(),
-                },
+    let mut channel = |root: &mut json::Root,
+                       bin: &mut Buffer<'a>,
+                       node: usize,
+                       path,
+                       (part, len): (Part<'a>, usize),
+                       type_| {
+        let output = bin.accessor_of(root, part, len, times.len(), C::F32, type_, None, None);
+        let sampler = json::Index::push(
+            &mut samplers,
+            json::animation::Sampler {
+                input,
+                interpolation: Valid(json::animation::Interpolation::Linear),
+                output,
                 extensions: None,
                 extras: Default::default(),
-            });
-        };
+            },
+        );
+        channels.push(json::animation::Channel {
+            sampler,
+            target: json::animation::Target {
+                node: json::Index::new(node as u32),
+                path: Valid(path),
+                extensions: None,
+                extras: Default::default(),
+            },
+            extensions: None,
+            extras: Default::default(),
+        });
+    };
     // The root's position, and the joints with an animated translation (`--in-place` hips).
     let root_track = (0, anim.root_positions());
     let moving =
@@ -600,35 +706,27 @@ fn document(
             let p = p * metres;
             [p.x as f32, p.y as f32, p.z as f32]
         }));
+        let len = bytes.len();
         channel(
             &mut root,
             &mut bin,
             j,
             json::animation::Property::Translation,
-            bytes,
+            (Part::Bytes(bytes), len),
             T::Vec3,
         );
     }
-    // The joints' keys made on every core, a few joints at a time (so that only those are held
-    // besides the buffer), added in joint order.
-    let rotated: Vec<usize> = (0..joints.len())
-        .filter(|&j| j == 0 || anim.is_animated(j))
-        .collect();
-    for group in rotated.chunks(rayon::current_num_threads()) {
-        let keys: Vec<Vec<u8>> = group
-            .par_iter()
-            .map(|&j| rotation_key_bytes(anim.local(j)))
-            .collect();
-        for (&j, bytes) in group.iter().zip(keys) {
-            channel(
-                &mut root,
-                &mut bin,
-                j,
-                json::animation::Property::Rotation,
-                bytes,
-                T::Vec4,
-            );
-        }
+    // The joints' rotations, in joint order; their keys are made when the buffer is written.
+    for j in (0..joints.len()).filter(|&j| j == 0 || anim.is_animated(j)) {
+        let track = anim.local(j);
+        channel(
+            &mut root,
+            &mut bin,
+            j,
+            json::animation::Property::Rotation,
+            (Part::Keys(track), 16 * track.len()),
+            T::Vec4,
+        );
     }
     // Foot contacts as per-frame 0/1 curves on the animation's own frames (frame n at n / fps,
     // from `first_frame` when not 0), for engines and IK setups that pin feet.
@@ -652,15 +750,14 @@ fn document(
         name: Some(name.to_string()),
     });
 
-    let data = bin.data;
     root.push(json::Buffer {
-        byte_length: USize64::from(data.len()),
+        byte_length: USize64::from(bin.len()),
         uri: buffer_uri,
         extensions: None,
         extras: Default::default(),
         name: None,
     });
-    Ok((root, data))
+    Ok((root, bin))
 }
 
 #[cfg(test)]

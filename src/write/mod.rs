@@ -186,7 +186,7 @@ impl Output {
                     gltf::to_glb_parts(take.animation, stem, 0).map_err(gltf_error(&path))?;
                 write_atomic(&path, |w| {
                     w.write_all(&head)?;
-                    w.write_all(&chunk)
+                    chunk.write_to(w)
                 })
                 .map_err(write_error(&path))?;
                 Ok(record("glb", "glb"))
