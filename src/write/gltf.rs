@@ -158,6 +158,17 @@ enum Part<'a> {
     Keys(&'a [UnitQuaternion<f64>]),
 }
 
+impl Part<'_> {
+    /// Its length in the buffer, bytes.
+    fn len(&self) -> usize {
+        match self {
+            Part::Bytes(bytes) => bytes.len(),
+            // x, y, z, w as f32.
+            Part::Keys(track) => 16 * track.len(),
+        }
+    }
+}
+
 impl<'a> Buffer<'a> {
     fn new() -> Buffer<'a> {
         Buffer {
@@ -179,15 +190,15 @@ impl<'a> Buffer<'a> {
     fn pad(&mut self) {
         let pad = self.len.next_multiple_of(4) - self.len;
         if pad > 0 {
-            self.push(Part::Bytes(vec![0; pad]), pad);
+            self.push(Part::Bytes(vec![0; pad]));
         }
     }
 
-    /// Appends `part` of `len` bytes; where it starts.
-    fn push(&mut self, part: Part<'a>, len: usize) -> usize {
+    /// Appends `part`; where it starts.
+    fn push(&mut self, part: Part<'a>) -> usize {
         let offset = self.len;
+        self.len += part.len();
         self.parts.push(part);
-        self.len += len;
         offset
     }
 
@@ -231,11 +242,11 @@ impl<'a> Buffer<'a> {
         &mut self,
         root: &mut json::Root,
         part: Part<'a>,
-        len: usize,
         target: Option<json::buffer::Target>,
     ) -> json::Index<json::buffer::View> {
         self.pad();
-        let offset = self.push(part, len);
+        let len = part.len();
+        let offset = self.push(part);
         root.push(json::buffer::View {
             buffer: json::Index::new(0),
             byte_length: USize64::from(len),
@@ -253,39 +264,14 @@ impl<'a> Buffer<'a> {
     fn accessor(
         &mut self,
         root: &mut json::Root,
-        bytes: Vec<u8>,
-        count: usize,
-        component: json::accessor::ComponentType,
-        type_: json::accessor::Type,
-        target: Option<json::buffer::Target>,
-        min_max: Option<(Value, Value)>,
-    ) -> json::Index<json::Accessor> {
-        let len = bytes.len();
-        self.accessor_of(
-            root,
-            Part::Bytes(bytes),
-            len,
-            count,
-            component,
-            type_,
-            target,
-            min_max,
-        )
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn accessor_of(
-        &mut self,
-        root: &mut json::Root,
         part: Part<'a>,
-        len: usize,
         count: usize,
         component: json::accessor::ComponentType,
         type_: json::accessor::Type,
         target: Option<json::buffer::Target>,
         min_max: Option<(Value, Value)>,
     ) -> json::Index<json::Accessor> {
-        let view = self.view(root, part, len, target);
+        let view = self.view(root, part, target);
         let (min, max) = match min_max {
             Some((min, max)) => (Some(min), Some(max)),
             None => (None, None),
@@ -513,7 +499,7 @@ fn document<'a>(
         .collect();
     let ibm = bin.accessor(
         &mut root,
-        f32_bytes(ibm),
+        Part::Bytes(f32_bytes(ibm)),
         joints.len(),
         C::F32,
         T::Mat4,
@@ -534,7 +520,7 @@ fn document<'a>(
     let count = mesh.positions.len();
     let position = bin.accessor(
         &mut root,
-        f32_bytes(mesh.positions.iter().flatten().copied()),
+        Part::Bytes(f32_bytes(mesh.positions.iter().flatten().copied())),
         count,
         C::F32,
         T::Vec3,
@@ -543,7 +529,7 @@ fn document<'a>(
     );
     let normal = bin.accessor(
         &mut root,
-        f32_bytes(mesh.normals.iter().flatten().copied()),
+        Part::Bytes(f32_bytes(mesh.normals.iter().flatten().copied())),
         count,
         C::F32,
         T::Vec3,
@@ -570,7 +556,7 @@ fn document<'a>(
     };
     let joint_acc = bin.accessor(
         &mut root,
-        joint_bytes,
+        Part::Bytes(joint_bytes),
         count,
         joint_type,
         T::Vec4,
@@ -580,7 +566,7 @@ fn document<'a>(
     let weights = f32_bytes((0..count).flat_map(|_| [1.0, 0.0, 0.0, 0.0]));
     let weight_acc = bin.accessor(
         &mut root,
-        weights,
+        Part::Bytes(weights),
         count,
         C::F32,
         T::Vec4,
@@ -601,7 +587,7 @@ fn document<'a>(
     };
     let indices = bin.accessor(
         &mut root,
-        index_bytes,
+        Part::Bytes(index_bytes),
         count,
         index_type,
         T::Scalar,
@@ -658,7 +644,7 @@ fn document<'a>(
         let (min, max) = min_max(&times.iter().map(|&t| [t]).collect::<Vec<_>>());
         bin.accessor(
             &mut root,
-            f32_bytes(times.iter().copied()),
+            Part::Bytes(f32_bytes(times.iter().copied())),
             times.len(),
             C::F32,
             T::Scalar,
@@ -668,35 +654,31 @@ fn document<'a>(
     };
     let mut channels = Vec::new();
     let mut samplers = Vec::new();
-    let mut channel = |root: &mut json::Root,
-                       bin: &mut Buffer<'a>,
-                       node: usize,
-                       path,
-                       (part, len): (Part<'a>, usize),
-                       type_| {
-        let output = bin.accessor_of(root, part, len, times.len(), C::F32, type_, None, None);
-        let sampler = json::Index::push(
-            &mut samplers,
-            json::animation::Sampler {
-                input,
-                interpolation: Valid(json::animation::Interpolation::Linear),
-                output,
+    let mut channel =
+        |root: &mut json::Root, bin: &mut Buffer<'a>, node: usize, path, part: Part<'a>, type_| {
+            let output = bin.accessor(root, part, times.len(), C::F32, type_, None, None);
+            let sampler = json::Index::push(
+                &mut samplers,
+                json::animation::Sampler {
+                    input,
+                    interpolation: Valid(json::animation::Interpolation::Linear),
+                    output,
+                    extensions: None,
+                    extras: Default::default(),
+                },
+            );
+            channels.push(json::animation::Channel {
+                sampler,
+                target: json::animation::Target {
+                    node: json::Index::new(node as u32),
+                    path: Valid(path),
+                    extensions: None,
+                    extras: Default::default(),
+                },
                 extensions: None,
                 extras: Default::default(),
-            },
-        );
-        channels.push(json::animation::Channel {
-            sampler,
-            target: json::animation::Target {
-                node: json::Index::new(node as u32),
-                path: Valid(path),
-                extensions: None,
-                extras: Default::default(),
-            },
-            extensions: None,
-            extras: Default::default(),
-        });
-    };
+            });
+        };
     // The root's position, and the joints with an animated translation (`--in-place` hips).
     let root_track = (0, anim.root_positions());
     let moving =
@@ -706,25 +688,23 @@ fn document<'a>(
             let p = p * metres;
             [p.x as f32, p.y as f32, p.z as f32]
         }));
-        let len = bytes.len();
         channel(
             &mut root,
             &mut bin,
             j,
             json::animation::Property::Translation,
-            (Part::Bytes(bytes), len),
+            Part::Bytes(bytes),
             T::Vec3,
         );
     }
     // The joints' rotations, in joint order; their keys are made when the buffer is written.
     for j in (0..joints.len()).filter(|&j| j == 0 || anim.is_animated(j)) {
-        let track = anim.local(j);
         channel(
             &mut root,
             &mut bin,
             j,
             json::animation::Property::Rotation,
-            (Part::Keys(track), 16 * track.len()),
+            Part::Keys(anim.local(j)),
             T::Vec4,
         );
     }
