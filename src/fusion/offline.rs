@@ -360,7 +360,7 @@ pub fn fuse_offline(
         Some((f.heading, if rest[i] { rest_var } else { motion_var }))
     };
     let drift = params.drift.to_radians().powi(2);
-    let delta = smooth_heading(n, measurement, steps, drift);
+    let delta = smooth_heading(steps, measurement, drift);
     drop(fields);
     // q₉ in place of q₆.
     let mut orientation = q6;
@@ -489,23 +489,23 @@ fn wrap(a: f64) -> f64 {
     }
 }
 
-/// A scalar random walk `δ` (process noise `drift · Δt`) over the first `n` steps, seen through
-/// angle measurements with variances (`measurement(i)`: step i's, if it has one): a Kalman filter
+/// A scalar random walk `δ` (process noise `drift · Δt`) over the steps, seen through angle
+/// measurements with variances (`measurement(i)`: step i's, if it has one): a Kalman filter
 /// forward, a Rauch–Tung–Striebel pass backward; innovations wrapped. Before the first
 /// measurement the estimate is its value; without any, 0.
 fn smooth_heading(
-    n: usize,
-    measurement: impl Fn(usize) -> Option<(f64, f64)>,
     steps: &[Step],
+    measurement: impl Fn(usize) -> Option<(f64, f64)>,
     drift: f64,
 ) -> Vec<f64> {
+    let n = steps.len();
     let Some(first) = (0..n).find_map(&measurement) else {
         return vec![0.0; n];
     };
     let (mut x, mut p) = (first.0, first.1);
     let mut filtered = Vec::with_capacity(n);
     let mut predicted_p = Vec::with_capacity(n);
-    for (i, step) in steps[..n].iter().enumerate() {
+    for (i, step) in steps.iter().enumerate() {
         let m = measurement(i);
         if i > 0 {
             p += drift * step.dt;
@@ -639,7 +639,7 @@ mod tests {
                 }
             })
             .collect();
-        let d = smooth_heading(m.len(), |i| m[i], &steps, 0.02f64.to_radians().powi(2));
+        let d = smooth_heading(&steps, |i| m[i], 0.02f64.to_radians().powi(2));
         assert!(
             d.iter().all(|x| (x - 0.3).abs() < 0.01),
             "{:?}",
@@ -649,7 +649,7 @@ mod tests {
         let m: Vec<Option<(f64, f64)>> = (0..1000)
             .map(|i| Some((if i % 2 == 0 { 3.1 } else { -3.1 }, 0.01)))
             .collect();
-        let d = smooth_heading(m.len(), |i| m[i], &steps, 1e-6);
+        let d = smooth_heading(&steps, |i| m[i], 1e-6);
         assert!(d.iter().all(|x| x.abs() > 3.0), "{:?}", &d[..4]);
     }
 

@@ -311,8 +311,8 @@ mod tests {
                 full.map(f64::to_bits),
                 "{field}"
             );
-            // In a row, with more bytes after it (eight at a time are read where there are):
-            // the same number, and it ends where the field does.
+            // In a row, with more bytes after it: the same number, and it ends where the field
+            // does.
             let row = format!("{field},0.25,pelvis");
             if let Some((value, end)) = plain_decimal_prefix(row.as_bytes(), 0) {
                 assert_eq!(Some(value.to_bits()), full.map(f64::to_bits), "{row}");
