@@ -195,24 +195,42 @@ pub fn to_local(
         .enumerate()
         .for_each(|(b, mut pieces)| {
             let mut frame_world = vec![UnitQuaternion::identity(); n];
-            let mut frame_local = vec![UnitQuaternion::identity(); n];
             let len = pieces.first().map_or(0, |p| p.len());
-            for i in 0..len {
-                let f = b * block + i;
-                frame_to_local(
-                    rig,
-                    |j| world[j].as_ref().map(|track| track[f]),
-                    &plan,
-                    &mut frame_world,
-                    &mut frame_local,
-                );
-                for (piece, q) in pieces.iter_mut().zip(&frame_local) {
-                    piece[i] = *q;
+            // A few frames at a time, each joint's run read and written in one sweep: going
+            // frame by frame hops between every joint's track and waits on memory at each hop.
+            let mut worlds = vec![UnitQuaternion::identity(); SWEEP * n];
+            let mut locals = vec![UnitQuaternion::identity(); SWEEP * n];
+            for start in (0..len).step_by(SWEEP) {
+                let count = SWEEP.min(len - start);
+                let first = b * block + start;
+                for (j, track) in world.iter().enumerate() {
+                    if let Some(track) = track {
+                        for (i, q) in track[first..first + count].iter().enumerate() {
+                            worlds[i * n + j] = *q;
+                        }
+                    }
+                }
+                for i in 0..count {
+                    frame_to_local(
+                        rig,
+                        |j| world[j].as_ref().map(|_| worlds[i * n + j]),
+                        &plan,
+                        &mut frame_world,
+                        &mut locals[i * n..(i + 1) * n],
+                    );
+                }
+                for (j, piece) in pieces.iter_mut().enumerate() {
+                    for (i, q) in piece[start..start + count].iter_mut().enumerate() {
+                        *q = locals[i * n + j];
+                    }
                 }
             }
         });
     local
 }
+
+/// Frames [`to_local`] turns from world to local rotations together (a few kB per joint).
+const SWEEP: usize = 64;
 
 /// The incremental core: one frame's local rotations (`local`, one per joint) from the world
 /// rotations of the joints a sensor drives (`world(j)`); `frame_world` is scratch (one per joint).

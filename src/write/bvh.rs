@@ -194,7 +194,16 @@ pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io:
         .collect();
     let lines = |frames: std::ops::Range<usize>| {
         let mut text = Vec::with_capacity(frames.len() * (order.len() * 30 + 32));
-        for f in frames {
+        // The block's angles frame by frame: each joint's run read in one sweep (reading them
+        // frame by frame hops between every joint's track and waits on memory at each hop).
+        let width = order.len();
+        let mut angles = vec![[0.0; 3]; frames.len() * width];
+        for (k, &j) in order.iter().enumerate() {
+            for (i, a) in motion.euler_deg[j][frames.clone()].iter().enumerate() {
+                angles[i * width + k] = *a;
+            }
+        }
+        for (i, f) in frames.enumerate() {
             // The root's position first, the line starting with its number.
             let root = motion.root_positions[f] * scale;
             push_fixed6(&mut text, root.x);
@@ -202,11 +211,12 @@ pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io:
                 text.push(b' ');
                 push_fixed6(&mut text, x);
             }
-            for (&j, translation) in order.iter().zip(&translations) {
+            let frame_angles = &angles[i * width..(i + 1) * width];
+            for (translation, joint_angles) in translations.iter().zip(frame_angles) {
                 if let Some(t) = translation {
                     push_vector(&mut text, &(t[f] * scale));
                 }
-                for a in motion.euler_deg[j][f] {
+                for &a in joint_angles {
                     text.push(b' ');
                     push_fixed6(&mut text, a);
                 }
