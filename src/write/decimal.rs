@@ -7,6 +7,11 @@
 //! is exact integer arithmetic: `q = ⌊m·10⁶ / 2⁻ᵉ⌉` with the remainder deciding the tie. The
 //! digits of `q` are then `q / 10⁶`, a point, and `q mod 10⁶` on six places.
 //!
+//! Most values take a shorter road to the same `q`: `p = v·10⁶` rounded to a double is within
+//! half an ulp of the exact product, so when `p`'s fraction is clearly away from ½ (by more
+//! than [`TIE_MARGIN`], which exceeds that half ulp for `|p| < 2⁴³`), the exact product rounds to
+//! the same integer as `p`. Only values within the margin of a tie take the exact road.
+//!
 //! The one deliberate difference from `{:.6}`: a value that rounds to zero is `0.000000` whatever
 //! its sign (`{:.6}` writes `-0.000000` for −10⁻⁹), as the BVH writer always did. Values of
 //! 2⁴⁰ (≈ 1.1·10¹²) and more, and non-finite ones, are left to `format!`.
@@ -23,9 +28,81 @@ const PAIRS: &[u8; 200] = b"0001020304050607080910111213141516171819\
 /// Above this magnitude the rounded value no longer fits the fast path's `u64` comfortably.
 const FAST_LIMIT: f64 = (1u64 << 40) as f64;
 
+/// Below this magnitude of `v·10⁶` (|v| < 8.8·10⁶) the rounded product decides `q` unless its
+/// fraction is within [`TIE_MARGIN`] of ½.
+const SCALED_LIMIT: f64 = (1u64 << 43) as f64;
+
+/// Larger than half an ulp of any double below [`SCALED_LIMIT`] (2⁻¹⁰), with room to spare.
+const TIE_MARGIN: f64 = 1.0 / 256.0;
+
 /// Appends `v` with exactly six decimals (see the module documentation).
 #[inline]
 pub fn push_fixed6(out: &mut Vec<u8>, v: f64) {
+    let scaled = (v * 1e6).abs();
+    // NaN and infinities fail the comparison.
+    if scaled < SCALED_LIMIT {
+        // Truncation, then the fraction: both exact below 2⁵².
+        let whole = scaled as u64;
+        let fraction = scaled - whole as f64;
+        if (fraction - 0.5).abs() > TIE_MARGIN {
+            let q = whole + u64::from(fraction > 0.5);
+            return push_micros(out, q, v.is_sign_negative());
+        }
+    }
+    push_exact(out, v);
+}
+
+/// `q` millionths (below 2⁴³), with a minus sign when `negative` and `q` is not zero.
+///
+/// Built in registers and stored in one 16-byte write, then cut to length: a few short writes
+/// read back as one would stall on store forwarding.
+#[inline]
+fn push_micros(out: &mut Vec<u8>, q: u64, negative: bool) {
+    debug_assert!(q < 1 << 43);
+    if q == 0 {
+        out.extend_from_slice(b"0.000000");
+        return;
+    }
+    let units = q / 1_000_000; // below 8.8·10⁶: at most seven digits
+    let frac = q % 1_000_000;
+    let unit_digits = digits_of_eight(units);
+    // Leading zero digits are the low zero bytes; a zero part keeps one digit.
+    let leading = (unit_digits.trailing_zeros() / 8).min(7);
+    let mut text = (unit_digits | ASCII_ZEROS) >> (8 * leading);
+    let mut len = 8 - leading;
+    if negative {
+        text = (text << 8) | u64::from(b'-');
+        len += 1;
+    }
+    // '.' and the six fraction digits (the first two of eight are zeros).
+    let fraction = u64::from(b'.') | (((digits_of_eight(frac) | ASCII_ZEROS) >> 16) << 8);
+    let whole = u128::from(text) | (u128::from(fraction) << (8 * len));
+    let at = out.len();
+    out.extend_from_slice(&whole.to_le_bytes());
+    out.truncate(at + len as usize + 7);
+}
+
+/// `'0'` in each of eight bytes.
+const ASCII_ZEROS: u64 = 0x3030_3030_3030_3030;
+
+/// The eight decimal digits of `x < 10⁸` (leading zeros included) as byte values 0–9, the most
+/// significant in the lowest byte (first in memory), by halving the digit groups in parallel
+/// lanes: 4 + 4 digits in 32-bit lanes, then 2 + 2 in 16-bit lanes, then 1 + 1 in bytes. The
+/// divisions are multiply-and-shift, exact for the lanes' ranges: `⌊x·10486 / 2²⁰⌋ = ⌊x / 100⌋`
+/// for `x < 10⁴`, `⌊x·103 / 2¹⁰⌋ = ⌊x / 10⌋` for `x < 100` (checked for every value in the
+/// tests), and no lane's product reaches the next lane's kept bits.
+#[inline]
+fn digits_of_eight(x: u64) -> u64 {
+    debug_assert!(x < 100_000_000);
+    let fours = (x / 10_000) | ((x % 10_000) << 32);
+    let hundreds = ((fours * 10_486) >> 20) & 0x0000_007f_0000_007f;
+    let twos = hundreds | ((fours - hundreds * 100) << 16);
+    let tens = ((twos * 103) >> 10) & 0x000f_000f_000f_000f;
+    tens | ((twos - tens * 10) << 8)
+}
+
+/// [`push_fixed6`] by exact integer arithmetic on the binary value.
+fn push_exact(out: &mut Vec<u8>, v: f64) {
     // NaN fails the comparison too.
     if v.is_nan() || v.abs() >= FAST_LIMIT {
         return push_slow(out, v);
@@ -198,6 +275,23 @@ mod tests {
         assert_eq!(fast(-1e-9), "0.000000");
         assert_eq!(fast(0.0078125), "0.007812");
         assert_eq!(fast(-12.5), "-12.500000");
+    }
+
+    #[test]
+    fn lane_divisions_are_exact_over_their_ranges() {
+        for x in 0..10_000u64 {
+            assert_eq!((x * 10_486) >> 20, x / 100, "{x}");
+        }
+        for x in 0..100u64 {
+            assert_eq!((x * 103) >> 10, x / 10, "{x}");
+        }
+        for x in (0..100_000_000u64)
+            .step_by(9_973)
+            .chain([0, 9, 10, 99_999_999])
+        {
+            let text = (digits_of_eight(x) | ASCII_ZEROS).to_le_bytes();
+            assert_eq!(std::str::from_utf8(&text).unwrap(), format!("{x:08}"));
+        }
     }
 
     #[test]
