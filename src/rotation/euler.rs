@@ -82,6 +82,7 @@ pub fn to_quaternion(angles: [f64; 3], order: EulerOrder) -> UnitQuaternion<f64>
 /// last one carries the rotation about the shared axis.
 ///
 /// This is Blender's first solution `eul1`; it never returns NaN for a finite quaternion.
+#[inline(always)]
 pub fn from_quaternion(q: &UnitQuaternion<f64>, order: EulerOrder) -> [f64; 3] {
     Solutions::of(q, order).principal()
 }
@@ -102,6 +103,7 @@ pub fn from_quaternion_blender(q: &UnitQuaternion<f64>, order: EulerOrder) -> [f
 /// of 2π towards `previous`, the one with the smaller sum of absolute differences.
 ///
 /// A non-finite `previous` (which Blender would turn into garbage) gives [`from_quaternion`].
+#[inline(always)]
 pub fn compatible(q: &UnitQuaternion<f64>, order: EulerOrder, previous: [f64; 3]) -> [f64; 3] {
     let solutions = Solutions::of(q, order);
     let principal = solutions.principal();
@@ -135,7 +137,22 @@ pub fn compatible(q: &UnitQuaternion<f64>, order: EulerOrder, previous: [f64; 3]
 /// The Euler discontinuity filter: frame 0 is [`from_quaternion`], every later frame is
 /// [`compatible`] with the previous output. Angles may grow beyond ±π on continuous spins.
 pub fn filter_track(track: &[UnitQuaternion<f64>], order: EulerOrder) -> Vec<[f64; 3]> {
-    let mut filter = EulerFilter::new(order);
+    // One copy of the loop per order: with the axes known when compiling, only the matrix
+    // entries the angles use are computed and the axis bookkeeping folds away. The arithmetic
+    // is the same, so the angles are the same to the bit.
+    match order {
+        EulerOrder::XYZ => filter_track_in::<0>(track),
+        EulerOrder::XZY => filter_track_in::<1>(track),
+        EulerOrder::YXZ => filter_track_in::<2>(track),
+        EulerOrder::YZX => filter_track_in::<3>(track),
+        EulerOrder::ZXY => filter_track_in::<4>(track),
+        EulerOrder::ZYX => filter_track_in::<5>(track),
+    }
+}
+
+/// [`filter_track`] for the order `EulerOrder::ALL[ORDER]`.
+fn filter_track_in<const ORDER: usize>(track: &[UnitQuaternion<f64>]) -> Vec<[f64; 3]> {
+    let mut filter = EulerFilter::new(EulerOrder::ALL[ORDER]);
     track.iter().map(|q| filter.next(q)).collect()
 }
 
@@ -155,6 +172,7 @@ impl EulerFilter {
     }
 
     /// The next frame's angles (radians, application order).
+    #[inline(always)]
     pub fn next(&mut self, q: &UnitQuaternion<f64>) -> [f64; 3] {
         let angles = match self.previous {
             None => from_quaternion(q, self.order),
@@ -167,6 +185,7 @@ impl EulerFilter {
 
 /// Application-order angles from Blender's per-axis storage (`[euler.x, euler.y, euler.z]` of an
 /// `Euler` in mode `order.blender_name()`).
+#[inline]
 pub fn from_blender_xyz(xyz: [f64; 3], order: EulerOrder) -> [f64; 3] {
     order.axes().map(|axis| xyz[axis])
 }
@@ -199,6 +218,7 @@ struct Solutions {
 }
 
 impl Solutions {
+    #[inline(always)]
     fn of(q: &UnitQuaternion<f64>, order: EulerOrder) -> Solutions {
         let m: Matrix3<f64> = q.to_rotation_matrix().into_inner();
         let axes = order.axes();
@@ -220,11 +240,13 @@ impl Solutions {
     }
 
     /// At gimbal lock both solutions are the same.
+    #[inline]
     fn locked(&self) -> bool {
         self.cy <= GIMBAL_LOCK_EPSILON
     }
 
     /// Blender's `eul1`.
+    #[inline(always)]
     fn principal(&self) -> [f64; 3] {
         let (i, j, k) = self.ijk;
         let mut e = [0.0; 3];
@@ -241,6 +263,7 @@ impl Solutions {
     }
 
     /// Blender's `eul2`: the same rotation as `(a + π, π − b, c + π)` (application order).
+    #[inline(always)]
     fn second(&self) -> [f64; 3] {
         if self.locked() {
             return self.principal();
@@ -254,6 +277,7 @@ impl Solutions {
     }
 
     /// Per-axis angles → application order, negated for odd permutations (Blender's `parity`).
+    #[inline(always)]
     fn finish(&self, mut e: [f64; 3]) -> [f64; 3] {
         let (i, j, _) = self.ijk;
         let parity_odd = j != (i + 1) % 3;
@@ -271,6 +295,7 @@ impl Solutions {
 
 /// The distance from `a` to the nearest angle equal to `b` modulo 2π, in [0, π]: what
 /// [`compatible_eul`] leaves between an angle and the previous one, up to rounding.
+#[inline]
 fn circular_distance(a: f64, b: f64) -> f64 {
     // Whole turns removed by rounding (a software `fmod` costs more than the rest of the
     // estimate); off by ~1e-15 per turn, far inside the margin it is used with. Adding and
@@ -290,6 +315,7 @@ fn circular_distance(a: f64, b: f64) -> f64 {
 /// Blender's `compatible_eul`: shift each angle by multiples of 2π towards `old`, then the
 /// "pi flip". The operation treats the three angles symmetrically, so it is the same in
 /// application order as in Blender's per-axis order.
+#[inline(always)]
 fn compatible_eul(eul: &mut [f64; 3], old: &[f64; 3]) {
     // Blender uses `pi_thresh = float(M_PI)` and `pi_x2 = 2 * float(M_PI)` (f32); here the f64
     // π and 2π, so that exact-π differences are not flipped (see the module documentation).
@@ -318,6 +344,7 @@ fn compatible_eul(eul: &mut [f64; 3], old: &[f64; 3]) {
     }
 }
 
+#[inline]
 fn l1_distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     (a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs()
 }

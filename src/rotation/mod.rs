@@ -35,6 +35,7 @@ impl EulerOrder {
     ];
 
     /// The axes in application order (0 = x, 1 = y, 2 = z): ZXY → [2, 0, 1].
+    #[inline]
     pub fn axes(self) -> [usize; 3] {
         match self {
             EulerOrder::XYZ => [0, 1, 2],
