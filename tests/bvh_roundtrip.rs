@@ -440,3 +440,87 @@ fn leaf_root_end_site() {
         assert!((back.joints()[0].end_site.unwrap() - Vector3::new(0.0, len, 0.0)).norm() < 1e-12);
     }
 }
+
+/// A sink that takes `room` bytes and then fails, as a full disk does.
+struct FullAfter {
+    room: usize,
+    taken: Vec<u8>,
+}
+
+impl std::io::Write for FullAfter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.taken.len() >= self.room {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::StorageFull,
+                "no space left",
+            ));
+        }
+        let n = buf.len().min(self.room - self.taken.len());
+        self.taken.extend_from_slice(&buf[..n]);
+        Ok(n)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// The motion lines are formatted on the cores while another thread writes them: a write that
+/// fails partway through a long take comes back as the error (no hang, nothing after it), and
+/// what was written before it is the start of the whole file.
+#[test]
+fn a_write_failing_partway_is_reported() {
+    let rig = small_rig(LengthUnit::Metres);
+    let fps = Fps::new(30, 1).unwrap();
+    let frames = 20_000;
+    let roots: Vec<Vector3<f64>> = (0..frames)
+        .map(|f| Vector3::new(f as f64 * 1e-3, 1.0, -0.5))
+        .collect();
+    let angles: Vec<Vec<[f64; 3]>> = (0..rig.len())
+        .map(|j| {
+            (0..frames)
+                .map(|f| [f as f64 * 0.01, j as f64 - 0.25, -(f as f64) * 0.003])
+                .collect()
+        })
+        .collect();
+    let motion = BvhMotion {
+        rig: &rig,
+        fps,
+        root_positions: &roots,
+        euler_deg: &angles,
+        translations: &[],
+    };
+    let whole = write(&motion);
+    // Each motion line against the values written one by one with `format!` (a value that
+    // rounds to zero is written without a sign).
+    let six = |v: f64| {
+        let text = format!("{v:.6}");
+        if text == "-0.000000" {
+            "0.000000".to_string()
+        } else {
+            text
+        }
+    };
+    let text = String::from_utf8(whole.clone()).unwrap();
+    let motion_lines: Vec<&str> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("Frame Time"))
+        .skip(1)
+        .collect();
+    assert_eq!(motion_lines.len(), frames);
+    for f in [0, 1, 255, 256, 4095, 4096, frames - 1] {
+        let mut expected = vec![six(roots[f].x), six(roots[f].y), six(roots[f].z)];
+        for joint_angles in &angles {
+            expected.extend(joint_angles[f].iter().map(|&a| six(a)));
+        }
+        assert_eq!(motion_lines[f], expected.join(" "), "frame {f}");
+    }
+    for room in [10, whole.len() / 3, whole.len() - 1] {
+        let mut sink = FullAfter {
+            room,
+            taken: Vec::new(),
+        };
+        let err = write::bvh::write_bvh(&mut sink, &motion).expect_err("the disk is full");
+        assert_eq!(err.kind(), std::io::ErrorKind::StorageFull, "room {room}");
+        assert_eq!(sink.taken, whole[..room], "room {room}");
+    }
+}

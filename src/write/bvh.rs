@@ -39,13 +39,17 @@ pub fn unit_scale(from: LengthUnit, to: LengthUnit) -> f64 {
 }
 
 /// Writes `motion` as BVH in the rig's own unit. See [`write_bvh_scaled`].
-pub fn write_bvh<W: Write>(out: W, motion: &BvhMotion) -> io::Result<()> {
+pub fn write_bvh<W: Write + Send>(out: W, motion: &BvhMotion) -> io::Result<()> {
     write_bvh_scaled(out, motion, 1.0)
 }
 
 /// Writes `motion` as BVH with lengths converted from the rig's unit to `units`
 /// (`--units cm` on a metre rig multiplies offsets, End Sites and root positions by 100).
-pub fn write_bvh_in<W: Write>(out: W, motion: &BvhMotion, units: LengthUnit) -> io::Result<()> {
+pub fn write_bvh_in<W: Write + Send>(
+    out: W,
+    motion: &BvhMotion,
+    units: LengthUnit,
+) -> io::Result<()> {
     write_bvh_scaled(out, motion, unit_scale(motion.rig.units(), units))
 }
 
@@ -102,7 +106,7 @@ fn invalid(message: String) -> io::Error {
 /// per frame (`root_positions.len()` frames), when a value is not finite, when `scale` is not a
 /// positive number, or when a joint name is empty or contains whitespace or braces (no reader
 /// could read it back).
-pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io::Result<()> {
+pub fn write_bvh_scaled<W: Write + Send>(out: W, motion: &BvhMotion, scale: f64) -> io::Result<()> {
     let rig = motion.rig;
     let frames = motion.root_positions.len();
     validate(motion, scale)?;
@@ -225,20 +229,37 @@ pub fn write_bvh_scaled<W: Write>(out: W, motion: &BvhMotion, scale: f64) -> io:
         }
         text
     };
+    // A thread of its own writes each group of blocks while the cores format the next: the
+    // copies into the file run beside the formatting instead of between its groups.
     let group = BLOCK_FRAMES * 2 * rayon::current_num_threads();
-    for start in (0..frames).step_by(group) {
-        let end = (start + group).min(frames);
-        let blocks: Vec<Vec<u8>> = (start..end)
-            .step_by(BLOCK_FRAMES)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map(|b| lines(b..(b + BLOCK_FRAMES).min(end)))
-            .collect();
-        for block in blocks {
-            out.write_all(&block)?;
+    std::thread::scope(|scope| {
+        let (formatted, groups) = std::sync::mpsc::sync_channel::<Vec<Vec<u8>>>(1);
+        let writer = scope.spawn(move || -> io::Result<()> {
+            for blocks in groups {
+                for block in blocks {
+                    out.write_all(&block)?;
+                }
+            }
+            out.flush()
+        });
+        for start in (0..frames).step_by(group) {
+            let end = (start + group).min(frames);
+            let blocks: Vec<Vec<u8>> = (start..end)
+                .step_by(BLOCK_FRAMES)
+                .collect::<Vec<_>>()
+                .into_par_iter()
+                .map(|b| lines(b..(b + BLOCK_FRAMES).min(end)))
+                .collect();
+            // The writer stopped on an error, which its result reports.
+            if formatted.send(blocks).is_err() {
+                break;
+            }
         }
-    }
-    out.flush()
+        drop(formatted);
+        writer
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    })
 }
 
 /// Frames formatted together: big enough to keep a core busy, small enough to stay in cache.

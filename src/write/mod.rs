@@ -249,7 +249,7 @@ pub fn temp_path(path: &Path) -> PathBuf {
 /// partial one. The data is flushed to disk before the rename.
 pub fn write_atomic(
     path: &Path,
-    write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+    write: impl FnOnce(&mut (dyn Write + Send)) -> io::Result<()>,
 ) -> io::Result<()> {
     let tmp = temp_path(path);
     let file = {
