@@ -1,11 +1,11 @@
 //! Output preparation, after the stages: what a writer needs that the animation does not hold as
 //! such. BVH stores Euler angles, so each joint's local rotations become angles in its channel
-//! order with the discontinuity filter ([`crate::rotation::euler::filter_track`], Blender's
+//! order with the discontinuity filter ([`crate::rotation::euler::filter_track_degrees`], Blender's
 //! `compatible_eul`); glTF keeps the quaternions (its writer keeps each key on the previous key's
 //! hemisphere).
 
 use crate::anim::Animation;
-use crate::rotation::euler::filter_track;
+use crate::rotation::euler::filter_track_degrees;
 use rayon::prelude::*;
 
 /// Euler angles in degrees, `[joint][frame]`, each joint in its own channel order, with the
@@ -17,12 +17,7 @@ pub fn euler_degrees(animation: &Animation) -> Vec<Vec<[f64; 3]>> {
         .joints()
         .par_iter()
         .enumerate()
-        .map(|(j, joint)| {
-            filter_track(animation.local(j), joint.order)
-                .into_iter()
-                .map(|a| a.map(f64::to_degrees))
-                .collect()
-        })
+        .map(|(j, joint)| filter_track_degrees(animation.local(j), joint.order))
         .collect()
 }
 

@@ -137,23 +137,42 @@ pub fn compatible(q: &UnitQuaternion<f64>, order: EulerOrder, previous: [f64; 3]
 /// The Euler discontinuity filter: frame 0 is [`from_quaternion`], every later frame is
 /// [`compatible`] with the previous output. Angles may grow beyond ±π on continuous spins.
 pub fn filter_track(track: &[UnitQuaternion<f64>], order: EulerOrder) -> Vec<[f64; 3]> {
+    filter_track_then(track, order, |angles| angles)
+}
+
+/// [`filter_track`] in degrees (each angle through `f64::to_degrees`), as BVH writes them.
+pub fn filter_track_degrees(track: &[UnitQuaternion<f64>], order: EulerOrder) -> Vec<[f64; 3]> {
+    filter_track_then(track, order, |angles| angles.map(f64::to_degrees))
+}
+
+/// [`filter_track`] with each frame's angles passed through `then` as they are made (no second
+/// pass over the track).
+#[inline]
+fn filter_track_then(
+    track: &[UnitQuaternion<f64>],
+    order: EulerOrder,
+    then: impl Fn([f64; 3]) -> [f64; 3],
+) -> Vec<[f64; 3]> {
     // One copy of the loop per order: with the axes known when compiling, only the matrix
     // entries the angles use are computed and the axis bookkeeping folds away. The arithmetic
     // is the same, so the angles are the same to the bit.
     match order {
-        EulerOrder::XYZ => filter_track_in::<0>(track),
-        EulerOrder::XZY => filter_track_in::<1>(track),
-        EulerOrder::YXZ => filter_track_in::<2>(track),
-        EulerOrder::YZX => filter_track_in::<3>(track),
-        EulerOrder::ZXY => filter_track_in::<4>(track),
-        EulerOrder::ZYX => filter_track_in::<5>(track),
+        EulerOrder::XYZ => filter_track_in::<0>(track, then),
+        EulerOrder::XZY => filter_track_in::<1>(track, then),
+        EulerOrder::YXZ => filter_track_in::<2>(track, then),
+        EulerOrder::YZX => filter_track_in::<3>(track, then),
+        EulerOrder::ZXY => filter_track_in::<4>(track, then),
+        EulerOrder::ZYX => filter_track_in::<5>(track, then),
     }
 }
 
-/// [`filter_track`] for the order `EulerOrder::ALL[ORDER]`.
-fn filter_track_in<const ORDER: usize>(track: &[UnitQuaternion<f64>]) -> Vec<[f64; 3]> {
+/// [`filter_track_then`] for the order `EulerOrder::ALL[ORDER]`.
+fn filter_track_in<const ORDER: usize>(
+    track: &[UnitQuaternion<f64>],
+    then: impl Fn([f64; 3]) -> [f64; 3],
+) -> Vec<[f64; 3]> {
     let mut filter = EulerFilter::new(EulerOrder::ALL[ORDER]);
-    track.iter().map(|q| filter.next(q)).collect()
+    track.iter().map(|q| then(filter.next(q))).collect()
 }
 
 /// The incremental core of [`filter_track`]: one frame at a time.
@@ -580,6 +599,20 @@ mod tests {
         let q = to_quaternion([0.1, 0.2, 0.3], EulerOrder::YZX);
         let out = filter_track(&[q], EulerOrder::YZX);
         assert_eq!(out, vec![from_quaternion(&q, EulerOrder::YZX)]);
+    }
+
+    #[test]
+    fn filter_track_degrees_is_filter_track_in_degrees() {
+        for order in EulerOrder::ALL {
+            let track: Vec<_> = (0..200)
+                .map(|n| to_quaternion([n as f64 * 0.09, 1.2 - n as f64 * 0.01, -0.4], order))
+                .collect();
+            let radians = filter_track(&track, order);
+            let degrees = filter_track_degrees(&track, order);
+            for (r, d) in radians.iter().zip(&degrees) {
+                assert_eq!(r.map(|a| a.to_degrees().to_bits()), d.map(f64::to_bits));
+            }
+        }
     }
 
     #[test]

@@ -40,7 +40,7 @@
 use crate::anim::Animation;
 use crate::inspect::{GAP_THRESHOLD_S, SensorSummaries};
 use crate::rotation::EulerOrder;
-use crate::rotation::euler::filter_track;
+use crate::rotation::euler::filter_track_degrees;
 use nalgebra::UnitQuaternion;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -127,10 +127,7 @@ pub fn bone_series(
             order: joint.order,
             times_s: times.clone(),
             before_deg: match unsmoothed {
-                Some(raw) => filter_track(&raw[j], joint.order)
-                    .into_iter()
-                    .map(|a| a.map(f64::to_degrees))
-                    .collect(),
+                Some(raw) => filter_track_degrees(&raw[j], joint.order),
                 None => euler_after[j].clone(),
             },
             after_deg: euler_after[j].clone(),
