@@ -237,8 +237,8 @@ pub fn sosfiltfilt(sos: &[Sos], x: &[f64]) -> Result<Vec<f64>, FilterError> {
 /// Each lane goes through the same operations in the same order as [`sosfiltfilt`] alone, so
 /// its result is the same to the bit; what changes is speed: a filter's recurrence waits on
 /// itself sample after sample, and `N` independent ones fill that wait (a quaternion's four
-/// components are filtered together). `work` is scratch for the padded series (callers filtering
-/// many tracks keep one).
+/// components are filtered together). `work` is scratch for the padding at both ends (callers
+/// filtering many tracks keep one).
 ///
 /// On an error `x` is unchanged; a non-finite sample is reported for the first lane that has
 /// one (with that lane), as filtering the lanes one after another would.
@@ -259,24 +259,29 @@ pub fn sosfiltfilt_lanes<const N: usize>(
         };
         return Err((0, e));
     }
-    for lane in 0..N {
-        if let Some(index) = x.iter().position(|v| !v[lane].is_finite()) {
-            return Err((lane, FilterError::NonFinite { index }));
+    // One pass when every sample is finite (the usual case); the lanes one by one otherwise.
+    if !x.iter().all(|v| v.iter().all(|c| c.is_finite())) {
+        for lane in 0..N {
+            if let Some(index) = x.iter().position(|v| !v[lane].is_finite()) {
+                return Err((lane, FilterError::NonFinite { index }));
+            }
         }
     }
-    odd_ext(x, edge, work);
+    // The padded series is `before ++ x ++ after`, filtered where it lies: `x` in place, the
+    // short extensions in `work`, with the state running on across them as along one array.
+    odd_ext_ends(x, edge, work);
+    let (before, after) = work.split_at_mut(edge);
 
-    // Forward over the padded series, in place.
-    let mut state = lane_state(&zi, work[0]);
-    for v in work.iter_mut() {
+    // Forward over the whole padded series.
+    let mut state = lane_state(&zi, before[0]);
+    for v in before.iter_mut().chain(x.iter_mut()).chain(after.iter_mut()) {
         *v = sosfilt_step_lanes(sos, *v, &mut state);
     }
-    // Backward from its end, in place; only the samples of `x` are kept.
-    let mut state = lane_state(&zi, work[work.len() - 1]);
-    for v in work.iter_mut().rev() {
+    // Backward from its end; the extension before `x` would only be filtered to be dropped.
+    let mut state = lane_state(&zi, after[edge - 1]);
+    for v in after.iter_mut().rev().chain(x.iter_mut().rev()) {
         *v = sosfilt_step_lanes(sos, *v, &mut state);
     }
-    x.copy_from_slice(&work[edge..edge + x.len()]);
     Ok(())
 }
 
@@ -308,18 +313,17 @@ pub fn sosfilt_step_lanes<const N: usize>(
     cur
 }
 
-/// `scipy.signal._arraytools.odd_ext(x, n)` per lane, into `ext`; requires
-/// `1 <= n <= x.len() - 1`.
-fn odd_ext<const N: usize>(x: &[[f64; N]], n: usize, ext: &mut Vec<[f64; N]>) {
+/// The two ends `scipy.signal._arraytools.odd_ext(x, n)` adds, per lane, into `ends`: the `n`
+/// samples before `x`, then the `n` after it; requires `1 <= n <= x.len() - 1`.
+fn odd_ext_ends<const N: usize>(x: &[[f64; N]], n: usize, ends: &mut Vec<[f64; N]>) {
     let len = x.len();
-    ext.clear();
-    ext.reserve(len + 2 * n);
+    ends.clear();
+    ends.reserve(2 * n);
     let (first, last) = (x[0], x[len - 1]);
     let reflect =
         |edge: [f64; N], v: [f64; N]| -> [f64; N] { std::array::from_fn(|l| 2.0 * edge[l] - v[l]) };
-    ext.extend((1..=n).rev().map(|i| reflect(first, x[i])));
-    ext.extend_from_slice(x);
-    ext.extend((1..=n).map(|i| reflect(last, x[len - 1 - i])));
+    ends.extend((1..=n).rev().map(|i| reflect(first, x[i])));
+    ends.extend((1..=n).map(|i| reflect(last, x[len - 1 - i])));
 }
 
 fn validate_sos(sos: &[Sos]) -> Result<(), FilterError> {
