@@ -140,3 +140,48 @@ fn short_tracks_fall_back_without_panicking() {
         assert!(angle_between(a, b) < 1e-12);
     }
 }
+
+/// When the guard refuses (smoothing would add a jump), the track is left as it came in, only
+/// made sign-continuous: each sample equal to the input or its negation, on its predecessor's
+/// hemisphere.
+#[test]
+fn a_refused_track_is_left_sign_continuous_and_otherwise_unchanged() {
+    use imubake::pipeline::smoothing::smooth_quaternions_in_place;
+    let method: Method = "butterworth:order=4,cutoff=6".parse().unwrap();
+    let mut refused = 0;
+    for step_deg in (100..=179).step_by(3) {
+        // A spin of `step_deg` per sample about a wandering axis, signs scrambled.
+        let input: Vec<UnitQuaternion<f64>> = (0..300)
+            .map(|n| {
+                let axis = Vector3::new(1.0, 0.3 * (n as f64 * 0.05).sin(), 0.2);
+                let q = UnitQuaternion::from_scaled_axis(
+                    axis.normalize() * (n as f64 * step_deg as f64).to_radians(),
+                );
+                if n % 3 == 1 {
+                    UnitQuaternion::new_unchecked(-q.into_inner())
+                } else {
+                    q
+                }
+            })
+            .collect();
+        let mut values = input.clone();
+        if smooth_quaternions_in_place(&mut values, 100.0, &method).is_ok() {
+            continue;
+        }
+        refused += 1;
+        for n in 0..input.len() {
+            let (v, i) = (values[n].coords, input[n].coords);
+            assert!(
+                v == i || v == -i,
+                "step {step_deg}° sample {n}: {v:?} is not ±{i:?}"
+            );
+            if n > 0 {
+                assert!(
+                    v.dot(&values[n - 1].coords) >= 0.0,
+                    "step {step_deg}° sample {n}"
+                );
+            }
+        }
+    }
+    assert!(refused > 0, "no spin was refused: the test checks nothing");
+}

@@ -8,7 +8,7 @@
 //! rate, where averaging has the most samples to work with — and then resampled onto the frame
 //! grid by the pipeline.
 
-use crate::rotation::{make_hemisphere_continuous, slerp_shortest};
+use crate::rotation::slerp_shortest;
 use crate::smooth::Method;
 use crate::smooth::butterworth::{
     Sos, design_lowpass_sos, sosfilt_step, sosfilt_with_state, sosfilt_zi, sosfiltfilt,
@@ -117,11 +117,20 @@ pub fn smooth_quaternions_with(
     if *method == Method::None {
         return Ok(());
     }
-    make_hemisphere_continuous(values);
-    // nalgebra stores quaternions as (x, y, z, w): four interleaved series, filtered in place.
+    // Each sample on its predecessor's hemisphere (as `make_hemisphere_continuous`), copied as
+    // it is made: nalgebra stores quaternions as (x, y, z, w), four interleaved series, filtered
+    // in place.
     let filtered = &mut scratch.filtered;
     filtered.clear();
-    filtered.extend(values.iter().map(|q| <[f64; 4]>::from(q.coords)));
+    filtered.reserve(values.len());
+    let mut before: Option<UnitQuaternion<f64>> = None;
+    for value in values.iter_mut() {
+        if before.is_some_and(|b| value.coords.dot(&b.coords) < 0.0) {
+            *value = UnitQuaternion::new_unchecked(-value.into_inner());
+        }
+        before = Some(*value);
+        filtered.push(<[f64; 4]>::from(value.coords));
+    }
     filter_lanes(filtered, rate_hz, method, &mut scratch.padded)?;
     let smoothed = |f: [f64; 4], input: &UnitQuaternion<f64>| {
         let f = Quaternion::new(f[3], f[0], f[1], f[2]);
@@ -135,33 +144,35 @@ pub fn smooth_quaternions_with(
     // Smoothing must never add a jump. On real motion it only shrinks steps; on a track that
     // turns by nearly 180° between samples, component averages lose their meaning, and such a
     // track is kept as it is (with the reason) rather than made worse. The largest step is the
-    // smallest |dot| of neighbours (angle = 2·acos|dot|). The output replaces the filtered
-    // components as it is made.
+    // smallest |dot| of neighbours (angle = 2·acos|dot|). The output takes the input's place
+    // as it is made, the input the filtered components' (to be put back if the guard refuses).
     let mut min_dot_in: f64 = 1.0;
     let mut min_dot_out: f64 = 1.0;
     let mut previous = None;
-    for (input, f) in values.iter().zip(filtered.iter_mut()) {
-        let out = smoothed(*f, input);
+    for (value, f) in values.iter_mut().zip(filtered.iter_mut()) {
+        let input = *value;
+        let out = smoothed(*f, &input);
         if let Some((prev_in, prev_out)) = previous {
             min_dot_in = min_dot_in.min(input.coords.dot(&prev_in).abs());
             min_dot_out = min_dot_out.min(out.coords.dot(&prev_out).abs());
         }
         previous = Some((input.coords, out.coords));
-        *f = out.coords.into();
+        *value = out;
+        *f = input.coords.into();
     }
     let (step_in, step_out) = (
         2.0 * min_dot_in.min(1.0).acos(),
         2.0 * min_dot_out.min(1.0).acos(),
     );
     if step_out > step_in + MAX_ADDED_STEP_RAD {
+        for (value, f) in values.iter_mut().zip(filtered.iter()) {
+            *value = UnitQuaternion::new_unchecked(Quaternion::new(f[3], f[0], f[1], f[2]));
+        }
         return Err(Unsmoothed(format!(
             "{method} would turn by up to {:.1}° between samples where the input turns by at most {:.1}°",
             step_out.to_degrees(),
             step_in.to_degrees()
         )));
-    }
-    for (value, f) in values.iter_mut().zip(filtered.iter()) {
-        *value = UnitQuaternion::new_unchecked(Quaternion::new(f[3], f[0], f[1], f[2]));
     }
     Ok(())
 }

@@ -274,7 +274,11 @@ pub fn sosfiltfilt_lanes<const N: usize>(
 
     // Forward over the whole padded series.
     let mut state = lane_state(&zi, before[0]);
-    for v in before.iter_mut().chain(x.iter_mut()).chain(after.iter_mut()) {
+    for v in before
+        .iter_mut()
+        .chain(x.iter_mut())
+        .chain(after.iter_mut())
+    {
         *v = sosfilt_step_lanes(sos, *v, &mut state);
     }
     // Backward from its end; the extension before `x` would only be filtered to be dropped.
