@@ -49,7 +49,9 @@ pub fn write_log(path: &Path, minutes: usize, sensors: &[&str]) -> std::io::Resu
             )?;
         }
     }
-    out.flush()?;
+    // On disk before any timing: its writeback would otherwise compete with the first runs'
+    // own writes (and their fsync).
+    out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
     Ok(std::fs::metadata(path)?.len())
 }
 
@@ -95,6 +97,8 @@ pub fn write_raw_log(path: &Path, minutes: usize, sensors: &[&str]) -> std::io::
             )?;
         }
     }
-    out.flush()?;
+    // On disk before any timing: its writeback would otherwise compete with the first runs'
+    // own writes (and their fsync).
+    out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
     Ok(std::fs::metadata(path)?.len())
 }
