@@ -32,7 +32,8 @@ const FAST_LIMIT: f64 = (1u64 << 40) as f64;
 /// fraction is within [`TIE_MARGIN`] of ½.
 const SCALED_LIMIT: f64 = (1u64 << 43) as f64;
 
-/// Larger than half an ulp of any double below [`SCALED_LIMIT`] (2⁻¹⁰), with room to spare.
+/// Larger than half an ulp of any double below [`SCALED_LIMIT`] (at most 2⁻¹¹), with room to
+/// spare.
 const TIE_MARGIN: f64 = 1.0 / 256.0;
 
 /// Appends `v` with exactly six decimals (see the module documentation).
