@@ -672,7 +672,7 @@ pub fn fuse(
     let mut next_series_t = f64::NEG_INFINITY;
     let mut last_bias = None;
     let kept = (0..steps.len()).filter(|k| real[*k]);
-    for ((k, t), _) in kept.clone().zip(times).zip(0..) {
+    for (k, t) in kept.clone().zip(times) {
         let rejected = run.rejected[k];
         mag_rejected += usize::from(rejected.magnetic);
         acc_rejected += usize::from(rejected.acceleration);

@@ -387,10 +387,13 @@ struct Field {
 impl Field {
     /// `None` for a field with no horizontal part (no heading).
     fn of(m: Vector3<f64>) -> Option<Field> {
-        (m.x != 0.0 || m.y != 0.0).then(|| Field {
-            heading: m.x.atan2(m.y),
-            norm: m.norm(),
-            dip: (m.z / m.norm()).asin(),
+        (m.x != 0.0 || m.y != 0.0).then(|| {
+            let norm = m.norm();
+            Field {
+                heading: m.x.atan2(m.y),
+                norm,
+                dip: (m.z / norm).asin(),
+            }
         })
     }
 }
