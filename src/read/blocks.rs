@@ -58,10 +58,18 @@ impl<R: Read> Read for Observed<'_, R> {
     }
 }
 
-/// A block read from the source: its bytes (whole lines) and its place in the file.
+/// A block read from the source: its bytes (whole lines, `bytes[..len]`; the buffer may be
+/// longer) and its place in the file.
 struct Block {
     seq: usize,
     bytes: Vec<u8>,
+    len: usize,
+}
+
+impl Block {
+    fn text(&self) -> &[u8] {
+        &self.bytes[..self.len]
+    }
 }
 
 /// What went wrong reading the source, at which block.
@@ -95,7 +103,7 @@ where
     let (free_tx, free_rx) = sync_channel::<Vec<u8>>(in_flight);
     for _ in 0..in_flight {
         free_tx
-            .send(Vec::with_capacity(BLOCK_BYTES + BLOCK_BYTES / 4))
+            .send(vec![0; BLOCK_BYTES + BLOCK_BYTES / 2])
             .expect("the channel has room for every buffer");
     }
     // As many block slots as buffers: the reader can never wait on a full block channel, so
@@ -116,7 +124,7 @@ where
                     // The lock is held only while taking a block.
                     let next = block_rx.lock().unwrap_or_else(|e| e.into_inner()).recv();
                     let Ok(block) = next else { return };
-                    let (parsed, lines) = parse(&block.bytes);
+                    let (parsed, lines) = parse(block.text());
                     if done_tx.send((block, parsed, lines)).is_err() {
                         return;
                     }
@@ -173,7 +181,7 @@ fn merge_in_order<P, E>(
     for done in done_rx {
         waiting.insert(done.0.seq, done);
         while let Some((block, parsed, lines)) = waiting.remove(&next_seq) {
-            merge(line, &block.bytes, parsed).map_err(MergeEnd::Merge)?;
+            merge(line, block.text(), parsed).map_err(MergeEnd::Merge)?;
             line += lines;
             next_seq += 1;
             // The reader may have stopped; then the buffer is simply dropped.
@@ -195,63 +203,73 @@ pub fn count_lines(block: &[u8]) -> u64 {
 
 /// Reads whole-line blocks into free buffers and hands them to the workers, until the end of the
 /// source, a failure, or no more buffers (the merge stopped).
+///
+/// A buffer keeps its length (its bytes stay initialised) as it goes round, and a block's
+/// `len` says how much of it is the block: reading into it then needs no zeroing first, which
+/// `read_to_end` would do for every block of a reader that only has `read`.
 fn read_blocks<R: Read>(
     mut source: R,
     mut carry: Vec<u8>,
     free_rx: Receiver<Vec<u8>>,
     block_tx: SyncSender<Block>,
 ) -> Result<(), ReadFailure> {
+    const READ_BYTES: usize = BLOCK_BYTES / 2;
     let mut seq = 0;
     let mut eof = false;
     while !eof {
         let Ok(mut bytes) = free_rx.recv() else {
             return Ok(());
         };
-        bytes.clear();
-        bytes.append(&mut carry);
+        let mut used = carry.len();
+        if bytes.len() < used + READ_BYTES {
+            bytes.resize(used + READ_BYTES, 0);
+        }
+        bytes[..used].copy_from_slice(&carry);
+        carry.clear();
         // Where the line being read starts: after the last newline so far.
-        let mut line_start = memchr::memrchr(b'\n', &bytes).map_or(0, |p| p + 1);
+        let mut line_start = memchr::memrchr(b'\n', &bytes[..used]).map_or(0, |p| p + 1);
         let cut = loop {
-            if bytes.len() >= BLOCK_BYTES && line_start > 0 {
+            if used >= BLOCK_BYTES && line_start > 0 {
                 break line_start;
             }
-            let start = bytes.len();
-            // Into the buffer's spare room without zeroing it first (`read_to_end` keeps track
-            // of what is initialised); up to half a block, fewer only at the end of the source.
-            let read = (&mut source)
-                .take(BLOCK_BYTES as u64 / 2)
-                .read_to_end(&mut bytes);
-            let n = match read {
+            if bytes.len() < used + READ_BYTES {
+                bytes.resize(used + READ_BYTES, 0);
+            }
+            let start = used;
+            let n = match read_some(&mut source, &mut bytes[start..start + READ_BYTES]) {
                 Ok(n) => n,
                 Err(e) => {
-                    bytes.truncate(line_start);
-                    send_whole_lines(bytes, &mut seq, &block_tx);
+                    send_whole_lines(bytes, line_start, &mut seq, &block_tx);
                     return Err(ReadFailure::Io(e));
                 }
             };
             if n == 0 {
                 eof = true;
-                break bytes.len();
+                break used;
             }
-            let new = &bytes[start..];
+            used += n;
+            let new = &bytes[start..used];
             // Every line is measured as it grows: the one being read ends in the new bytes or
             // goes on past them.
             let grown_to = memchr::memchr(b'\n', new).map_or(n, |p| p);
             if start - line_start + grown_to > MAX_LINE_BYTES {
-                bytes.truncate(line_start);
-                send_whole_lines(bytes, &mut seq, &block_tx);
+                send_whole_lines(bytes, line_start, &mut seq, &block_tx);
                 return Err(ReadFailure::TooLong);
             }
             if let Some(p) = memchr::memrchr(b'\n', new) {
                 line_start = start + p + 1;
             }
         };
-        carry.extend_from_slice(&bytes[cut..]);
-        bytes.truncate(cut);
-        if bytes.is_empty() {
+        carry.extend_from_slice(&bytes[cut..used]);
+        if cut == 0 {
             continue;
         }
-        if block_tx.send(Block { seq, bytes }).is_err() {
+        let block = Block {
+            seq,
+            bytes,
+            len: cut,
+        };
+        if block_tx.send(block).is_err() {
             return Ok(());
         }
         seq += 1;
@@ -259,10 +277,28 @@ fn read_blocks<R: Read>(
     Ok(())
 }
 
-/// Sends the lines before a failure, so that they are merged and the failure's line number is
-/// known.
-fn send_whole_lines(bytes: Vec<u8>, seq: &mut usize, block_tx: &SyncSender<Block>) {
-    if !bytes.is_empty() && block_tx.send(Block { seq: *seq, bytes }).is_ok() {
+/// One `read` into `buf`, again when interrupted: the bytes read, 0 at the end of the source.
+fn read_some(source: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
+    loop {
+        match source.read(buf) {
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            read => return read,
+        }
+    }
+}
+
+/// Sends the lines before a failure (the first `len` bytes of `bytes`), so that they are merged
+/// and the failure's line number is known.
+fn send_whole_lines(bytes: Vec<u8>, len: usize, seq: &mut usize, block_tx: &SyncSender<Block>) {
+    if len > 0
+        && block_tx
+            .send(Block {
+                seq: *seq,
+                bytes,
+                len,
+            })
+            .is_ok()
+    {
         *seq += 1;
     }
 }
@@ -351,6 +387,95 @@ mod tests {
                     assert!(fails, "a line of {length} bytes is accepted: {e}");
                     let expected = format!("line {} is longer than", lines_before + 1);
                     assert!(e.starts_with(&expected), "{e}");
+                }
+            }
+        }
+    }
+
+    /// A source that hands out a few bytes at a time (from 1 to over a block), is interrupted
+    /// now and then, and fails for good after `fail_at` bytes if asked to.
+    struct Trickle<'a> {
+        data: &'a [u8],
+        at: usize,
+        state: u64,
+        fail_at: Option<usize>,
+    }
+
+    impl Read for Trickle<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            self.state ^= self.state << 13;
+            self.state ^= self.state >> 7;
+            self.state ^= self.state << 17;
+            if self.state % 5 == 0 {
+                return Err(io::ErrorKind::Interrupted.into());
+            }
+            let end = self.fail_at.unwrap_or(self.data.len()).min(self.data.len());
+            if self.at == end && self.fail_at.is_some() {
+                return Err(io::Error::other("the disk went away"));
+            }
+            let want = match self.state % 3 {
+                0 => 1 + (self.state >> 8) as usize % 16,
+                1 => 1 + (self.state >> 8) as usize % 4096,
+                _ => 1 + (self.state >> 8) as usize % (BLOCK_BYTES * 2),
+            };
+            let n = want.min(buf.len()).min(end - self.at);
+            buf[..n].copy_from_slice(&self.data[self.at..self.at + n]);
+            self.at += n;
+            Ok(n)
+        }
+    }
+
+    /// Short reads, interrupted reads and a failure part way: the lines are those a line
+    /// reader gives, and a failure merges every whole line before it, then reports the error.
+    #[test]
+    fn short_interrupted_and_failing_reads() {
+        let text: Vec<u8> = (0..120_000)
+            .flat_map(|i| format!("{i},s{},{}\n", i % 16, "7".repeat(i % 40)).into_bytes())
+            .collect();
+        for (seed, fail_at) in [
+            (1, None),
+            (2, None),
+            (3, Some(0)),
+            (4, Some(5)),
+            (5, Some(BLOCK_BYTES - 3)),
+            (6, Some(text.len() / 2)),
+            (7, Some(text.len() - 1)),
+        ] {
+            let source = Trickle {
+                data: &text,
+                at: 0,
+                state: 0x9e37_79b9_7f4a_7c15 ^ seed,
+                fail_at,
+            };
+            let mut merged = Vec::new();
+            let result = parse_in_blocks(
+                source,
+                Vec::new(),
+                1,
+                |block| {
+                    let lines: Vec<Vec<u8>> = lines_of(block).map(|(_, l)| l.to_vec()).collect();
+                    let n = lines.len() as u64;
+                    (lines, n)
+                },
+                |first, _, lines: Vec<Vec<u8>>| -> Result<(), ()> {
+                    for (i, l) in lines.into_iter().enumerate() {
+                        merged.push((first + i as u64, l));
+                    }
+                    Ok(())
+                },
+            );
+            match fail_at {
+                None => {
+                    assert!(result.is_ok(), "seed {seed}");
+                    assert_eq!(Ok(merged), line_reader(&text), "seed {seed}");
+                }
+                Some(at) => {
+                    assert!(
+                        matches!(&result, Err(BlockError::Lines(LineError::Io(e))) if e.to_string() == "the disk went away"),
+                        "seed {seed}: {result:?}"
+                    );
+                    let whole = memchr::memrchr(b'\n', &text[..at]).map_or(0, |p| p + 1);
+                    assert_eq!(Ok(merged), line_reader(&text[..whole]), "seed {seed}");
                 }
             }
         }
