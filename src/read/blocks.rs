@@ -406,7 +406,7 @@ mod tests {
             self.state ^= self.state << 13;
             self.state ^= self.state >> 7;
             self.state ^= self.state << 17;
-            if self.state % 5 == 0 {
+            if self.state.is_multiple_of(5) {
                 return Err(io::ErrorKind::Interrupted.into());
             }
             let end = self.fail_at.unwrap_or(self.data.len()).min(self.data.len());
