@@ -167,12 +167,42 @@ fn filter_track_then(
 }
 
 /// [`filter_track_then`] for the order `EulerOrder::ALL[ORDER]`.
+///
+/// Each frame's angles are a function of its rotation and the previous frame's angles, so once
+/// a frame gives the very angles of the frame before, every following frame with the same
+/// rotation gives them again: a joint that holds still (a rig's unsensed joints, all of a
+/// finger) costs a comparison per frame instead of an Euler conversion, to the same bits.
 fn filter_track_in<const ORDER: usize>(
     track: &[UnitQuaternion<f64>],
     then: impl Fn([f64; 3]) -> [f64; 3],
 ) -> Vec<[f64; 3]> {
     let mut filter = EulerFilter::new(EulerOrder::ALL[ORDER]);
-    track.iter().map(|q| then(filter.next(q))).collect()
+    let mut out: Vec<[f64; 3]> = Vec::with_capacity(track.len());
+    // The last frame's angles equal those before them, both made by `compatible`.
+    let mut settled = false;
+    let mut previous_q: Option<&UnitQuaternion<f64>> = None;
+    for q in track {
+        let same_rotation = previous_q.is_some_and(|p| same_bits(p, q));
+        previous_q = Some(q);
+        if settled
+            && same_rotation
+            && let Some(&last) = out.last()
+        {
+            out.push(last);
+            continue;
+        }
+        let before = filter.previous;
+        let angles = filter.next(q);
+        settled = before.is_some_and(|b| b.map(f64::to_bits) == angles.map(f64::to_bits));
+        out.push(then(angles));
+    }
+    out
+}
+
+/// The two rotations are stored as the same four doubles.
+#[inline(always)]
+fn same_bits(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> bool {
+    a.coords.map(f64::to_bits) == b.coords.map(f64::to_bits)
 }
 
 /// The incremental core of [`filter_track`]: one frame at a time.
@@ -599,6 +629,59 @@ mod tests {
         let q = to_quaternion([0.1, 0.2, 0.3], EulerOrder::YZX);
         let out = filter_track(&[q], EulerOrder::YZX);
         assert_eq!(out, vec![from_quaternion(&q, EulerOrder::YZX)]);
+    }
+
+    /// Frames held still are copied rather than converted, to exactly what converting each
+    /// frame in turn gives: tracks of runs of repeated rotations — ordinary ones, half-turn
+    /// flips, spins, gimbal lock, a joint that never moves — in every order.
+    #[test]
+    fn held_frames_give_what_frame_by_frame_conversion_gives() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for order in EulerOrder::ALL {
+            for case in 0..60 {
+                let mut track = Vec::new();
+                let mut angle = [0.0f64; 3];
+                while track.len() < 400 {
+                    match case % 4 {
+                        // A joint that never moves.
+                        0 => angle = [0.3, -0.2, 0.1],
+                        // Small steps, some across ±180°, some through the middle axis's ±90°.
+                        1 => {
+                            for a in &mut angle {
+                                *a += (next() - 0.5) * 0.8;
+                            }
+                        }
+                        2 => {
+                            angle = [
+                                next() * 12.0 - 6.0,
+                                FRAC_PI_2 * (next() - 0.5).signum(),
+                                next(),
+                            ]
+                        }
+                        _ => angle = [angle[0] + 0.9, next() * 3.0 - 1.5, angle[2] - 0.7],
+                    }
+                    let q = to_quaternion(angle, order);
+                    let run = 1 + (next() * 6.0) as usize;
+                    track.extend(std::iter::repeat_n(q, run));
+                }
+                let mut filter = EulerFilter::new(order);
+                let expected: Vec<[u64; 3]> = track
+                    .iter()
+                    .map(|q| filter.next(q).map(f64::to_bits))
+                    .collect();
+                let got: Vec<[u64; 3]> = filter_track(&track, order)
+                    .iter()
+                    .map(|a| a.map(f64::to_bits))
+                    .collect();
+                assert_eq!(got, expected, "{order} case {case}");
+            }
+        }
     }
 
     #[test]
