@@ -524,3 +524,87 @@ fn a_write_failing_partway_is_reported() {
         assert_eq!(sink.taken, whole[..room], "room {room}");
     }
 }
+
+/// `{:.6}` as the writer has always written it: a zero of either sign is `0.000000`.
+fn six_decimals(v: f64) -> String {
+    let text = format!("{v:.6}");
+    if text == "-0.000000" {
+        "0.000000".into()
+    } else {
+        text
+    }
+}
+
+/// Joints that hold still for a while, a root that stays put for a while, and a joint with
+/// position channels: the motion lines are exactly the numbers one by one with `{:.6}`, across
+/// several of the writer's blocks of frames (where held runs start and end inside blocks too).
+#[test]
+fn held_joints_and_a_fixed_root_are_written_as_moving_ones_are() {
+    let rig = small_rig(LengthUnit::Metres);
+    let frames = 1500;
+    let moving = |f: usize, j: usize| -> [f64; 3] {
+        let t = f as f64 * 0.37 + j as f64;
+        [t.sin() * 170.0, -(t * 0.5).cos() * 89.9, (t * 1e-3).tan()]
+    };
+    let euler: Vec<Vec<[f64; 3]>> = (0..rig.len())
+        .map(|j| {
+            (0..frames)
+                .map(|f| match j {
+                    // Never moves, at a value that is not zero.
+                    1 => [12.5, -0.0, 1.0 / 3.0],
+                    // Held from frame 300 to 1100, moving before and after.
+                    2 if (300..1100).contains(&f) => [-45.0, 0.125, 7.0],
+                    // Moves on every frame but one value of the three.
+                    3 => [moving(f, j)[0], 2.0, moving(f, j)[2]],
+                    // Still but for a twitch now and then: the same at both ends of a block.
+                    4 if f % 97 == 50 => [1.0, 2.0, 3.5],
+                    4 => [1.0, 2.0, 3.0],
+                    _ => moving(f, j),
+                })
+                .collect()
+        })
+        .collect();
+    let roots: Vec<Vector3<f64>> = (0..frames)
+        .map(|f| {
+            if f < 700 && f % 89 == 30 {
+                Vector3::new(0.25, 1.5, -0.0)
+            } else if f < 700 {
+                Vector3::new(0.25, 1.0, -0.0)
+            } else {
+                Vector3::new(f as f64 * 1e-3, 1.0, 0.5)
+            }
+        })
+        .collect();
+    let translation: Vec<Vector3<f64>> = (0..frames)
+        .map(|f| Vector3::new(0.0, 0.3 + if f > 900 { 0.01 } else { 0.0 }, 0.0))
+        .collect();
+    let translations = vec![(1, translation.clone())];
+    let text = String::from_utf8(write(&BvhMotion {
+        rig: &rig,
+        fps: Fps::new(60, 1).unwrap(),
+        root_positions: &roots,
+        euler_deg: &euler,
+        translations: &translations,
+    }))
+    .unwrap();
+    let motion: Vec<&str> = text
+        .split_once("Frame Time: ")
+        .unwrap()
+        .1
+        .lines()
+        .skip(1)
+        .collect();
+    assert_eq!(motion.len(), frames);
+    for (f, line) in motion.iter().enumerate() {
+        let mut numbers: Vec<f64> = roots[f].iter().copied().collect();
+        // Hierarchy order: Hips, Spine (with its position channels), Head, Hand, Tip.
+        for j in 0..rig.len() {
+            if j == 1 {
+                numbers.extend(translation[f].iter());
+            }
+            numbers.extend(euler[j][f]);
+        }
+        let expected: Vec<String> = numbers.into_iter().map(six_decimals).collect();
+        assert_eq!(*line, expected.join(" "), "frame {f}");
+    }
+}

@@ -200,25 +200,64 @@ pub fn write_bvh_scaled<W: Write + Send>(out: W, motion: &BvhMotion, scale: f64)
         let mut text = Vec::with_capacity(frames.len() * (order.len() * 30 + 32));
         // The block's angles frame by frame: each joint's run read in one sweep (reading them
         // frame by frame hops between every joint's track and waits on memory at each hop).
+        // A joint whose angles hold through the block (one that never moves) has its three
+        // numbers formatted once and copied into each line: `held[k]` is their text's range in
+        // `held_text`.
         let width = order.len();
         let mut angles = vec![[0.0; 3]; frames.len() * width];
+        let mut held: Vec<Option<std::ops::Range<usize>>> = vec![None; width];
+        let mut held_text = Vec::new();
+        let push_root = |text: &mut Vec<u8>, f: usize| {
+            let root = motion.root_positions[f] * scale;
+            push_fixed6(text, root.x);
+            for x in [root.y, root.z] {
+                text.push(b' ');
+                push_fixed6(text, x);
+            }
+        };
+        // So does a root that stays in place (`--root fixed`).
+        let roots = &motion.root_positions[frames.clone()];
+        let root_bits = |p: &Vector3<f64>| p.map(f64::to_bits);
+        let root_held = roots
+            .iter()
+            .all(|p| root_bits(p) == root_bits(&roots[0]))
+            .then(|| {
+                push_root(&mut held_text, frames.start);
+                0..held_text.len()
+            });
         for (k, &j) in order.iter().enumerate() {
-            for (i, a) in motion.euler_deg[j][frames.clone()].iter().enumerate() {
+            let run = &motion.euler_deg[j][frames.clone()];
+            let first = run[0].map(f64::to_bits);
+            if run.iter().all(|a| a.map(f64::to_bits) == first) {
+                let start = held_text.len();
+                for &a in &run[0] {
+                    held_text.push(b' ');
+                    push_fixed6(&mut held_text, a);
+                }
+                held[k] = Some(start..held_text.len());
+                continue;
+            }
+            for (i, a) in run.iter().enumerate() {
                 angles[i * width + k] = *a;
             }
         }
         for (i, f) in frames.enumerate() {
             // The root's position first, the line starting with its number.
-            let root = motion.root_positions[f] * scale;
-            push_fixed6(&mut text, root.x);
-            for x in [root.y, root.z] {
-                text.push(b' ');
-                push_fixed6(&mut text, x);
+            if let Some(range) = &root_held {
+                text.extend_from_slice(&held_text[range.clone()]);
+            } else {
+                push_root(&mut text, f);
             }
             let frame_angles = &angles[i * width..(i + 1) * width];
-            for (translation, joint_angles) in translations.iter().zip(frame_angles) {
+            for ((translation, joint_angles), held) in
+                translations.iter().zip(frame_angles).zip(&held)
+            {
                 if let Some(t) = translation {
                     push_vector(&mut text, &(t[f] * scale));
+                }
+                if let Some(range) = held {
+                    text.extend_from_slice(&held_text[range.clone()]);
+                    continue;
                 }
                 for &a in joint_angles {
                     text.push(b' ');
