@@ -598,11 +598,11 @@ fn held_joints_and_a_fixed_root_are_written_as_moving_ones_are() {
     for (f, line) in motion.iter().enumerate() {
         let mut numbers: Vec<f64> = roots[f].iter().copied().collect();
         // Hierarchy order: Hips, Spine (with its position channels), Head, Hand, Tip.
-        for j in 0..rig.len() {
+        for (j, angles) in euler.iter().enumerate() {
             if j == 1 {
                 numbers.extend(translation[f].iter());
             }
-            numbers.extend(euler[j][f]);
+            numbers.extend(angles[f]);
         }
         let expected: Vec<String> = numbers.into_iter().map(six_decimals).collect();
         assert_eq!(*line, expected.join(" "), "frame {f}");
