@@ -178,7 +178,7 @@ fn filter_track_in<const ORDER: usize>(
 ) -> Vec<[f64; 3]> {
     let mut filter = EulerFilter::new(EulerOrder::ALL[ORDER]);
     let mut out: Vec<[f64; 3]> = Vec::with_capacity(track.len());
-    // The last frame's angles equal those before them, both made by `compatible`.
+    // The last frame's angles were made by `compatible` from those before them, and equal them.
     let mut settled = false;
     let mut previous_q: Option<&UnitQuaternion<f64>> = None;
     for q in track {
