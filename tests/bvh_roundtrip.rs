@@ -525,16 +525,6 @@ fn a_write_failing_partway_is_reported() {
     }
 }
 
-/// `{:.6}` as the writer has always written it: a zero of either sign is `0.000000`.
-fn six_decimals(v: f64) -> String {
-    let text = format!("{v:.6}");
-    if text == "-0.000000" {
-        "0.000000".into()
-    } else {
-        text
-    }
-}
-
 /// Joints that hold still for a while, a root that stays put for a while, and a joint with
 /// position channels: the motion lines are exactly the numbers one by one with `{:.6}`, across
 /// several of the writer's blocks of frames (where held runs start and end inside blocks too).
@@ -604,7 +594,7 @@ fn held_joints_and_a_fixed_root_are_written_as_moving_ones_are() {
             }
             numbers.extend(angles[f]);
         }
-        let expected: Vec<String> = numbers.into_iter().map(six_decimals).collect();
+        let expected: Vec<String> = numbers.into_iter().map(common::six_decimals).collect();
         assert_eq!(*line, expected.join(" "), "frame {f}");
     }
 }

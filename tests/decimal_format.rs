@@ -2,17 +2,10 @@
 //! ten million values (issue 23): uniform values at every magnitude a BVH holds, every kind of
 //! random bit pattern, and the doubles next to every half-micro tie.
 
-use imubake::write::decimal::push_fixed6;
+mod common;
 
-/// `format!` as the writer always used it: a value that rounds to zero is written positive.
-fn reference(v: f64) -> String {
-    let text = format!("{v:.6}");
-    if text == "-0.000000" {
-        "0.000000".to_string()
-    } else {
-        text
-    }
-}
+use common::six_decimals as reference;
+use imubake::write::decimal::push_fixed6;
 
 /// xorshift64*: a fixed, reproducible stream (no dependency on a random crate's versions).
 struct Stream(u64);

@@ -265,3 +265,14 @@ pub fn convert_with_mapping(input: &Path, mapping_json: &str, dir: &Path) -> ser
     serde_json::from_slice(&std::fs::read(out.join(format!("{stem}.imubake.json"))).unwrap())
         .unwrap()
 }
+
+/// `format!("{v:.6}")` as the BVH writer has always written numbers: a value that rounds to
+/// zero is written positive (`0.000000`, never `-0.000000`).
+pub fn six_decimals(v: f64) -> String {
+    let text = format!("{v:.6}");
+    if text == "-0.000000" {
+        "0.000000".to_string()
+    } else {
+        text
+    }
+}
