@@ -210,10 +210,7 @@ pub fn write_bvh_scaled<W: Write + Send>(out: W, motion: &BvhMotion, scale: f64)
         let push_root = |text: &mut Vec<u8>, f: usize| {
             let root = motion.root_positions[f] * scale;
             push_fixed6(text, root.x);
-            for x in [root.y, root.z] {
-                text.push(b' ');
-                push_fixed6(text, x);
-            }
+            push_numbers(text, &[root.y, root.z]);
         };
         // So does a root that stays in place (`--root fixed`).
         let roots = &motion.root_positions[frames.clone()];
@@ -230,10 +227,7 @@ pub fn write_bvh_scaled<W: Write + Send>(out: W, motion: &BvhMotion, scale: f64)
             let first = run[0].map(f64::to_bits);
             if run.iter().all(|a| a.map(f64::to_bits) == first) {
                 let start = held_text.len();
-                for &a in &run[0] {
-                    held_text.push(b' ');
-                    push_fixed6(&mut held_text, a);
-                }
+                push_numbers(&mut held_text, &run[0]);
                 held[k] = Some(start..held_text.len());
                 continue;
             }
@@ -259,10 +253,7 @@ pub fn write_bvh_scaled<W: Write + Send>(out: W, motion: &BvhMotion, scale: f64)
                     text.extend_from_slice(&held_text[range.clone()]);
                     continue;
                 }
-                for &a in joint_angles {
-                    text.push(b' ');
-                    push_fixed6(&mut text, a);
-                }
+                push_numbers(&mut text, joint_angles);
             }
             text.push(b'\n');
         }
@@ -401,8 +392,13 @@ fn indent(buf: &mut Vec<u8>, depth: usize) {
 /// ` x y z` (each preceded by a space), six decimals; a value that rounds to zero is written as
 /// `0.000000` whatever its sign ([`push_fixed6`]).
 fn push_vector(buf: &mut Vec<u8>, v: &Vector3<f64>) {
-    for x in v.iter() {
+    push_numbers(buf, v.as_slice());
+}
+
+/// Each number with a space before it.
+fn push_numbers(buf: &mut Vec<u8>, values: &[f64]) {
+    for &x in values {
         buf.push(b' ');
-        push_fixed6(buf, *x);
+        push_fixed6(buf, x);
     }
 }
