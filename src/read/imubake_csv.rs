@@ -11,7 +11,7 @@
 //! Lines starting with `#` are comments; `# world: ned` before the header declares the world
 //! (default `enu`). Blank lines are ignored.
 
-use super::blocks::{BlockError, Observed, lines_of, parse_in_blocks};
+use super::blocks::{BlockError, Observed, SpareVecs, lines_of, parse_in_blocks};
 use super::lines::{LineReader, number_problem, parse_f64, plain_decimal_prefix, split_fields};
 use super::{InputFormat, ReadError, ReadOptions, check_text, sniff, warn_if_denormalised};
 use crate::take::{ClockUnit, ImuSample, SensorIdx, Take, TakeBuilder, YawPitchRollDeg};
@@ -21,7 +21,6 @@ use std::convert::Infallible;
 use std::fs::File;
 use std::io::Read;
 use std::path::Path;
-use std::sync::Mutex;
 
 /// Standard gravity, for accelerometer columns in g.
 pub const STANDARD_GRAVITY_M_S2: f64 = 9.80665;
@@ -459,6 +458,12 @@ impl From<Packed> for Values {
     }
 }
 
+/// The blocks' item lists go round like their buffers, and from one read to the next: emptied
+/// by the merge, refilled by a worker (a raw log's list is over a megabyte, and fresh memory
+/// costs page faults). Those of two reads at once on 2 cores; a list grown past 4 MiB (a block
+/// of very short lines) is not kept.
+static SPARE_ITEMS: SpareVecs<Item> = SpareVecs::new(16, 4 << 20);
+
 /// A block's lines, parsed.
 struct ParsedBlock {
     items: Vec<Item>,
@@ -567,9 +572,6 @@ fn read_sized(
     let mut rows: u64 = 0;
     let mut reserved = size_hint == 0;
     let mut worst_norm_error: f64 = 0.0;
-    // The blocks' item lists go round like their buffers: emptied by the merge, refilled by a
-    // worker (a raw log's list is over a megabyte, and fresh memory costs page faults).
-    let spare_items: Mutex<Vec<Vec<Item>>> = Mutex::new(Vec::new());
     let merge = |first_line: u64, block: &[u8], mut parsed: ParsedBlock| -> Result<(), ReadError> {
         let mut known = vec![Known::Unknown; parsed.ids.len()];
         let raw = |(start, end): (u32, u32)| &block[start as usize..end as usize];
@@ -656,19 +658,14 @@ fn read_sized(
             }
         }
         bytes_before += block.len() as u64;
-        if let Ok(mut spare) = spare_items.lock() {
-            spare.push(parsed.items);
-        }
+        SPARE_ITEMS.give([parsed.items]);
         Ok(())
     };
     parse_in_blocks(
         reader,
         pending,
         header_line + 1,
-        |block| {
-            let items = spare_items.lock().ok().and_then(|mut spare| spare.pop());
-            parse_block(&layout, block, items.unwrap_or_default())
-        },
+        |block| parse_block(&layout, block, SPARE_ITEMS.take().unwrap_or_default()),
         merge,
     )
     .map_err(|e| match e {
