@@ -1088,29 +1088,14 @@ mod tests {
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(3000))]
-        #[test]
-        fn a_direct_quaternion_row_is_what_the_general_reader_reads(
-            header in prop::sample::select(HEADERS.to_vec()),
-            line in line(),
-        ) {
-            check_direct(header, &line)?;
-        }
-
-        #[test]
-        fn near_plain_quaternion_rows_too(
-            (header, line) in prop::sample::select(HEADERS.to_vec()).prop_flat_map(|h| {
-                (Just(h), near_plain_line(h.split(',').count()))
-            }),
-        ) {
-            check_direct(header, &line)?;
-        }
-
+        /// Both one-pass readers: the plain row and the direct quaternion row.
         #[test]
         fn the_one_pass_row_reads_what_the_general_reader_reads(
             header in prop::sample::select(HEADERS.to_vec()),
             line in line(),
         ) {
             check(header, &line)?;
+            check_direct(header, &line)?;
         }
 
         #[test]
@@ -1120,6 +1105,7 @@ mod tests {
             }),
         ) {
             check(header, &line)?;
+            check_direct(header, &line)?;
         }
     }
 
