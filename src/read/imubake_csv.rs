@@ -834,7 +834,7 @@ fn plain_row<'a>(layout: &Layout, line: &'a [u8]) -> Option<(&'a [u8], [f64; FEW
 
 /// What [`parse_row`] makes of a plain row of a quaternion-only layout (`columns`: the
 /// quaternion's), as a block keeps it, without the general row's optional parts made and moved
-/// around (~15 ns of a row's ~90): the same numbers, norm and division as [`row`]. `None` where
+/// around (~15 ns of a row's ~90): the same numbers and [`normalised`] as [`row`]. `None` where
 /// `parse_row` must decide: not a plain row, or a zero quaternion (dropped, with its reason).
 #[inline]
 fn plain_quaternion_row<'a>(
@@ -844,13 +844,8 @@ fn plain_quaternion_row<'a>(
 ) -> Option<(&'a [u8], Packed)> {
     let (id, numbers) = plain_row(layout, line)?;
     let [w, x, y, z] = columns.map(|c| numbers[c]);
-    let q = Quaternion::new(w, x, y, z);
-    let norm = q.norm();
-    if norm < 1e-9 {
-        return None;
-    }
+    let (q, norm) = normalised(Quaternion::new(w, x, y, z))?;
     let time = numbers[layout.time];
-    let q = UnitQuaternion::new_unchecked(q / norm);
     Some((id, Packed::Quaternion { time, q, norm }))
 }
 
@@ -912,13 +907,9 @@ fn row(
     mag: Option<Vector3<f64>>,
 ) -> Result<Row<'_>, String> {
     let quaternion = match q {
-        Some(q) => {
-            let norm = q.norm();
-            if norm < 1e-9 {
-                return Err("quaternion is zero; expected a unit quaternion qw,qx,qy,qz".into());
-            }
-            Some((UnitQuaternion::new_unchecked(q / norm), norm))
-        }
+        Some(q) => Some(normalised(q).ok_or_else(|| {
+            "quaternion is zero; expected a unit quaternion qw,qx,qy,qz".to_string()
+        })?),
         None => None,
     };
     Ok(Row {
@@ -931,6 +922,16 @@ fn row(
             mag,
         },
     })
+}
+
+/// A row's quaternion normalised, and the norm it had; `None` for a zero quaternion.
+#[inline]
+fn normalised(q: Quaternion<f64>) -> Option<(UnitQuaternion<f64>, f64)> {
+    let norm = q.norm();
+    if norm < 1e-9 {
+        return None;
+    }
+    Some((UnitQuaternion::new_unchecked(q / norm), norm))
 }
 
 fn column_name(layout: &Layout, index: usize) -> String {
