@@ -402,11 +402,10 @@ fn run_on(
     drop(stage);
     let stage = tracing::debug_span!("local rotations").entered();
     let held = calibrate::held_pose(rig, window.as_ref());
-    let local = relative::to_local(rig, &world_tracks, grid.frames, options.unsensed, &held);
-    let unsmoothed =
-        raw_tracks.map(|raw| relative::to_local(rig, &raw, grid.frames, options.unsensed, &held));
     let animated: Vec<bool> = world_tracks.iter().map(Option::is_some).collect();
-    drop(world_tracks);
+    let local = relative::to_local(rig, world_tracks, grid.frames, options.unsensed, &held);
+    let unsmoothed =
+        raw_tracks.map(|raw| relative::to_local(rig, raw, grid.frames, options.unsensed, &held));
     drop(stage);
     let _stage = tracing::debug_span!("root").entered();
     let root_mode = root::resolve(options.root, rig, &animated);
