@@ -378,7 +378,12 @@ fn run_on(
             options.sensor_rate_hz,
             scratch,
         );
-        let on_grid = resample::resample(&track, &grid);
+        // Into memory an earlier track had (the take's, most often), which then stays in use.
+        let mut on_grid = scratch.values();
+        track.resample_into(grid.times_s(), &mut on_grid);
+        // Its room past the frames (the sensor's rate is above the frame rate) given back.
+        on_grid.shrink_to_fit();
+        scratch.give(track);
         (
             s.bone,
             on_grid,

@@ -148,10 +148,22 @@ impl Track<UnitQuaternion<f64>> {
 
     /// The track at increasing times (slerp between the bracketing samples, held outside).
     pub fn resample_at(&self, times_s: impl IntoIterator<Item = f64>) -> Vec<UnitQuaternion<f64>> {
+        let mut out = Vec::new();
+        self.resample_into(times_s, &mut out);
+        out
+    }
+
+    /// [`Self::resample_at`] into `out` (cleared first): memory a caller already has.
+    pub fn resample_into(
+        &self,
+        times_s: impl IntoIterator<Item = f64>,
+        out: &mut Vec<UnitQuaternion<f64>>,
+    ) {
         let times = self.times_s();
         let values = self.values();
         let times_s = times_s.into_iter();
-        let mut out = Vec::with_capacity(times_s.size_hint().0);
+        out.clear();
+        out.reserve(times_s.size_hint().0);
         // The times increase, so the bracketing sample only moves forward.
         let mut i = 0;
         for t in times_s {
@@ -168,7 +180,6 @@ impl Track<UnitQuaternion<f64>> {
             };
             out.push(q);
         }
-        out
     }
 }
 
