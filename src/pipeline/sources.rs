@@ -163,10 +163,12 @@ pub fn orientations(
         })
         .collect();
     let take = input.take();
+    // Once, not per sample: the compiler does not hoist it out of the loop.
+    let world_to_rig = world.to_rig();
     let results = parallel_map(kept, |(s, plan, device)| {
         let result = match (plan, device) {
             (Plan::Device, Some(track)) => Ok((
-                track.map_in_place(|q| world.to_rig() * q),
+                track.map_in_place(|q| world_to_rig * q),
                 Origin::Device { world },
                 Vec::new(),
             )),
