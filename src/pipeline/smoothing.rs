@@ -117,7 +117,7 @@ impl Scratch {
     const SPARES: usize = 2;
 
     /// Keeps `track`'s memory for later tracks.
-    pub fn give(&mut self, track: Track<UnitQuaternion<f64>>) {
+    pub(crate) fn give(&mut self, track: Track<UnitQuaternion<f64>>) {
         let (times, values) = track.into_parts();
         if self.spare_times.len() < Self::SPARES {
             self.spare_times.push(times);
@@ -128,7 +128,7 @@ impl Scratch {
     }
 
     /// A kept vector for values (empty, perhaps with room), else a new one.
-    pub fn values(&mut self) -> Vec<UnitQuaternion<f64>> {
+    pub(crate) fn values(&mut self) -> Vec<UnitQuaternion<f64>> {
         self.spare_values.pop().unwrap_or_default()
     }
 
