@@ -387,6 +387,10 @@ impl Animation {
     pub fn local(&self, joint: usize) -> &[UnitQuaternion<f64>] {
         &self.local[joint]
     }
+    /// `locals()[joint][frame]`: every joint's [`Self::local`].
+    pub fn locals(&self) -> &[Vec<UnitQuaternion<f64>>] {
+        &self.local
+    }
     pub fn is_animated(&self, joint: usize) -> bool {
         self.animated[joint]
     }

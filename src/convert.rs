@@ -680,7 +680,7 @@ impl Motion {
         pipeline.trim = None;
         let rig = animation.rig().name().to_string();
         let conversion = Conversion {
-            euler_deg: pipeline::output::euler_degrees(&animation),
+            euler_deg: None,
             animation,
             unsmoothed: None,
             mapping: MappingRecord {
@@ -779,8 +779,9 @@ fn mvnx_segments_conversion(
 /// and what the sidecar says of how it was made.
 struct Conversion {
     animation: Animation,
-    /// BVH channel values ([`TakeOutputs::euler_deg`]).
-    euler_deg: Vec<Vec<[f64; 3]>>,
+    /// BVH channel values when made already, paper 002's channel copy ([`TakeOutputs::euler_deg`]);
+    /// else the BVH writer makes them from the animation's rotations.
+    euler_deg: Option<Vec<Vec<[f64; 3]>>>,
     /// Local rotations before smoothing, `[joint][frame]`, for the report.
     unsmoothed: Option<Vec<Vec<UnitQuaternion<f64>>>>,
     mapping: MappingRecord,
@@ -822,10 +823,8 @@ impl Conversion {
     fn in_place(mut self) -> Result<Conversion, crate::anim::AnimationError> {
         self.animation = self.animation.in_place()?;
         let frames = self.animation.frames();
-        if self.pipeline.mode == "legacy-euler" {
-            self.euler_deg.insert(0, vec![[0.0; 3]; frames]);
-        } else {
-            self.euler_deg = pipeline::output::euler_degrees(&self.animation);
+        if let Some(euler_deg) = &mut self.euler_deg {
+            euler_deg.insert(0, vec![[0.0; 3]; frames]);
         }
         if let Some(unsmoothed) = &mut self.unsmoothed {
             unsmoothed.insert(0, vec![UnitQuaternion::identity(); frames]);
@@ -840,12 +839,8 @@ impl Conversion {
     /// and the contacts move one frame on.
     fn with_bind_frame(mut self) -> Conversion {
         self.animation = self.animation.with_bind_frame();
-        if self.pipeline.mode == "legacy-euler" {
-            for track in &mut self.euler_deg {
-                track.insert(0, [0.0; 3]);
-            }
-        } else {
-            self.euler_deg = pipeline::output::euler_degrees(&self.animation);
+        for track in self.euler_deg.iter_mut().flatten() {
+            track.insert(0, [0.0; 3]);
         }
         if let Some(unsmoothed) = &mut self.unsmoothed {
             for track in unsmoothed {
@@ -939,11 +934,8 @@ fn quaternion_mode(
             }
         })?;
     let heading = &converted.calibration;
-    let euler_span = tracing::debug_span!("euler angles").entered();
-    let euler_deg = pipeline::output::euler_degrees(&converted.animation);
-    drop(euler_span);
     Ok(Conversion {
-        euler_deg,
+        euler_deg: None,
         mapping: mapping_record(&converted, &rig, &mapping, file),
         pipeline: PipelineRecord {
             fusion: fusion_record(settings, &converted),
@@ -1022,7 +1014,7 @@ fn legacy_mode(
         vendor_contacts: None,
         unsmoothed: None,
         warnings: legacy.warnings,
-        euler_deg: legacy.euler_deg,
+        euler_deg: Some(legacy.euler_deg),
         animation: legacy.animation,
     })
 }
@@ -1130,7 +1122,7 @@ fn write_take(
     let take_outputs = TakeOutputs {
         stem: &stem,
         animation,
-        euler_deg: &conversion.euler_deg,
+        euler_deg: conversion.euler_deg.as_deref(),
         units: settings.units,
         report: settings.report.then(|| ReportInput {
             take: &stem,
@@ -1140,7 +1132,7 @@ fn write_take(
             bones: bone_series(
                 animation,
                 conversion.unsmoothed.as_deref(),
-                &conversion.euler_deg,
+                conversion.euler_deg.as_deref(),
             ),
             sensors: &sensor_summaries,
             warnings: &warnings,

@@ -13,7 +13,10 @@ mod common;
 use imubake::fps::Fps;
 use imubake::rig::{Joint, LengthUnit, Rig};
 use imubake::rotation::EulerOrder;
-use imubake::write::{self, bvh::BvhMotion};
+use imubake::write::{
+    self,
+    bvh::{Angles, BvhMotion},
+};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde_json::Value;
 
@@ -120,7 +123,7 @@ fn blender_imports_our_bvh() {
                 rig: &rig,
                 fps: Fps::new(num, den).unwrap(),
                 root_positions: &roots,
-                euler_deg: &angles,
+                euler_deg: Angles::Degrees(&angles),
                 translations: &[],
             },
         )

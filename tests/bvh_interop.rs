@@ -7,7 +7,10 @@ use imubake::bvh;
 use imubake::fps::Fps;
 use imubake::rig::{Joint, LengthUnit, Rig};
 use imubake::rotation::EulerOrder;
-use imubake::write::{self, bvh::BvhMotion};
+use imubake::write::{
+    self,
+    bvh::{Angles, BvhMotion},
+};
 use nalgebra::Vector3;
 
 fn check_with_bvh_anim(bytes: &[u8], ours: &bvh::Bvh) {
@@ -101,7 +104,7 @@ fn bvh_anim_reads_our_small_rig() {
             rig: &rig,
             fps: Fps::new(30000, 1001).unwrap(),
             root_positions: &roots,
-            euler_deg: &angles,
+            euler_deg: Angles::Degrees(&angles),
             translations: &[],
         },
     )
@@ -145,7 +148,7 @@ fn bvh_anim_reads_our_rewrite_of_real_files() {
                 rig: &rig,
                 fps: Fps::new(120, 1).unwrap(),
                 root_positions: &roots,
-                euler_deg: &angles,
+                euler_deg: Angles::Degrees(&angles),
                 translations: &[],
             },
         )

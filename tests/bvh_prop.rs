@@ -7,7 +7,10 @@ use imubake::bvh;
 use imubake::fps::Fps;
 use imubake::rig::{Joint, LengthUnit, Rig};
 use imubake::rotation::EulerOrder;
-use imubake::write::{self, bvh::BvhMotion};
+use imubake::write::{
+    self,
+    bvh::{Angles, BvhMotion},
+};
 use nalgebra::{UnitQuaternion, Vector3};
 use proptest::prelude::*;
 
@@ -246,7 +249,7 @@ fn write(c: &Case) -> Vec<u8> {
             rig: &c.rig,
             fps: c.fps,
             root_positions: &c.roots,
-            euler_deg: &c.angles,
+            euler_deg: Angles::Degrees(&c.angles),
             translations: &[],
         },
     )

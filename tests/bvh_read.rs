@@ -7,7 +7,10 @@ mod common;
 use imubake::bvh::{self, Bvh, Channel};
 use imubake::rig::LengthUnit;
 use imubake::rotation::EulerOrder;
-use imubake::write::{self, bvh::BvhMotion};
+use imubake::write::{
+    self,
+    bvh::{Angles, BvhMotion},
+};
 use nalgebra::{Matrix3, Vector3};
 
 /// The lines of a file as text, line ends removed (LF or CRLF).
@@ -457,7 +460,7 @@ fn deep_nesting() {
             rig: &rig,
             fps: imubake::fps::Fps::new(10, 1).unwrap(),
             root_positions: &roots,
-            euler_deg: &angles,
+            euler_deg: Angles::Degrees(&angles),
             translations: &[],
         },
     )

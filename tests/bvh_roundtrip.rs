@@ -8,7 +8,10 @@ use imubake::bvh::{self, Bvh, Channel};
 use imubake::fps::Fps;
 use imubake::rig::{Joint, LengthUnit, Rig};
 use imubake::rotation::EulerOrder;
-use imubake::write::{self, bvh::BvhMotion};
+use imubake::write::{
+    self,
+    bvh::{Angles, BvhMotion},
+};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 
 const FILES: [&str; 5] = [
@@ -76,7 +79,7 @@ fn real_files_round_trip() {
             rig: &rig,
             fps,
             root_positions: &roots,
-            euler_deg: &angles,
+            euler_deg: Angles::Degrees(&angles),
             translations: &[],
         });
         let back = bvh::parse(&bytes).unwrap_or_else(|e| panic!("{rel}: {e}"));
@@ -102,7 +105,7 @@ fn real_files_round_trip() {
             rig: &rig,
             fps,
             root_positions: &roots,
-            euler_deg: &angles,
+            euler_deg: Angles::Degrees(&angles),
             translations: &[],
         });
         assert_eq!(bytes, again, "{rel}");
@@ -158,7 +161,7 @@ fn other_euler_orders_keep_the_rotations() {
         rig: &rig,
         fps,
         root_positions: &roots,
-        euler_deg: &angles,
+        euler_deg: Angles::Degrees(&angles),
         translations: &[],
     });
     let back = bvh::parse(&bytes).unwrap();
@@ -240,7 +243,7 @@ fn layout_end_sites_and_units() {
         rig: &rig,
         fps: Fps::new(30000, 1001).unwrap(),
         root_positions: &roots,
-        euler_deg: &angles,
+        euler_deg: Angles::Degrees(&angles),
         translations: &[],
     };
     let text = String::from_utf8(write(&motion)).unwrap();
@@ -325,7 +328,7 @@ fn frame_time_digits() {
             rig: &rig,
             fps: Fps::new(num, den).unwrap(),
             root_positions: &[],
-            euler_deg: &angles,
+            euler_deg: Angles::Degrees(&angles),
             translations: &[],
         });
         let s = String::from_utf8(out).unwrap();
@@ -351,7 +354,7 @@ fn invalid_input_is_refused() {
                 rig: &rig,
                 fps,
                 root_positions: roots,
-                euler_deg: angles,
+                euler_deg: Angles::Degrees(angles),
                 translations: &[],
             },
         )
@@ -392,7 +395,7 @@ fn invalid_input_is_refused() {
             rig: &spaced,
             fps,
             root_positions: &[],
-            euler_deg: &[Vec::new()],
+            euler_deg: Angles::Degrees(&[Vec::new()]),
             translations: &[],
         },
     )
@@ -404,7 +407,7 @@ fn invalid_input_is_refused() {
             rig: &rig,
             fps,
             root_positions: &roots,
-            euler_deg: &good,
+            euler_deg: Angles::Degrees(&good),
             translations: &[],
         },
         0.0,
@@ -433,7 +436,7 @@ fn leaf_root_end_site() {
             rig: &rig,
             fps: Fps::new(24, 1).unwrap(),
             root_positions: &[Vector3::zeros()],
-            euler_deg: &[vec![[1.0, 2.0, 3.0]]],
+            euler_deg: Angles::Degrees(&[vec![[1.0, 2.0, 3.0]]]),
             translations: &[],
         });
         let back = bvh::parse(&out).unwrap();
@@ -486,7 +489,7 @@ fn a_write_failing_partway_is_reported() {
         rig: &rig,
         fps,
         root_positions: &roots,
-        euler_deg: &angles,
+        euler_deg: Angles::Degrees(&angles),
         translations: &[],
     };
     let whole = write(&motion);
@@ -573,7 +576,7 @@ fn held_joints_and_a_fixed_root_are_written_as_moving_ones_are() {
         rig: &rig,
         fps: Fps::new(60, 1).unwrap(),
         root_positions: &roots,
-        euler_deg: &euler,
+        euler_deg: Angles::Degrees(&euler),
         translations: &translations,
     }))
     .unwrap();

@@ -2,7 +2,9 @@
 //! such. BVH stores Euler angles, so each joint's local rotations become angles in its channel
 //! order with the discontinuity filter ([`crate::rotation::euler::filter_track_degrees`], Blender's
 //! `compatible_eul`); glTF keeps the quaternions (its writer keeps each key on the previous key's
-//! hemisphere).
+//! hemisphere). `convert` leaves the angles to the BVH writer, which makes them a group of frames
+//! at a time as it writes ([`crate::write::bvh::Angles::Rotations`]); [`euler_degrees`] makes a
+//! whole take's at once, the same to the bit.
 
 use crate::anim::Animation;
 use crate::rotation::euler::filter_track_degrees;

@@ -153,50 +153,98 @@ fn filter_track_then(
     order: EulerOrder,
     then: impl Fn([f64; 3]) -> [f64; 3],
 ) -> Vec<[f64; 3]> {
-    // One copy of the loop per order: with the axes known when compiling, only the matrix
-    // entries the angles use are computed and the axis bookkeeping folds away. The arithmetic
-    // is the same, so the angles are the same to the bit.
-    match order {
-        EulerOrder::XYZ => filter_track_in::<0>(track, then),
-        EulerOrder::XZY => filter_track_in::<1>(track, then),
-        EulerOrder::YXZ => filter_track_in::<2>(track, then),
-        EulerOrder::YZX => filter_track_in::<3>(track, then),
-        EulerOrder::ZXY => filter_track_in::<4>(track, then),
-        EulerOrder::ZYX => filter_track_in::<5>(track, then),
-    }
+    let mut out = Vec::with_capacity(track.len());
+    TrackFilter::new(order).extend_then(track, then, &mut out);
+    out
 }
 
-/// [`filter_track_then`] for the order `EulerOrder::ALL[ORDER]`.
-///
-/// Each frame's angles are a function of its rotation and the previous frame's angles, so once
-/// a frame gives the very angles of the frame before, every following frame with the same
-/// rotation gives them again: a joint that holds still (a rig's unsensed joints, all of a
-/// finger) costs a comparison per frame instead of an Euler conversion, to the same bits.
-fn filter_track_in<const ORDER: usize>(
-    track: &[UnitQuaternion<f64>],
-    then: impl Fn([f64; 3]) -> [f64; 3],
-) -> Vec<[f64; 3]> {
-    let mut filter = EulerFilter::new(EulerOrder::ALL[ORDER]);
-    let mut out: Vec<[f64; 3]> = Vec::with_capacity(track.len());
-    // The last frame's angles were made by `compatible` from those before them, and equal them.
-    let mut settled = false;
-    let mut previous_q: Option<&UnitQuaternion<f64>> = None;
-    for q in track {
-        let same_rotation = previous_q.is_some_and(|p| same_bits(p, q));
-        previous_q = Some(q);
-        if settled
-            && same_rotation
-            && let Some(&last) = out.last()
-        {
-            out.push(last);
-            continue;
+/// [`filter_track`] a run of frames at a time: the runs of a track fed in turn give, to the bit,
+/// what the whole track gives at once (a writer that makes each block of frames' angles as it
+/// writes them never holds the whole track's).
+#[derive(Debug, Clone, Copy)]
+pub struct TrackFilter {
+    filter: EulerFilter,
+    /// The last frame's angles were made by `compatible` from those before them, and equal them.
+    settled: bool,
+    previous_q: Option<UnitQuaternion<f64>>,
+    /// The last output (after `then`).
+    last: Option<[f64; 3]>,
+}
+
+impl TrackFilter {
+    pub fn new(order: EulerOrder) -> TrackFilter {
+        TrackFilter {
+            filter: EulerFilter::new(order),
+            settled: false,
+            previous_q: None,
+            last: None,
         }
-        let before = filter.previous;
-        let angles = filter.next(q);
-        settled = before.is_some_and(|b| b.map(f64::to_bits) == angles.map(f64::to_bits));
-        out.push(then(angles));
     }
-    out
+
+    /// Appends the next frames' angles in degrees ([`filter_track_degrees`]) to `out`.
+    pub fn extend_degrees(&mut self, run: &[UnitQuaternion<f64>], out: &mut Vec<[f64; 3]>) {
+        self.extend_then(run, |angles| angles.map(f64::to_degrees), out);
+    }
+
+    #[inline]
+    fn extend_then(
+        &mut self,
+        run: &[UnitQuaternion<f64>],
+        then: impl Fn([f64; 3]) -> [f64; 3],
+        out: &mut Vec<[f64; 3]>,
+    ) {
+        // One copy of the loop per order: with the axes known when compiling, only the matrix
+        // entries the angles use are computed and the axis bookkeeping folds away. The arithmetic
+        // is the same, so the angles are the same to the bit.
+        match self.filter.order {
+            EulerOrder::XYZ => self.extend_in::<0>(run, then, out),
+            EulerOrder::XZY => self.extend_in::<1>(run, then, out),
+            EulerOrder::YXZ => self.extend_in::<2>(run, then, out),
+            EulerOrder::YZX => self.extend_in::<3>(run, then, out),
+            EulerOrder::ZXY => self.extend_in::<4>(run, then, out),
+            EulerOrder::ZYX => self.extend_in::<5>(run, then, out),
+        }
+    }
+
+    /// [`Self::extend_then`] for the order `EulerOrder::ALL[ORDER]`.
+    ///
+    /// Each frame's angles are a function of its rotation and the previous frame's angles, so
+    /// once a frame gives the very angles of the frame before, every following frame with the
+    /// same rotation gives them again: a joint that holds still (a rig's unsensed joints, all of a
+    /// finger) costs a comparison per frame instead of an Euler conversion, to the same bits.
+    fn extend_in<const ORDER: usize>(
+        &mut self,
+        run: &[UnitQuaternion<f64>],
+        then: impl Fn([f64; 3]) -> [f64; 3],
+        out: &mut Vec<[f64; 3]>,
+    ) {
+        // The order as a constant here (a local filter), not a field read through `self`.
+        let mut filter = EulerFilter {
+            order: EulerOrder::ALL[ORDER],
+            previous: self.filter.previous,
+        };
+        let (mut settled, mut previous_q, mut last) = (self.settled, self.previous_q, self.last);
+        out.reserve(run.len());
+        for q in run {
+            let same_rotation = previous_q.is_some_and(|p| same_bits(&p, q));
+            previous_q = Some(*q);
+            if settled
+                && same_rotation
+                && let Some(last) = last
+            {
+                out.push(last);
+                continue;
+            }
+            let before = filter.previous;
+            let angles = filter.next(q);
+            settled = before.is_some_and(|b| b.map(f64::to_bits) == angles.map(f64::to_bits));
+            let made = then(angles);
+            last = Some(made);
+            out.push(made);
+        }
+        self.filter.previous = filter.previous;
+        (self.settled, self.previous_q, self.last) = (settled, previous_q, last);
+    }
 }
 
 /// The two rotations are stored as the same four doubles.
@@ -633,7 +681,8 @@ mod tests {
 
     /// Frames held still are copied rather than converted, to exactly what converting each
     /// frame in turn gives: tracks of runs of repeated rotations — ordinary ones, half-turn
-    /// flips, spins, gimbal lock, a joint that never moves — in every order.
+    /// flips, spins, gimbal lock, a joint that never moves — in every order; and fed to a
+    /// [`TrackFilter`] in pieces, what the whole track gives.
     #[test]
     fn held_frames_give_what_frame_by_frame_conversion_gives() {
         let mut state = 0x2545_f491_4f6c_dd1du64;
@@ -680,6 +729,22 @@ mod tests {
                     .map(|a| a.map(f64::to_bits))
                     .collect();
                 assert_eq!(got, expected, "{order} case {case}");
+                // The same track fed in runs of 0 to 40 frames, as the BVH writer feeds it a
+                // group of frames at a time: the whole track's angles to the bit.
+                let whole: Vec<[u64; 3]> = filter_track_degrees(&track, order)
+                    .iter()
+                    .map(|a| a.map(f64::to_bits))
+                    .collect();
+                let mut runs = TrackFilter::new(order);
+                let mut in_runs = Vec::new();
+                let mut at = 0;
+                while at < track.len() {
+                    let len = ((next() * 41.0) as usize).min(track.len() - at);
+                    runs.extend_degrees(&track[at..at + len], &mut in_runs);
+                    at += len;
+                }
+                let in_runs: Vec<[u64; 3]> = in_runs.iter().map(|a| a.map(f64::to_bits)).collect();
+                assert_eq!(in_runs, whole, "{order} case {case}, in runs");
             }
         }
     }

@@ -6,7 +6,8 @@
 use super::decimal::push_fixed6;
 use crate::fps::Fps;
 use crate::rig::{LengthUnit, Rig};
-use nalgebra::Vector3;
+use crate::rotation::euler::TrackFilter;
+use nalgebra::{UnitQuaternion, Vector3};
 use rayon::prelude::*;
 use std::io::{self, BufWriter, Write};
 
@@ -20,13 +21,51 @@ pub struct BvhMotion<'a> {
     /// root's position channels, which replace its OFFSET when read (the OFFSET written is the
     /// rig's rest offset of the root).
     pub root_positions: &'a [Vector3<f64>],
-    /// `euler_deg[joint][frame]`: the joint's local rotation as Euler angles in degrees, in the
-    /// joint's own order (`rig.joints()[joint].order`), listed in application order, which is the
-    /// BVH channel order: for ZXY, `[z, x, y]` meaning Rz(z)·Rx(x)·Ry(y).
-    pub euler_deg: &'a [Vec<[f64; 3]>],
+    /// Every joint's rotation at every frame, as Euler angles or as rotations to turn into them.
+    pub euler_deg: Angles<'a>,
     /// Joints other than the root with position channels: per frame their translation from the
     /// parent (rig units), written before their rotations, replacing their OFFSET when read.
     pub translations: &'a [(usize, Vec<Vector3<f64>>)],
+}
+
+/// The joints' rotations a BVH's channels hold.
+#[derive(Debug, Clone, Copy)]
+pub enum Angles<'a> {
+    /// `[joint][frame]`: the joint's local rotation as Euler angles in degrees, in the joint's own
+    /// order (`rig.joints()[joint].order`), listed in application order, which is the BVH channel
+    /// order: for ZXY, `[z, x, y]` meaning Rz(z)·Rx(x)·Ry(y).
+    Degrees(&'a [Vec<[f64; 3]>]),
+    /// `[joint][frame]`: local rotations, turned into those angles by the Euler discontinuity
+    /// filter ([`crate::rotation::euler::filter_track_degrees`]) a group of frames at a time as
+    /// the lines are written, never the whole take's angles at once.
+    Rotations(&'a [Vec<UnitQuaternion<f64>>]),
+}
+
+impl Angles<'_> {
+    /// Tracks, one per joint.
+    fn joints(&self) -> usize {
+        match self {
+            Angles::Degrees(t) => t.len(),
+            Angles::Rotations(t) => t.len(),
+        }
+    }
+
+    /// Joint `j`'s frames.
+    fn frames(&self, j: usize) -> usize {
+        match self {
+            Angles::Degrees(t) => t[j].len(),
+            Angles::Rotations(t) => t[j].len(),
+        }
+    }
+
+    /// The first frame of joint `j` with a non-finite number, if any.
+    fn first_non_finite(&self, j: usize) -> Option<usize> {
+        let finite = |v: &[f64]| v.iter().all(|v| v.is_finite());
+        match self {
+            Angles::Degrees(t) => t[j].iter().position(|a| !finite(a)),
+            Angles::Rotations(t) => t[j].iter().position(|q| !finite(q.coords.as_slice())),
+        }
+    }
 }
 
 /// The factor that converts lengths in `from` to lengths in `to` (metres → centimetres: 100).
@@ -196,7 +235,8 @@ pub fn write_bvh_scaled<W: Write + Send>(out: W, motion: &BvhMotion, scale: f64)
                 .map(|(_, t)| t.as_slice())
         })
         .collect();
-    let lines = |frames: std::ops::Range<usize>| {
+    // `runs[j]`: joint j's angles for the group of frames from `first` on.
+    let lines = |frames: std::ops::Range<usize>, runs: &[&[[f64; 3]]], first: usize| {
         let mut text = Vec::with_capacity(frames.len() * (order.len() * 30 + 32));
         // The block's angles frame by frame: each joint's run read in one sweep (reading them
         // frame by frame hops between every joint's track and waits on memory at each hop).
@@ -223,7 +263,7 @@ pub fn write_bvh_scaled<W: Write + Send>(out: W, motion: &BvhMotion, scale: f64)
                 0..held_text.len()
             });
         for (k, &j) in order.iter().enumerate() {
-            let run = &motion.euler_deg[j][frames.clone()];
+            let run = &runs[j][frames.start - first..frames.end - first];
             let first = run[0].map(f64::to_bits);
             if run.iter().all(|a| a.map(f64::to_bits) == first) {
                 let start = held_text.len();
@@ -272,13 +312,30 @@ pub fn write_bvh_scaled<W: Write + Send>(out: W, motion: &BvhMotion, scale: f64)
             }
             out.flush()
         });
+        // Rotations become angles a group at a time, each joint's filter running on from the
+        // group before, into buffers kept from group to group.
+        let mut filters: Vec<TrackFilter> =
+            joints.iter().map(|j| TrackFilter::new(j.order)).collect();
+        let mut made: Vec<Vec<[f64; 3]>> = vec![Vec::new(); joints.len()];
         for start in (0..frames).step_by(group) {
             let end = (start + group).min(frames);
+            let runs: Vec<&[[f64; 3]]> = match motion.euler_deg {
+                Angles::Degrees(tracks) => tracks.iter().map(|t| &t[start..end]).collect(),
+                Angles::Rotations(tracks) => {
+                    made.par_iter_mut().zip(&mut filters).zip(tracks).for_each(
+                        |((out, filter), track)| {
+                            out.clear();
+                            filter.extend_degrees(&track[start..end], out);
+                        },
+                    );
+                    made.iter().map(Vec::as_slice).collect()
+                }
+            };
             let blocks: Vec<Vec<u8>> = (start..end)
                 .step_by(BLOCK_FRAMES)
                 .collect::<Vec<_>>()
                 .into_par_iter()
-                .map(|b| lines(b..(b + BLOCK_FRAMES).min(end)))
+                .map(|b| lines(b..(b + BLOCK_FRAMES).min(end), &runs, start))
                 .collect();
             // The writer stopped on an error, which its result reports.
             if formatted.send(blocks).is_err() {
@@ -303,23 +360,24 @@ fn validate(motion: &BvhMotion, scale: f64) -> io::Result<()> {
             "BVH scale must be a positive number, got {scale}"
         )));
     }
-    if motion.euler_deg.len() != rig.len() {
+    let angles = &motion.euler_deg;
+    if angles.joints() != rig.len() {
         return Err(invalid(format!(
             "BVH motion has Euler angles for {} joints but rig `{}` has {} joints",
-            motion.euler_deg.len(),
+            angles.joints(),
             rig.name(),
             rig.len()
         )));
     }
-    for (j, (joint, angles)) in rig.joints().iter().zip(motion.euler_deg).enumerate() {
-        if angles.len() != frames {
+    for (j, joint) in rig.joints().iter().enumerate() {
+        if angles.frames(j) != frames {
             return Err(invalid(format!(
                 "BVH motion: joint {j} `{}` has {} frames of Euler angles but there are {frames} root positions",
                 joint.name,
-                angles.len()
+                angles.frames(j)
             )));
         }
-        if let Some(f) = angles.iter().position(|a| !a.iter().all(|v| v.is_finite())) {
+        if let Some(f) = angles.first_non_finite(j) {
             return Err(invalid(format!(
                 "BVH motion: joint `{}` has a non-finite angle at frame {f}",
                 joint.name
@@ -400,5 +458,108 @@ fn push_numbers(buf: &mut Vec<u8>, values: &[f64]) {
     for &x in values {
         buf.push(b' ');
         push_fixed6(buf, x);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rig::Joint;
+    use crate::rotation::EulerOrder;
+    use crate::rotation::euler::{filter_track_degrees, to_quaternion};
+
+    /// A chain of six joints, one per Euler order.
+    fn six_orders() -> Rig {
+        let joints = EulerOrder::ALL
+            .iter()
+            .enumerate()
+            .map(|(i, &order)| Joint {
+                name: format!("j{i}"),
+                parent: i.checked_sub(1),
+                offset: Vector3::new(0.0, 0.1 * i as f64, 0.0),
+                order,
+                end_site: None,
+            })
+            .collect();
+        Rig::new("six", LengthUnit::Metres, joints).unwrap()
+    }
+
+    /// Rotations written as they are made into angles, a group of frames at a time, give the
+    /// very bytes of the angles made for the whole take first: 2 600 frames (groups end in the
+    /// middle), spins across ±180°, passes through gimbal lock, and joints holding still for a
+    /// while (the filter's settled state carried from one group to the next).
+    #[test]
+    fn angles_made_while_writing_match_angles_made_first() {
+        let rig = six_orders();
+        let frames = 2600;
+        let rotations: Vec<Vec<UnitQuaternion<f64>>> = rig
+            .joints()
+            .iter()
+            .enumerate()
+            .map(|(j, joint)| {
+                (0..frames)
+                    .map(|f| {
+                        // Held still over frames 900..1500 (and all along for the last joint).
+                        let t = if (900..1500).contains(&f) || j == 5 {
+                            900
+                        } else {
+                            f
+                        } as f64;
+                        let a = [
+                            t * 0.031 * (j + 1) as f64,
+                            (t * 0.004 + j as f64).sin() * 1.7,
+                            -t * 0.017,
+                        ];
+                        to_quaternion(a, joint.order)
+                    })
+                    .collect()
+            })
+            .collect();
+        let roots = vec![Vector3::new(0.0, 1.0, 0.0); frames];
+        let degrees: Vec<Vec<[f64; 3]>> = rotations
+            .iter()
+            .zip(rig.joints())
+            .map(|(track, joint)| filter_track_degrees(track, joint.order))
+            .collect();
+        let write = |angles: Angles| {
+            let mut out = Vec::new();
+            let motion = BvhMotion {
+                rig: &rig,
+                fps: "60".parse().unwrap(),
+                root_positions: &roots,
+                euler_deg: angles,
+                translations: &[],
+            };
+            write_bvh(&mut out, &motion).unwrap();
+            out
+        };
+        let made_first = write(Angles::Degrees(&degrees));
+        assert!(made_first.len() > 100_000);
+        assert!(write(Angles::Rotations(&rotations)) == made_first);
+    }
+
+    /// Rotations are checked before anything is written, as angles are.
+    #[test]
+    fn bad_rotations_are_refused_before_writing() {
+        let rig = six_orders();
+        let roots = vec![Vector3::zeros(); 3];
+        let mut rotations = vec![vec![UnitQuaternion::identity(); 3]; rig.len()];
+        rotations[2][1] =
+            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
+        let short = vec![vec![UnitQuaternion::identity(); 2]; rig.len()];
+        for (rotations, what) in [(&rotations, "non-finite angle"), (&short, "2 frames")] {
+            let mut out = Vec::new();
+            let motion = BvhMotion {
+                rig: &rig,
+                fps: "60".parse().unwrap(),
+                root_positions: &roots,
+                euler_deg: Angles::Rotations(rotations),
+                translations: &[],
+            };
+            let err = write_bvh(&mut out, &motion).unwrap_err();
+            assert_eq!(err.kind(), io::ErrorKind::InvalidInput);
+            assert!(err.to_string().contains(what), "{err}");
+            assert!(out.is_empty());
+        }
     }
 }

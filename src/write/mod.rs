@@ -122,9 +122,10 @@ pub enum Output {
 pub struct TakeOutputs<'a> {
     pub stem: &'a str,
     pub animation: &'a Animation,
-    /// BVH channel values: `[joint][frame]` degrees, each joint's order, continuous
-    /// ([`crate::pipeline::output`]).
-    pub euler_deg: &'a [Vec<[f64; 3]>],
+    /// BVH channel values, `[joint][frame]` degrees in each joint's order, continuous
+    /// ([`crate::pipeline::output`]), when made already (paper 002's channel copy); else the
+    /// BVH writer makes them from the animation's rotations as it writes.
+    pub euler_deg: Option<&'a [Vec<[f64; 3]>]>,
     /// Length unit of the BVH (glTF is always metres).
     pub units: LengthUnit,
     /// The report's content, when a report is wanted.
@@ -173,7 +174,10 @@ impl Output {
                     rig: anim.rig(),
                     fps: anim.fps(),
                     root_positions: anim.root_positions(),
-                    euler_deg: take.euler_deg,
+                    euler_deg: match take.euler_deg {
+                        Some(degrees) => bvh::Angles::Degrees(degrees),
+                        None => bvh::Angles::Rotations(anim.locals()),
+                    },
                     translations: anim.translations(),
                 };
                 write_atomic(&path, |w| bvh::write_bvh_in(w, &motion, take.units))

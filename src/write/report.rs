@@ -110,7 +110,7 @@ pub struct ReportInput<'a> {
 pub fn bone_series(
     animation: &Animation,
     unsmoothed: Option<&[Vec<UnitQuaternion<f64>>]>,
-    euler_after: &[Vec<[f64; 3]>],
+    euler_after: Option<&[Vec<[f64; 3]>]>,
 ) -> Vec<BoneSeries> {
     let fps = animation.fps();
     let times: Vec<f64> = (0..animation.frames() as u64)
@@ -122,15 +122,22 @@ pub fn bone_series(
         .iter()
         .enumerate()
         .filter(|(j, _)| animation.is_animated(*j))
-        .map(|(j, joint)| BoneSeries {
-            bone: joint.name.clone(),
-            order: joint.order,
-            times_s: times.clone(),
-            before_deg: match unsmoothed {
-                Some(raw) => filter_track_degrees(&raw[j], joint.order),
-                None => euler_after[j].clone(),
-            },
-            after_deg: euler_after[j].clone(),
+        .map(|(j, joint)| {
+            // The BVH's channels: given, or made from the rotations as the BVH writer makes them.
+            let after_deg = match euler_after {
+                Some(euler) => euler[j].clone(),
+                None => filter_track_degrees(animation.local(j), joint.order),
+            };
+            BoneSeries {
+                bone: joint.name.clone(),
+                order: joint.order,
+                times_s: times.clone(),
+                before_deg: match unsmoothed {
+                    Some(raw) => filter_track_degrees(&raw[j], joint.order),
+                    None => after_deg.clone(),
+                },
+                after_deg,
+            }
         })
         .collect()
 }
