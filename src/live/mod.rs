@@ -18,7 +18,7 @@ pub mod vmc;
 use crate::anim::Pose;
 use crate::convert::{ConvertError, ConvertSettings};
 use crate::pipeline::stream::{PoseStream, StreamStatus};
-use crate::read::stream::{self as read_stream, LineClock, LineFormat, LineStream};
+use crate::read::stream::{HostStamps, LineClock, LineFormat, LineStream};
 use crate::take::{LineReport, StreamSample, StreamValue};
 use source::{Allow, Event, Link, SourceCounters, SourceSpec};
 use std::net::{SocketAddr, UdpSocket};
@@ -78,7 +78,8 @@ const STALE_NOTICE_S: f64 = 0.5;
 pub enum Clock {
     /// Each line's own timestamp.
     Source,
-    /// The host's monotonic clock at arrival, since the session started.
+    /// The host's monotonic clock at arrival, since the session started, each sensor's stamps
+    /// strictly rising ([`HostStamps`]).
     Host,
 }
 
@@ -340,6 +341,11 @@ pub fn run(
         .iter()
         .map(|_| LineClock::default())
         .collect();
+    let mut host_stamps: Vec<HostStamps> = settings
+        .sources
+        .iter()
+        .map(|_| HostStamps::default())
+        .collect();
     let mut continuing: Vec<Continuing> = settings
         .sources
         .iter()
@@ -375,25 +381,25 @@ pub fn run(
             };
             match event {
                 Some(Event::Lines { source, lines, at }) => {
+                    // The host's clock when the lines arrived, not when they are handled.
+                    let arrived_s = at.saturating_duration_since(started).as_secs_f64();
                     for line in lines {
-                        // A SOU line without a timestamp gets the host's, in ms, on arrival.
-                        let line = match read_stream::stamp_untimed_sou(
-                            &line,
-                            started.elapsed().as_millis() as u64,
-                        ) {
-                            Some(stamped) => stamped,
-                            None => line,
-                        };
                         let line = match clock {
-                            Clock::Source => continuing[source].line(
-                                &mut clocks[source],
-                                line,
-                                &settings.sources[source],
-                                &mut report,
-                            ),
-                            Clock::Host => clocks[source]
-                                .restamp(&line, started.elapsed().as_secs_f64())
-                                .unwrap_or(line),
+                            Clock::Source => {
+                                // A SOU line without a timestamp gets the host's on arrival.
+                                let line = host_stamps[source]
+                                    .stamp_untimed(&line, arrived_s)
+                                    .unwrap_or(line);
+                                continuing[source].line(
+                                    &mut clocks[source],
+                                    line,
+                                    &settings.sources[source],
+                                    &mut report,
+                                )
+                            }
+                            Clock::Host => {
+                                host_stamps[source].stamp(&line, arrived_s).unwrap_or(line)
+                            }
                         };
                         if format.is_none() {
                             match LineFormat::recognise(&line) {

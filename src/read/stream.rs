@@ -42,7 +42,7 @@ impl LineFormat {
 /// A SOU line without a timestamp of its own (`N0,yaw1,pitch1,roll1,yaw2,pitch2,roll2`, as some
 /// node firmware sends), stamped with `ms` as paper 002's driver stamps it on arrival; `None`
 /// for any other line.
-pub fn stamp_untimed_sou(line: &[u8], ms: u64) -> Option<Vec<u8>> {
+fn stamp_untimed_sou(line: &[u8], ms: u64) -> Option<Vec<u8>> {
     let t = line.trim_ascii();
     if t.is_empty() || t[0].is_ascii_digit() {
         return None;
@@ -88,18 +88,31 @@ impl LineClock {
                 (layout.time_column(), format!("{:.6}", t_s / unit))
             }
         };
-        let mut out = Vec::with_capacity(line.len() + 8);
-        for (i, field) in line.split(|&b| b == b',').enumerate() {
-            if i > 0 {
-                out.push(b',');
-            }
-            if i == column {
-                out.extend_from_slice(value.as_bytes());
-            } else {
-                out.extend_from_slice(field);
+        Some(with_field(line, column, &value))
+    }
+
+    /// The data line's time column and the seconds of one tick of the time written there: a
+    /// millisecond for SOU, a millionth of a CSV's unit (the six decimals `restamp` writes).
+    fn time_column(&self) -> Option<(usize, f64)> {
+        match self.format? {
+            LineFormat::Sou => Some((0, 1e-3)),
+            LineFormat::ImubakeCsv => {
+                let layout = self.csv.as_ref()?;
+                Some((layout.time_column(), layout.clock.seconds_per_unit() * 1e-6))
             }
         }
-        Some(out)
+    }
+
+    /// A data line's sensor id, as written.
+    fn sensor<'l>(&mut self, line: &'l [u8]) -> Option<&'l [u8]> {
+        self.see(line)?;
+        match self.format? {
+            LineFormat::Sou => sou::parse_line(line).ok().map(|(_, id, _)| id.as_bytes()),
+            LineFormat::ImubakeCsv => {
+                let row = imubake_csv::parse_row(self.csv.as_ref()?, line).ok()??;
+                Some(row.id)
+            }
+        }
     }
 
     /// Learns the format and a CSV's header; `None` for a line that is not data.
@@ -312,6 +325,80 @@ impl LineStream {
     }
 }
 
+/// `line` with comma-separated field `column` replaced by `value`.
+fn with_field(line: &[u8], column: usize, value: &str) -> Vec<u8> {
+    let mut out = Vec::with_capacity(line.len() + 8);
+    for (i, field) in line.split(|&b| b == b',').enumerate() {
+        if i > 0 {
+            out.push(b',');
+        }
+        if i == column {
+            out.extend_from_slice(value.as_bytes());
+        } else {
+            out.extend_from_slice(field);
+        }
+    }
+    out
+}
+
+/// Sensors whose last host stamp is kept; a stream naming more is not one body's sensors, and
+/// the ones past this are stamped as the clock says.
+const MAX_STAMPED_SENSORS: usize = 1024;
+
+/// Data lines stamped with the host's clock on arrival, each sensor's stamps strictly rising.
+///
+/// One sensor's two samples cannot share a time, but the host can give them one: lines that
+/// arrive in one read share their arrival, and SOU's stamps are whole milliseconds. The stream
+/// keeps the first of a repeated time and drops the second, so a stamp not later than the
+/// sensor's last becomes its last plus one tick (1 ms for SOU, 10⁻⁶ of a CSV's unit).
+#[derive(Debug, Default)]
+pub struct HostStamps {
+    clock: LineClock,
+    /// Each sensor's last stamp, in ticks of its line's time column.
+    last: HashMap<Vec<u8>, u64>,
+}
+
+impl HostStamps {
+    /// A data line stamped `t_s` seconds (the host's clock since the session started): an
+    /// untimed SOU line given the time paper 002's driver would give it, any other data line's
+    /// time replaced; `None` for a line that is not data.
+    pub fn stamp(&mut self, line: &[u8], t_s: f64) -> Option<Vec<u8>> {
+        match stamp_untimed_sou(line, 0) {
+            Some(untimed) => self.restamp(&untimed, t_s),
+            None => self.restamp(line, t_s),
+        }
+    }
+
+    /// An untimed SOU line stamped as [`HostStamps::stamp`] stamps it; `None` for any other
+    /// line (those keep their own clock).
+    pub fn stamp_untimed(&mut self, line: &[u8], t_s: f64) -> Option<Vec<u8>> {
+        let untimed = stamp_untimed_sou(line, 0)?;
+        Some(self.restamp(&untimed, t_s).unwrap_or(untimed))
+    }
+
+    fn restamp(&mut self, line: &[u8], t_s: f64) -> Option<Vec<u8>> {
+        let sensor = self.clock.sensor(line)?;
+        let (column, tick_s) = self.clock.time_column()?;
+        let mut ticks = (t_s.max(0.0) / tick_s).round() as u64;
+        let room = self.last.len() < MAX_STAMPED_SENSORS;
+        match self.last.get_mut(sensor) {
+            Some(last) => {
+                ticks = ticks.max(last.saturating_add(1));
+                *last = ticks;
+            }
+            None if room => {
+                self.last.insert(sensor.to_vec(), ticks);
+            }
+            None => {}
+        }
+        let value = match self.clock.format {
+            Some(LineFormat::Sou) => ticks.to_string(),
+            _ => format!("{}.{:06}", ticks / 1_000_000, ticks % 1_000_000),
+        };
+        Some(with_field(line, column, &value))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -355,6 +442,74 @@ mod tests {
         assert_eq!(
             stamp_untimed_sou(b"Calibrating gyro... keep still", 7),
             None
+        );
+    }
+
+    #[test]
+    fn host_stamps_rise_for_each_sensor() {
+        let mut sou = HostStamps::default();
+        let stamp = |h: &mut HostStamps, line: &[u8], t: f64| {
+            String::from_utf8(h.stamp(line, t).unwrap()).unwrap()
+        };
+        // Two lines of N1 in one millisecond: the second a millisecond later; N2 beside them
+        // keeps the clock's time; a later clock passes the bumped stamp by.
+        assert_eq!(
+            stamp(&mut sou, b"N1,1,2,3,4,5,6", 0.0104),
+            "10,N1,1,2,3,4,5,6"
+        );
+        assert_eq!(
+            stamp(&mut sou, b"N1,1,2,3,4,5,6", 0.0096),
+            "11,N1,1,2,3,4,5,6"
+        );
+        assert_eq!(
+            stamp(&mut sou, b"N2,1,2,3,4,5,6", 0.0096),
+            "10,N2,1,2,3,4,5,6"
+        );
+        assert_eq!(
+            stamp(&mut sou, b"999,N1,1,2,3,4,5,6", 0.011),
+            "12,N1,1,2,3,4,5,6"
+        );
+        assert_eq!(
+            stamp(&mut sou, b"N1,1,2,3,4,5,6", 0.020),
+            "20,N1,1,2,3,4,5,6"
+        );
+        assert_eq!(sou.stamp(b"Calibrating gyro... keep still", 0.03), None);
+        // Only untimed lines take the host's clock when the source's clock is kept.
+        assert_eq!(sou.stamp_untimed(b"999,N1,1,2,3,4,5,6", 0.03), None);
+        assert_eq!(
+            sou.stamp_untimed(b"N1,1,2,3,4,5,6", 0.02).unwrap(),
+            b"21,N1,1,2,3,4,5,6"
+        );
+
+        // A CSV in ms: six decimals of a millisecond, so a nanosecond tick.
+        let mut csv = HostStamps::default();
+        assert_eq!(csv.stamp(b"time_ms,sensor,qw,qx,qy,qz", 0.0), None);
+        assert_eq!(
+            stamp(&mut csv, b"5,a,1,0,0,0", 1.5),
+            "1500.000000,a,1,0,0,0"
+        );
+        assert_eq!(
+            stamp(&mut csv, b"6,a,1,0,0,0", 1.5),
+            "1500.000001,a,1,0,0,0"
+        );
+        assert_eq!(
+            stamp(&mut csv, b"6,b,1,0,0,0", 1.5),
+            "1500.000000,b,1,0,0,0"
+        );
+        assert_eq!(
+            stamp(&mut csv, b"7,a,1,0,0,0", 1.6),
+            "1600.000000,a,1,0,0,0"
+        );
+        // In seconds, a microsecond tick.
+        let mut csv_s = HostStamps::default();
+        assert_eq!(csv_s.stamp(b"time_s,sensor,qw,qx,qy,qz", 0.0), None);
+        assert_eq!(
+            stamp(&mut csv_s, b"0.1,a,1,0,0,0", 2.25),
+            "2.250000,a,1,0,0,0"
+        );
+        assert_eq!(
+            stamp(&mut csv_s, b"0.2,a,1,0,0,0", 2.25),
+            "2.250001,a,1,0,0,0"
         );
     }
 }
