@@ -210,6 +210,11 @@ fn parallel_map<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> V
 
 /// [`parallel_map`] where each thread keeps its own `S` (working memory, say) from item to
 /// item, made with `S::default()` and dropped when its items are done.
+///
+/// Each thread takes the next item not yet taken when it finishes one, rather than a share
+/// dealt out first: items do not cost the same (a sensor fused from its rest, another through
+/// VQF's passes), and on a shared machine one thread can be held up, so a fixed share can
+/// leave a core idle while the other works through the rest of its own.
 fn parallel_map_with<T: Send, R: Send, S: Default>(
     items: Vec<T>,
     f: impl Fn(&mut S, T) -> R + Sync,
@@ -221,21 +226,30 @@ fn parallel_map_with<T: Send, R: Send, S: Default>(
         let mut state = S::default();
         return items.into_iter().map(|t| f(&mut state, t)).collect();
     }
-    let mut chunks: Vec<Vec<(usize, T)>> = (0..threads).map(|_| Vec::new()).collect();
-    for (i, item) in items.into_iter().enumerate() {
-        chunks[i % threads].push((i, item));
-    }
-    let f = &f;
+    let slots: Vec<std::sync::Mutex<Option<T>>> = items
+        .into_iter()
+        .map(|t| std::sync::Mutex::new(Some(t)))
+        .collect();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let (f, slots, next) = (&f, &slots, &next);
     let mut results: Vec<(usize, R)> = std::thread::scope(|scope| {
-        let handles: Vec<_> = chunks
-            .into_iter()
-            .map(|chunk| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
                 scope.spawn(move || {
                     let mut state = S::default();
-                    chunk
-                        .into_iter()
-                        .map(|(i, t)| (i, f(&mut state, t)))
-                        .collect::<Vec<_>>()
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(slot) = slots.get(i) else {
+                            return done;
+                        };
+                        let item = slot
+                            .lock()
+                            .unwrap_or_else(std::sync::PoisonError::into_inner)
+                            .take()
+                            .expect("each item is taken once");
+                        done.push((i, f(&mut state, item)));
+                    }
                 })
             })
             .collect();
@@ -600,5 +614,56 @@ impl Ord for MergeHead {
             .t
             .total_cmp(&self.t)
             .then(other.sensor.cmp(&self.sensor))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::time::{Duration, Instant};
+
+    #[test]
+    fn parallel_map_keeps_the_order_and_takes_each_item_once() {
+        let calls = AtomicUsize::new(0);
+        // Each thread's state counts the items it took.
+        let out = parallel_map_with((0..500u64).collect(), |taken: &mut usize, x| {
+            calls.fetch_add(1, Ordering::Relaxed);
+            *taken += 1;
+            x * x
+        });
+        assert_eq!(out, (0..500u64).map(|x| x * x).collect::<Vec<_>>());
+        assert_eq!(calls.load(Ordering::Relaxed), 500);
+        assert!(parallel_map(Vec::<u8>::new(), |x| x).is_empty());
+    }
+
+    #[test]
+    fn a_slow_item_leaves_the_rest_to_the_other_threads() {
+        if std::thread::available_parallelism().map_or(1, |n| n.get()) < 2 {
+            return;
+        }
+        // The first item waits until every other item is done: with shares dealt out first,
+        // its thread would own half of them and wait for itself until the deadline.
+        let others_done = AtomicUsize::new(0);
+        let n = 200;
+        let out = parallel_map((0..n).collect(), |i: usize| {
+            if i == 0 {
+                let deadline = Instant::now() + Duration::from_secs(10);
+                while others_done.load(Ordering::Acquire) < n - 1 {
+                    if Instant::now() > deadline {
+                        return false;
+                    }
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            } else {
+                others_done.fetch_add(1, Ordering::Release);
+            }
+            true
+        });
+        assert!(
+            out[0],
+            "the other items were not taken by the other threads"
+        );
+        assert!(out.iter().all(|&done| done));
     }
 }
