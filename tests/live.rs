@@ -804,7 +804,14 @@ fn a_silent_sensor_is_held_and_picked_up_again() {
     assert!(err.contains("sensor `left_hand` is silent"), "{err}");
     assert!(err.contains("sensor `left_hand` is back"), "{err}");
     let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(summary["lines"].as_u64().unwrap(), sent);
+    // Every datagram (a line each) was read, or counted as lost: at the session's queue or by
+    // the system (a machine busy with other tests can leave the source thread off its core for
+    // longer than a socket's buffer lasts).
+    let count = |k: &str| summary[k].as_u64().unwrap();
+    let lost = count("overflowed") + count("lost_datagrams");
+    eprintln!("sent {sent}, read {}, lost {lost}", count("lines"));
+    assert_eq!(count("lines") + lost, sent, "{summary}");
+    assert!(lost * 100 <= sent, "more than 1 % lost: {summary}");
     // 60 fps over the whole take: the frames went on through the silence.
     assert!(summary["frames"].as_u64().unwrap() >= 700, "{summary}");
 }

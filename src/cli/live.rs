@@ -81,6 +81,9 @@ fn status_line(s: &Status) -> String {
         s.lines,
         s.dropped_lines + s.overflowed
     );
+    if s.lost_datagrams > 0 {
+        line.push_str(&format!(" · {} datagrams lost", s.lost_datagrams));
+    }
     if let Some((median, p99)) = s.latency_ms {
         line.push_str(&format!(" · latency {median:.2}/{p99:.2} ms"));
     }
@@ -202,12 +205,26 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
     for w in &summary.warnings {
         eprintln!("warning: {w}");
     }
+    if summary.overflowed > 0 {
+        eprintln!(
+            "warning: {} lines lost: they came faster than the session could take them",
+            summary.overflowed
+        );
+    }
+    if summary.lost_datagrams > 0 {
+        eprintln!(
+            "warning: {} datagrams dropped by the system before they were read (its receive \
+             buffer full; a busy machine, or a sender faster than the session)",
+            summary.lost_datagrams
+        );
+    }
     if args.json {
         let json = serde_json::json!({
             "frames": summary.frames,
             "lines": summary.lines,
             "dropped_lines": summary.dropped,
             "overflowed": summary.overflowed,
+            "lost_datagrams": summary.lost_datagrams,
             "recording": summary.recording,
             "latency_ms": summary.latency_ms.map(|(m, p)| serde_json::json!({"median": m, "p99": p})),
             "warnings": summary.warnings,

@@ -146,6 +146,9 @@ pub struct Status {
     pub dropped_lines: u64,
     /// Lines lost before the session could read them (a burst of datagrams).
     pub overflowed: u64,
+    /// Datagrams the system dropped before a `udp:` source read them (see
+    /// [`source::SourceCounters::lost_datagrams`]).
+    pub lost_datagrams: u64,
     /// Median and 99th percentile, milliseconds, of the last frames' latency: from the arrival
     /// of the batch holding the sample that completed a frame to its bundle's sending.
     pub latency_ms: Option<(f64, f64)>,
@@ -165,7 +168,10 @@ pub struct Summary {
     pub frames: u64,
     pub lines: u64,
     pub dropped: Vec<LineReport>,
+    /// Lines lost at the session's channel (a burst it could not keep up with).
     pub overflowed: u64,
+    /// Datagrams the system dropped before a `udp:` source read them.
+    pub lost_datagrams: u64,
     pub recording: Option<PathBuf>,
     pub warnings: Vec<String>,
     pub latency_ms: Option<(f64, f64)>,
@@ -607,11 +613,16 @@ pub fn run(
         .iter()
         .map(|c| c.overflowed.load(Ordering::Relaxed))
         .sum();
+    let lost_datagrams = counters
+        .iter()
+        .map(|c| c.lost_datagrams.load(Ordering::Relaxed))
+        .sum();
     Ok(Summary {
         frames,
         lines: line_no,
         dropped,
         overflowed,
+        lost_datagrams,
         recording,
         warnings,
         latency_ms: latencies.summary(),
@@ -818,6 +829,10 @@ fn status(
         overflowed: counters
             .iter()
             .map(|c| c.overflowed.load(Ordering::Relaxed) + c.too_long.load(Ordering::Relaxed))
+            .sum(),
+        lost_datagrams: counters
+            .iter()
+            .map(|c| c.lost_datagrams.load(Ordering::Relaxed))
             .sum(),
         latency_ms,
     }

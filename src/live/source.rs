@@ -286,6 +286,9 @@ pub struct SourceCounters {
     pub refused: AtomicU64,
     /// Lines longer than [`MAX_LINE`].
     pub too_long: AtomicU64,
+    /// Datagrams the system dropped before they were read, its receive buffer full (Linux: the
+    /// socket's `drops` in `/proc/net/udp`; 0 elsewhere, where it cannot be known).
+    pub lost_datagrams: AtomicU64,
 }
 
 /// What every source thread has: its index, where to send, when to stop.
@@ -374,10 +377,7 @@ pub fn start(
             read_stream(stdin.lock(), &link);
         }),
         SourceSpec::Udp { bind, witmotion } => {
-            let socket = UdpSocket::bind(bind).map_err(io)?;
-            socket
-                .set_read_timeout(Some(Duration::from_millis(100)))
-                .map_err(io)?;
+            let socket = udp_socket(bind).map_err(io)?;
             let framing = Framing::new(witmotion, &format!("udp{}", bind.port()));
             std::thread::spawn(move || udp(socket, &link, &allow, framing))
         }
@@ -589,9 +589,76 @@ fn replay(reader: impl BufRead, speed: f64, link: &Link) {
     link.closed(None);
 }
 
+/// The receive buffer asked for (bytes). A sender's burst (a suit's sixteen sensors each
+/// sending at once) waits there while this thread is not running; the system's default (~200 KiB,
+/// a few hundred small datagrams as the kernel counts them) overflows after ~30 ms of a busy
+/// machine. Linux grants at most `net.core.rmem_max` (commonly 4 MiB).
+pub const UDP_RECEIVE_BUFFER: usize = 4 << 20;
+
+/// A bound datagram socket with a large receive buffer and a 100 ms read timeout (so the thread
+/// sees the session stop).
+fn udp_socket(bind: SocketAddr) -> std::io::Result<UdpSocket> {
+    use socket2::{Domain, Protocol, Socket, Type};
+    let socket = Socket::new(Domain::for_address(bind), Type::DGRAM, Some(Protocol::UDP))?;
+    // Best effort: a smaller buffer than asked for still works.
+    let _ = socket.set_recv_buffer_size(UDP_RECEIVE_BUFFER);
+    socket.bind(&bind.into())?;
+    let socket = UdpSocket::from(socket);
+    socket.set_read_timeout(Some(Duration::from_millis(100)))?;
+    Ok(socket)
+}
+
+/// The datagrams the system has dropped for this socket since it was opened: the `drops` column
+/// of its row (found by the socket's inode) in `/proc/net/udp` or `/proc/net/udp6`. `None` off
+/// Linux or when the row cannot be read.
+#[cfg(target_os = "linux")]
+fn kernel_drops(socket: &UdpSocket) -> Option<u64> {
+    use std::os::fd::AsRawFd;
+    use std::os::unix::fs::MetadataExt;
+    let inode = std::fs::metadata(format!("/proc/self/fd/{}", socket.as_raw_fd()))
+        .ok()?
+        .ino();
+    ["/proc/net/udp", "/proc/net/udp6"]
+        .iter()
+        .find_map(|table| {
+            let text = std::fs::read_to_string(table).ok()?;
+            drops_of(&text, inode)
+        })
+}
+
+#[cfg(not(target_os = "linux"))]
+fn kernel_drops(_socket: &UdpSocket) -> Option<u64> {
+    None
+}
+
+/// The `drops` (last) column of the row whose `inode` (tenth) column is `inode`, in the text of
+/// `/proc/net/udp` (a header line, then one row per socket).
+#[cfg_attr(not(target_os = "linux"), allow(dead_code))]
+fn drops_of(table: &str, inode: u64) -> Option<u64> {
+    table.lines().skip(1).find_map(|row| {
+        let columns: Vec<&str> = row.split_whitespace().collect();
+        // sl local rem st tx:rx tr:when retrnsmt uid timeout inode ref pointer drops
+        if columns.len() < 13 || columns[9].parse::<u64>().ok()? != inode {
+            return None;
+        }
+        columns.last()?.parse().ok()
+    })
+}
+
 fn udp(socket: UdpSocket, link: &Link, allow: &Allow, mut framing: Framing) {
     let mut buf = vec![0u8; 65_536];
+    let mut drops_read = Instant::now();
+    let read_drops = || {
+        if let Some(n) = kernel_drops(&socket) {
+            link.counters.lost_datagrams.store(n, Ordering::Relaxed);
+        }
+    };
     while !link.stopped() {
+        // Twice a second is enough for the status line; the last count is read on the way out.
+        if drops_read.elapsed() >= Duration::from_millis(500) {
+            read_drops();
+            drops_read = Instant::now();
+        }
         match socket.recv_from(&mut buf) {
             Ok((n, from)) => {
                 if !allow.admits(from.ip()) {
@@ -605,7 +672,7 @@ fn udp(socket: UdpSocket, link: &Link, allow: &Allow, mut framing: Framing) {
                     framing.finish(&mut lines, link);
                 }
                 if !link.offer(lines) {
-                    return;
+                    break;
                 }
             }
             Err(e)
@@ -621,6 +688,7 @@ fn udp(socket: UdpSocket, link: &Link, allow: &Allow, mut framing: Framing) {
             }
         }
     }
+    read_drops();
 }
 
 /// Waits `delay` unless the session stops first; the next delay (doubling, at most 5 s).
@@ -678,6 +746,56 @@ fn serial(path: &std::path::Path, baud: u32, witmotion: bool, link: &Link) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Two rows as Linux 6 prints them (a socket bound to 127.0.0.1:54539 whose buffer held 256
+    /// datagrams of 3 000 sent, and another): the drops of the one asked for.
+    #[test]
+    fn drops_are_read_from_the_sockets_row() {
+        let table = "   sl  local_address rem_address   st tx_queue rx_queue tr tm->when retrnsmt   uid  timeout inode ref pointer drops            \n 3358: 0100007F:D50B 00000000:0000 07 00000000:00034000 00:00000000 00000000     0        0 6096 2 00000000a6bb308c 2744       \n14196: 00000000:BF61 00000000:0000 07 00000000:00000000 00:00000000 00000000     0        0 6097 2 00000000c8413e5c 0          \n";
+        assert_eq!(drops_of(table, 6096), Some(2744));
+        assert_eq!(drops_of(table, 6097), Some(0));
+        assert_eq!(drops_of(table, 3358), None);
+        assert_eq!(drops_of("", 6096), None);
+        assert_eq!(drops_of("header\n 1: short row 6096\n", 6096), None);
+    }
+
+    /// The system's own count, read back: datagrams sent to a socket nobody reads overflow its
+    /// buffer, and what is then read plus what the system says it dropped is what was sent.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn the_systems_drops_and_the_datagrams_read_add_up_to_those_sent() {
+        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+        socket.set_nonblocking(true).unwrap();
+        let sender = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let to = socket.local_addr().unwrap();
+        let sent = 20_000;
+        for _ in 0..sent {
+            sender.send_to(&[b'x'; 60], to).unwrap();
+        }
+        let mut buf = [0u8; 128];
+        let mut read = 0;
+        while socket.recv_from(&mut buf).is_ok() {
+            read += 1;
+        }
+        let dropped = kernel_drops(&socket).expect("the socket's row in /proc/net/udp");
+        assert!(dropped > 0, "a default buffer holds 20 000 datagrams?");
+        assert_eq!(read + dropped, sent);
+    }
+
+    /// A `udp:` source's buffer is the one asked for, within what the system allows.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_udp_source_asks_for_a_large_receive_buffer() {
+        let socket = udp_socket("127.0.0.1:0".parse().unwrap()).unwrap();
+        let max: usize = std::fs::read_to_string("/proc/sys/net/core/rmem_max")
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap();
+        // Linux doubles the size asked for (its bookkeeping) and reports the double.
+        let got = socket2::SockRef::from(&socket).recv_buffer_size().unwrap();
+        assert_eq!(got, 2 * UDP_RECEIVE_BUFFER.min(max), "rmem_max {max}");
+    }
 
     #[test]
     fn specs_parse_and_bad_ones_say_why() {
