@@ -165,6 +165,8 @@ fn check(bundles: &[Value], anim: &Animation, names: &[(&str, &str)]) -> (f64, u
     let mut worst_pos: f64 = 0.0;
     let mut matched = 0;
     let mut last_t: Option<f64> = None;
+    // Where the worst bone was, said when a test fails on it.
+    let mut worst_at = String::new();
     for b in bundles {
         let addresses: Vec<&str> = b["addresses"]
             .as_array()
@@ -201,7 +203,11 @@ fn check(bundles: &[Value], anim: &Animation, names: &[(&str, &str)]) -> (f64, u
                 .collect();
             // Unity (x right, y up, z forward, left-handed) back to the rig world (x left).
             let q = UnitQuaternion::from_quaternion(Quaternion::new(f[6], f[3], -f[4], -f[5]));
-            worst = worst.max(q.angle_to(&anim.local(joint)[n]).to_degrees());
+            let angle = q.angle_to(&anim.local(joint)[n]).to_degrees();
+            if angle > worst {
+                worst = angle;
+                worst_at = format!("frame {n} (t = {t:.4} s), {unity}");
+            }
             if unity == "Hips" {
                 let p = Vector3::new(-f[0], f[1], f[2]);
                 let expected = anim.root_positions()[n] * rig.units().metres_per_unit();
@@ -209,6 +215,9 @@ fn check(bundles: &[Value], anim: &Animation, names: &[(&str, &str)]) -> (f64, u
             }
         }
         matched += 1;
+    }
+    if worst > 1e-3 {
+        eprintln!("worst bone {worst:.3e}° at {worst_at}");
     }
     (worst, matched, worst_pos)
 }
@@ -696,7 +705,7 @@ fn a_calibration_request_recalibrates_and_the_recording_says_so() {
     let (worst, matched, _) = check(bundles, &recorded, &MIXAMO);
     assert!(
         worst < 1e-3,
-        "the recording converts to the frames streamed: {worst}°"
+        "the recording converts to the frames streamed: {worst}°; the session said:\n{err}"
     );
     assert!(matched + 2 >= recorded.frames());
     // Without the recalibration, the same frames until the new window ends, then others.
