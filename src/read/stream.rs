@@ -447,69 +447,46 @@ mod tests {
 
     #[test]
     fn host_stamps_rise_for_each_sensor() {
-        let mut sou = HostStamps::default();
-        let stamp = |h: &mut HostStamps, line: &[u8], t: f64| {
-            String::from_utf8(h.stamp(line, t).unwrap()).unwrap()
+        // Lines in turn through one source's stamps: (line, host clock in seconds, stamped).
+        let expect = |cases: &[(&str, f64, &str)]| {
+            let mut stamps = HostStamps::default();
+            for &(line, t, stamped) in cases {
+                let got = stamps.stamp(line.as_bytes(), t);
+                let got = got.map(|g| String::from_utf8(g).unwrap());
+                let want = (!stamped.is_empty()).then(|| stamped.to_string());
+                assert_eq!(got, want, "{line} at {t}");
+            }
+            stamps
         };
         // Two lines of N1 in one millisecond: the second a millisecond later; N2 beside them
-        // keeps the clock's time; a later clock passes the bumped stamp by.
-        assert_eq!(
-            stamp(&mut sou, b"N1,1,2,3,4,5,6", 0.0104),
-            "10,N1,1,2,3,4,5,6"
-        );
-        assert_eq!(
-            stamp(&mut sou, b"N1,1,2,3,4,5,6", 0.0096),
-            "11,N1,1,2,3,4,5,6"
-        );
-        assert_eq!(
-            stamp(&mut sou, b"N2,1,2,3,4,5,6", 0.0096),
-            "10,N2,1,2,3,4,5,6"
-        );
-        assert_eq!(
-            stamp(&mut sou, b"999,N1,1,2,3,4,5,6", 0.011),
-            "12,N1,1,2,3,4,5,6"
-        );
-        assert_eq!(
-            stamp(&mut sou, b"N1,1,2,3,4,5,6", 0.020),
-            "20,N1,1,2,3,4,5,6"
-        );
-        assert_eq!(sou.stamp(b"Calibrating gyro... keep still", 0.03), None);
+        // keeps the clock's time; a later clock passes the bumped stamp by; text is not stamped.
+        let mut sou = expect(&[
+            ("N1,1,2,3,4,5,6", 0.0104, "10,N1,1,2,3,4,5,6"),
+            ("N1,1,2,3,4,5,6", 0.0096, "11,N1,1,2,3,4,5,6"),
+            ("N2,1,2,3,4,5,6", 0.0096, "10,N2,1,2,3,4,5,6"),
+            ("999,N1,1,2,3,4,5,6", 0.011, "12,N1,1,2,3,4,5,6"),
+            ("N1,1,2,3,4,5,6", 0.020, "20,N1,1,2,3,4,5,6"),
+            ("Calibrating gyro... keep still", 0.03, ""),
+        ]);
         // Only untimed lines take the host's clock when the source's clock is kept.
         assert_eq!(sou.stamp_untimed(b"999,N1,1,2,3,4,5,6", 0.03), None);
         assert_eq!(
             sou.stamp_untimed(b"N1,1,2,3,4,5,6", 0.02).unwrap(),
             b"21,N1,1,2,3,4,5,6"
         );
-
         // A CSV in ms: six decimals of a millisecond, so a nanosecond tick.
-        let mut csv = HostStamps::default();
-        assert_eq!(csv.stamp(b"time_ms,sensor,qw,qx,qy,qz", 0.0), None);
-        assert_eq!(
-            stamp(&mut csv, b"5,a,1,0,0,0", 1.5),
-            "1500.000000,a,1,0,0,0"
-        );
-        assert_eq!(
-            stamp(&mut csv, b"6,a,1,0,0,0", 1.5),
-            "1500.000001,a,1,0,0,0"
-        );
-        assert_eq!(
-            stamp(&mut csv, b"6,b,1,0,0,0", 1.5),
-            "1500.000000,b,1,0,0,0"
-        );
-        assert_eq!(
-            stamp(&mut csv, b"7,a,1,0,0,0", 1.6),
-            "1600.000000,a,1,0,0,0"
-        );
+        expect(&[
+            ("time_ms,sensor,qw,qx,qy,qz", 0.0, ""),
+            ("5,a,1,0,0,0", 1.5, "1500.000000,a,1,0,0,0"),
+            ("6,a,1,0,0,0", 1.5, "1500.000001,a,1,0,0,0"),
+            ("6,b,1,0,0,0", 1.5, "1500.000000,b,1,0,0,0"),
+            ("7,a,1,0,0,0", 1.6, "1600.000000,a,1,0,0,0"),
+        ]);
         // In seconds, a microsecond tick.
-        let mut csv_s = HostStamps::default();
-        assert_eq!(csv_s.stamp(b"time_s,sensor,qw,qx,qy,qz", 0.0), None);
-        assert_eq!(
-            stamp(&mut csv_s, b"0.1,a,1,0,0,0", 2.25),
-            "2.250000,a,1,0,0,0"
-        );
-        assert_eq!(
-            stamp(&mut csv_s, b"0.2,a,1,0,0,0", 2.25),
-            "2.250001,a,1,0,0,0"
-        );
+        expect(&[
+            ("time_s,sensor,qw,qx,qy,qz", 0.0, ""),
+            ("0.1,a,1,0,0,0", 2.25, "2.250000,a,1,0,0,0"),
+            ("0.2,a,1,0,0,0", 2.25, "2.250001,a,1,0,0,0"),
+        ]);
     }
 }
