@@ -589,10 +589,10 @@ fn replay(reader: impl BufRead, speed: f64, link: &Link) {
     link.closed(None);
 }
 
-/// The receive buffer asked for (bytes). A sender's burst (a suit's sixteen sensors each
-/// sending at once) waits there while this thread is not running; the system's default (~200 KiB,
-/// a few hundred small datagrams as the kernel counts them) overflows after ~30 ms of a busy
-/// machine. Linux grants at most `net.core.rmem_max` (commonly 4 MiB).
+/// The receive buffer asked for (bytes). Datagrams wait there while this thread is off its core;
+/// the system's default (~200 KiB) holds ~256 small datagrams as the kernel counts them (~830
+/// bytes each), 0.16 s of a 16-sensor suit sending a datagram per reading at 100 Hz, and less
+/// when a recording is replayed faster. Linux grants at most `net.core.rmem_max` (commonly 4 MiB).
 pub const UDP_RECEIVE_BUFFER: usize = 4 << 20;
 
 /// A bound datagram socket with a large receive buffer and a 100 ms read timeout (so the thread
