@@ -609,20 +609,12 @@ pub fn run(
         let _ = t.join();
     }
     result?;
-    let overflowed = counters
-        .iter()
-        .map(|c| c.overflowed.load(Ordering::Relaxed))
-        .sum();
-    let lost_datagrams = counters
-        .iter()
-        .map(|c| c.lost_datagrams.load(Ordering::Relaxed))
-        .sum();
     Ok(Summary {
         frames,
         lines: line_no,
         dropped,
-        overflowed,
-        lost_datagrams,
+        overflowed: total(&counters, |c| c.overflowed.load(Ordering::Relaxed)),
+        lost_datagrams: total(&counters, |c| c.lost_datagrams.load(Ordering::Relaxed)),
         recording,
         warnings,
         latency_ms: latencies.summary(),
@@ -778,6 +770,11 @@ fn preview_status(preview: &crate::view::Preview, s: &Status) {
     preview.status(phase, left, s.frames, &sensors);
 }
 
+/// One count summed over every source.
+fn total(counters: &[Arc<SourceCounters>], count: impl Fn(&SourceCounters) -> u64) -> u64 {
+    counters.iter().map(|c| count(c)).sum()
+}
+
 #[allow(clippy::too_many_arguments)]
 fn status(
     started: Instant,
@@ -826,14 +823,10 @@ fn status(
         sensors,
         lines,
         dropped_lines,
-        overflowed: counters
-            .iter()
-            .map(|c| c.overflowed.load(Ordering::Relaxed) + c.too_long.load(Ordering::Relaxed))
-            .sum(),
-        lost_datagrams: counters
-            .iter()
-            .map(|c| c.lost_datagrams.load(Ordering::Relaxed))
-            .sum(),
+        overflowed: total(counters, |c| {
+            c.overflowed.load(Ordering::Relaxed) + c.too_long.load(Ordering::Relaxed)
+        }),
+        lost_datagrams: total(counters, |c| c.lost_datagrams.load(Ordering::Relaxed)),
         latency_ms,
     }
 }
