@@ -14,7 +14,7 @@
 
 mod common;
 
-use common::{PAPER000_SENSORS, minutes_from_env, status_kib, write_log, write_raw_log};
+use common::{Cpu, PAPER000_SENSORS, minutes_from_env, status_kib, write_log, write_raw_log};
 use imubake::convert::{ConvertSettings, convert};
 use imubake::pipeline::PipelineOptions;
 use imubake::pipeline::root::RootMode;
@@ -125,14 +125,18 @@ fn main() {
     );
 
     let out = dir.path().join("out");
-    let runs = |input: &Path, settings: &ConvertSettings, n: usize| -> Vec<f64> {
+    // Each run's wall time, and the CPU it took.
+    let timed = |input: &Path, settings: &ConvertSettings, n: usize| -> Vec<(f64, Cpu)> {
         (0..n)
             .map(|_| {
-                let start = Instant::now();
+                let (start, cpu) = (Instant::now(), Cpu::now());
                 convert(input, &out, settings).expect("convert");
-                start.elapsed().as_secs_f64()
+                (start.elapsed().as_secs_f64(), Cpu::now().since(cpu))
             })
             .collect()
+    };
+    let runs = |input: &Path, settings: &ConvertSettings, n: usize| -> Vec<f64> {
+        timed(input, settings, n).into_iter().map(|r| r.0).collect()
     };
 
     // The issue's setting: memory of the first run, then the time of five.
@@ -143,7 +147,8 @@ fn main() {
             .frames
     });
     stages.0.lock().expect("stages").clear();
-    let fixed_runs = runs(&input, &fixed, 5);
+    let fixed_timed = timed(&input, &fixed, 5);
+    let fixed_runs: Vec<f64> = fixed_timed.iter().map(|r| r.0).collect();
     let fixed_s = median(fixed_runs.clone());
     let profile = std::mem::take(&mut *stages.0.lock().expect("stages"));
     let size = |ext: &str| {
@@ -165,6 +170,17 @@ fn main() {
     println!(
         "peak anonymous memory (RssAnon): {:.0} MB (target ≤ 400 MB)",
         peak_kib as f64 / 1024.0
+    );
+    // The CPU behind the wall time: a slow hour shows as more CPU for the same work (and often
+    // more system time for the same page faults), a regression as more work.
+    let cpu_median = |f: fn(&Cpu) -> f64| median(fixed_timed.iter().map(|r| f(&r.1)).collect());
+    let (user_s, system_s) = (cpu_median(|c| c.user_s), cpu_median(|c| c.system_s));
+    println!(
+        "CPU per run, median of 5: user {user_s:.2} s, system {system_s:.2} s, {:.0} k page faults; \
+         both cores busy {:.0} % of the wall time",
+        cpu_median(|c| c.minor_faults as f64) / 1e3,
+        100.0 * (user_s + system_s)
+            / (fixed_s * std::thread::available_parallelism().map_or(1, |n| n.get()) as f64),
     );
     // Where the time goes: each stage's median wall time over the five runs (the two writes
     // run side by side, each on both cores).

@@ -62,6 +62,43 @@ pub fn status_kib(field: &str) -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
+/// This process's CPU so far (`getrusage(RUSAGE_SELF)`, every thread): user and system seconds,
+/// and minor page faults. Wall time on this shared machine drifts from hour to hour; the CPU a
+/// run took, and how much of it went to the kernel, says whether a slow run worked more or the
+/// host ran slower.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Cpu {
+    pub user_s: f64,
+    pub system_s: f64,
+    pub minor_faults: u64,
+}
+
+impl Cpu {
+    pub fn now() -> Cpu {
+        // SAFETY: `getrusage` fills the zeroed struct it is given and keeps no reference to it.
+        let usage = unsafe {
+            let mut usage: libc::rusage = std::mem::zeroed();
+            libc::getrusage(libc::RUSAGE_SELF, &mut usage);
+            usage
+        };
+        let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+        Cpu {
+            user_s: seconds(usage.ru_utime),
+            system_s: seconds(usage.ru_stime),
+            minor_faults: usage.ru_minflt as u64,
+        }
+    }
+
+    /// What was spent between `earlier` and `self`.
+    pub fn since(self, earlier: Cpu) -> Cpu {
+        Cpu {
+            user_s: self.user_s - earlier.user_s,
+            system_s: self.system_s - earlier.system_s,
+            minor_faults: self.minor_faults - earlier.minor_faults,
+        }
+    }
+}
+
 /// Resets the peak-memory mark (VmHWM) to the current resident size.
 pub fn reset_peak() {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
