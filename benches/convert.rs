@@ -174,13 +174,21 @@ fn main() {
     // The CPU behind the wall time: a slow hour shows as more CPU for the same work (and often
     // more system time for the same page faults), a regression as more work.
     let cpu_median = |f: fn(&Cpu) -> f64| median(fixed_timed.iter().map(|r| f(&r.1)).collect());
-    let (user_s, system_s) = (cpu_median(|c| c.user_s), cpu_median(|c| c.system_s));
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
+    // Each run's CPU over its own wall time on every core.
+    let busy = median(
+        fixed_timed
+            .iter()
+            .map(|(wall, c)| (c.user_s + c.system_s) / (wall * cores))
+            .collect(),
+    );
     println!(
-        "CPU per run, median of 5: user {user_s:.2} s, system {system_s:.2} s, {:.0} k page faults; \
-         both cores busy {:.0} % of the wall time",
+        "CPU per run, median of 5: user {:.2} s, system {:.2} s, {:.0} k page faults; \
+         the cores busy {:.0} % of the wall time",
+        cpu_median(|c| c.user_s),
+        cpu_median(|c| c.system_s),
         cpu_median(|c| c.minor_faults as f64) / 1e3,
-        100.0 * (user_s + system_s)
-            / (fixed_s * std::thread::available_parallelism().map_or(1, |n| n.get()) as f64),
+        100.0 * busy,
     );
     // Where the time goes: each stage's median wall time over the five runs (the two writes
     // run side by side, each on both cores).
