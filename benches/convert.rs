@@ -92,6 +92,7 @@ fn main() {
     tracing::subscriber::set_global_default(subscriber).expect("the bench's subscriber");
 
     let minutes = minutes_from_env();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let dir = tempfile::tempdir().expect("temp dir");
     let input = dir.path().join("long.csv");
     let raw_input = dir.path().join("raw.csv");
@@ -121,7 +122,7 @@ fn main() {
         bytes as f64 / 1e6,
         raw_bytes as f64 / 1e6,
         default.pipeline.smoothing.describe(),
-        std::thread::available_parallelism().map_or(1, |n| n.get()),
+        cores,
     );
 
     let out = dir.path().join("out");
@@ -174,12 +175,11 @@ fn main() {
     // The CPU behind the wall time: a slow hour shows as more CPU for the same work (and often
     // more system time for the same page faults), a regression as more work.
     let cpu_median = |f: fn(&Cpu) -> f64| median(fixed_timed.iter().map(|r| f(&r.1)).collect());
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
     // Each run's CPU over its own wall time on every core.
     let busy = median(
         fixed_timed
             .iter()
-            .map(|(wall, c)| (c.user_s + c.system_s) / (wall * cores))
+            .map(|(wall, c)| (c.user_s + c.system_s) / (wall * cores as f64))
             .collect(),
     );
     println!(

@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::{PAPER000_SENSORS, RATE_HZ};
+use common::{Cpu, PAPER000_SENSORS, RATE_HZ};
 use imubake::convert::ConvertSettings;
 use imubake::live::{LiveSettings, Report};
 use std::net::UdpSocket;
@@ -18,13 +18,6 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-
-fn cpu_seconds() -> f64 {
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) };
-    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-    tv(usage.ru_utime) + tv(usage.ru_stime)
-}
 
 fn main() {
     let seconds: f64 = std::env::var("IMUBAKE_BENCH_SECONDS")
@@ -104,14 +97,15 @@ fn main() {
         std::thread::sleep(Duration::from_millis(300));
         stopper.store(true, Ordering::Relaxed);
     });
-    let (cpu0, wall0) = (cpu_seconds(), Instant::now());
+    let (cpu0, wall0) = (Cpu::now(), Instant::now());
     let summary = imubake::live::run(&settings, stop, |r| {
         if let Report::Notice(n) = r {
             eprintln!("{n}");
         }
     })
     .expect("the session");
-    let (cpu, wall) = (cpu_seconds() - cpu0, wall0.elapsed().as_secs_f64());
+    let spent = Cpu::now().since(cpu0);
+    let (cpu, wall) = (spent.user_s + spent.system_s, wall0.elapsed().as_secs_f64());
     sender.join().unwrap();
     let (median, p99) = summary.latency_ms.expect("frames went out");
     println!(

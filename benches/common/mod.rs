@@ -66,7 +66,7 @@ pub fn status_kib(field: &str) -> Option<u64> {
 /// and minor page faults. Wall time on this shared machine drifts from hour to hour; the CPU a
 /// run took, and how much of it went to the kernel, says whether a slow run worked more or the
 /// host ran slower.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy)]
 pub struct Cpu {
     pub user_s: f64,
     pub system_s: f64,
