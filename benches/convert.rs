@@ -179,7 +179,7 @@ fn main() {
     let busy = median(
         fixed_timed
             .iter()
-            .map(|(wall, c)| (c.user_s + c.system_s) / (wall * cores as f64))
+            .map(|(wall, c)| c.total_s() / (wall * cores as f64))
             .collect(),
     );
     println!(

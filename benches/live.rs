@@ -104,8 +104,10 @@ fn main() {
         }
     })
     .expect("the session");
-    let spent = Cpu::now().since(cpu0);
-    let (cpu, wall) = (spent.user_s + spent.system_s, wall0.elapsed().as_secs_f64());
+    let (cpu, wall) = (
+        Cpu::now().since(cpu0).total_s(),
+        wall0.elapsed().as_secs_f64(),
+    );
     sender.join().unwrap();
     let (median, p99) = summary.latency_ms.expect("frames went out");
     println!(

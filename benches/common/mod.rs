@@ -89,6 +89,11 @@ impl Cpu {
         }
     }
 
+    /// User and system seconds together.
+    pub fn total_s(&self) -> f64 {
+        self.user_s + self.system_s
+    }
+
     /// What was spent between `earlier` and `self`.
     pub fn since(self, earlier: Cpu) -> Cpu {
         Cpu {
