@@ -14,7 +14,7 @@
 
 mod common;
 
-use common::{PAPER000_SENSORS, write_log};
+use common::{HostProbe, PAPER000_SENSORS, write_log};
 use imubake::batch::{DiscoverOptions, Summary, discover, run};
 use imubake::convert::ConvertSettings;
 use std::path::Path;
@@ -51,6 +51,7 @@ fn main() {
         bytes as f64 / 1e6
     );
 
+    println!("before: {}", HostProbe::measure());
     let never_stop = AtomicBool::new(false);
     let batch = |out: &Path, jobs: usize| {
         run(&library, out, &settings, jobs, &never_stop, &|_| {}).expect("batch")
@@ -94,6 +95,7 @@ fn main() {
         "default --jobs / 1 job: {:.2}×",
         throughput[1] / throughput[0]
     );
+    println!("after: {}", HostProbe::measure());
     let ok = throughput[1] >= 40.0;
     println!(
         "default --jobs: {:.1} takes/s (target ≥ 40): {}",

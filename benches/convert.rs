@@ -14,7 +14,9 @@
 
 mod common;
 
-use common::{Cpu, PAPER000_SENSORS, minutes_from_env, status_kib, write_log, write_raw_log};
+use common::{
+    Cpu, HostProbe, PAPER000_SENSORS, minutes_from_env, status_kib, write_log, write_raw_log,
+};
 use imubake::convert::{ConvertSettings, convert};
 use imubake::pipeline::PipelineOptions;
 use imubake::pipeline::root::RootMode;
@@ -124,6 +126,7 @@ fn main() {
         default.pipeline.smoothing.describe(),
         cores,
     );
+    println!("before: {}", HostProbe::measure());
 
     let out = dir.path().join("out");
     // Each run's wall time, and the CPU it took.
@@ -242,5 +245,6 @@ fn main() {
         && raw_s <= 2.0 * fixed_here_s
         && default_s <= 1.10 * fixed_here_s
         && default_s <= 1.15 * plain_s;
+    println!("after: {}", HostProbe::measure());
     println!("{}", if ok { "targets met" } else { "TARGETS MISSED" });
 }

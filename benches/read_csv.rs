@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{RATE_HZ, minutes_from_env, reset_peak, status_kib, write_log};
+use common::{HostProbe, RATE_HZ, minutes_from_env, reset_peak, status_kib, write_log};
 use imubake::read::{ReadOptions, read_take};
 use std::time::Instant;
 
@@ -31,6 +31,7 @@ fn main() {
         SENSORS.len(),
         bytes as f64 / 1e6
     );
+    println!("before: {}", HostProbe::measure());
     let options = ReadOptions::default();
 
     // Peak memory of one read, measured first so earlier runs' freed pages do not hide it.
@@ -58,6 +59,7 @@ fn main() {
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
     println!("peak memory: {per_sample:.1} bytes/sample above base (target ≤ 64)");
+    println!("after: {}", HostProbe::measure());
     let ok = mb_s >= 600.0 && per_sample <= 64.0;
     println!("{}", if ok { "targets met" } else { "TARGETS MISSED" });
 }

@@ -1,6 +1,7 @@
 //! Shared by the benchmarks: the synthetic capture log of issue 2 and memory readings.
 #![allow(dead_code)]
 
+use std::fmt::Write as _;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
@@ -143,4 +144,91 @@ pub fn write_raw_log(path: &Path, minutes: usize, sensors: &[&str]) -> std::io::
     // own writes (and their fsync).
     out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
     Ok(std::fs::metadata(path)?.len())
+}
+
+/// How fast this host runs this hour, by work that does not depend on imubake's code: this
+/// shared machine's speed drifts by up to half from hour to hour (no stolen time shows in
+/// `/proc/stat`; the same work simply takes more CPU), so a figure is only comparable with
+/// another beside the probe taken with it.
+#[derive(Debug, Clone, Copy)]
+pub struct HostProbe {
+    /// Nanoseconds for std to format a number with `{:.6}` and parse it back, with every core
+    /// doing the same at once (scalar, branchy work, like most of a conversion; it changes with
+    /// the Rust toolchain, not with imubake).
+    pub number_ns: f64,
+    /// Microseconds for the kernel to back a 4 KiB page of fresh memory on its first write.
+    pub fault_us: f64,
+}
+
+impl HostProbe {
+    /// The median of a few short rounds of each (~0.5 s in all).
+    pub fn measure() -> HostProbe {
+        const NUMBERS: usize = 200_000;
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        // Each thread times its own loop: the slowest core's start would otherwise count.
+        let number_round = || {
+            let per_core: Vec<f64> = std::thread::scope(|scope| {
+                let handles: Vec<_> = (0..cores)
+                    .map(|core| {
+                        scope.spawn(move || {
+                            let mut text = String::with_capacity(32);
+                            let mut sum = 0.0;
+                            // A fixed sequence of values between −1000 and 1000 (an LCG).
+                            let mut state = 0x9e37_79b9_7f4a_7c15_u64 ^ core as u64;
+                            let start = std::time::Instant::now();
+                            for _ in 0..NUMBERS {
+                                state = state
+                                    .wrapping_mul(6_364_136_223_846_793_005)
+                                    .wrapping_add(1_442_695_040_888_963_407);
+                                let v =
+                                    (state >> 11) as f64 / (1u64 << 53) as f64 * 2000.0 - 1000.0;
+                                text.clear();
+                                let _ = write!(text, "{v:.6}");
+                                sum += text.parse::<f64>().unwrap_or(0.0);
+                            }
+                            std::hint::black_box(sum);
+                            start.elapsed().as_secs_f64() * 1e9 / NUMBERS as f64
+                        })
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or(f64::NAN))
+                    .collect()
+            });
+            per_core.iter().sum::<f64>() / per_core.len() as f64
+        };
+        let fault_round = || {
+            const BYTES: usize = 64 << 20;
+            // Zeroed memory this large comes straight from the kernel, not yet backed.
+            let mut fresh = vec![0u8; BYTES];
+            let start = std::time::Instant::now();
+            for page in fresh.chunks_mut(4096) {
+                page[0] = 1;
+            }
+            let secs = start.elapsed().as_secs_f64();
+            std::hint::black_box(&fresh);
+            secs * 1e6 / (BYTES / 4096) as f64
+        };
+        let median_of = |rounds: usize, f: &dyn Fn() -> f64| {
+            let mut v: Vec<f64> = (0..rounds).map(|_| f()).collect();
+            v.sort_by(f64::total_cmp);
+            v[rounds / 2]
+        };
+        HostProbe {
+            number_ns: median_of(7, &number_round),
+            fault_us: median_of(5, &fault_round),
+        }
+    }
+}
+
+impl std::fmt::Display for HostProbe {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "host probe: {:.0} ns to format and parse a number (std, every core at once), \
+             {:.2} µs to back a fresh 4 KiB page",
+            self.number_ns, self.fault_us
+        )
+    }
 }
