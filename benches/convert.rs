@@ -15,7 +15,8 @@
 mod common;
 
 use common::{
-    Cpu, HostProbe, PAPER000_SENSORS, minutes_from_env, status_kib, write_log, write_raw_log,
+    Cpu, HostProbe, PAPER000_SENSORS, median, minutes_from_env, status_kib, write_log,
+    write_raw_log,
 };
 use imubake::convert::{ConvertSettings, convert};
 use imubake::pipeline::PipelineOptions;
@@ -78,11 +79,6 @@ fn peak_rss_anon<T>(f: impl FnOnce() -> T) -> (T, u64) {
         result
     });
     (result, peak.load(Ordering::Relaxed))
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 fn main() {

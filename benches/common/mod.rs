@@ -56,6 +56,12 @@ pub fn write_log(path: &Path, minutes: usize, sensors: &[&str]) -> std::io::Resu
     Ok(std::fs::metadata(path)?.len())
 }
 
+/// The middle value (the upper of the two middle ones for an even count).
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
 /// A field of /proc/self/status in KiB (`VmRSS:`, `VmHWM:`).
 pub fn status_kib(field: &str) -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
@@ -210,14 +216,9 @@ impl HostProbe {
             std::hint::black_box(&fresh);
             secs * 1e6 / (BYTES / 4096) as f64
         };
-        let median_of = |rounds: usize, f: &dyn Fn() -> f64| {
-            let mut v: Vec<f64> = (0..rounds).map(|_| f()).collect();
-            v.sort_by(f64::total_cmp);
-            v[rounds / 2]
-        };
         HostProbe {
-            number_ns: median_of(7, &number_round),
-            fault_us: median_of(5, &fault_round),
+            number_ns: median((0..7).map(|_| number_round()).collect()),
+            fault_us: median((0..5).map(|_| fault_round()).collect()),
         }
     }
 }
