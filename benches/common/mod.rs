@@ -70,14 +70,19 @@ pub fn status_kib(field: &str) -> Option<u64> {
 }
 
 /// This process's CPU so far (`getrusage(RUSAGE_SELF)`, every thread): user and system seconds,
-/// and minor page faults. Wall time on this shared machine drifts from hour to hour; the CPU a
-/// run took, and how much of it went to the kernel, says whether a slow run worked more or the
-/// host ran slower.
+/// minor page faults and voluntary waits, and the bytes it had the disk read (`/proc/self/io`).
+/// Wall time on this shared machine drifts from hour to hour; the CPU a run took, and how much
+/// of it went to the kernel, says whether a slow run worked more or the host ran slower; its
+/// waits and disk reads, whether idle cores waited for something (an input no longer cached).
 #[derive(Debug, Clone, Copy)]
 pub struct Cpu {
     pub user_s: f64,
     pub system_s: f64,
     pub minor_faults: u64,
+    /// Times a thread gave up its core to wait (a lock, a channel, the disk).
+    pub waits: u64,
+    /// Bytes read from the storage device, not from the page cache.
+    pub disk_read_bytes: u64,
 }
 
 impl Cpu {
@@ -93,6 +98,8 @@ impl Cpu {
             user_s: seconds(usage.ru_utime),
             system_s: seconds(usage.ru_stime),
             minor_faults: usage.ru_minflt as u64,
+            waits: usage.ru_nvcsw as u64,
+            disk_read_bytes: proc_self_io("read_bytes:").unwrap_or(0),
         }
     }
 
@@ -107,8 +114,17 @@ impl Cpu {
             user_s: self.user_s - earlier.user_s,
             system_s: self.system_s - earlier.system_s,
             minor_faults: self.minor_faults - earlier.minor_faults,
+            waits: self.waits - earlier.waits,
+            disk_read_bytes: self.disk_read_bytes - earlier.disk_read_bytes,
         }
     }
+}
+
+/// A field of /proc/self/io (bytes; every thread of the process).
+fn proc_self_io(field: &str) -> Option<u64> {
+    let io = std::fs::read_to_string("/proc/self/io").ok()?;
+    let line = io.lines().find(|l| l.starts_with(field))?;
+    line.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// Resets the peak-memory mark (VmHWM) to the current resident size.
