@@ -81,8 +81,9 @@ pub struct Cpu {
     pub minor_faults: u64,
     /// Times a thread gave up its core to wait (a lock, a channel, the disk).
     pub waits: u64,
-    /// Bytes read from the storage device, not from the page cache.
-    pub disk_read_bytes: u64,
+    /// Bytes read from the storage device, not from the page cache (`None` where the kernel
+    /// does not count them).
+    pub disk_read_bytes: Option<u64>,
 }
 
 impl Cpu {
@@ -99,7 +100,7 @@ impl Cpu {
             system_s: seconds(usage.ru_stime),
             minor_faults: usage.ru_minflt as u64,
             waits: usage.ru_nvcsw as u64,
-            disk_read_bytes: proc_self_io("read_bytes:").unwrap_or(0),
+            disk_read_bytes: proc_self_io("read_bytes:"),
         }
     }
 
@@ -115,7 +116,10 @@ impl Cpu {
             system_s: self.system_s - earlier.system_s,
             minor_faults: self.minor_faults - earlier.minor_faults,
             waits: self.waits - earlier.waits,
-            disk_read_bytes: self.disk_read_bytes - earlier.disk_read_bytes,
+            disk_read_bytes: self
+                .disk_read_bytes
+                .zip(earlier.disk_read_bytes)
+                .map(|(now, then)| now - then),
         }
     }
 }
