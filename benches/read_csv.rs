@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{HostProbe, RATE_HZ, minutes_from_env, reset_peak, status_kib, write_log};
+use common::{HostProbe, RATE_HZ, median, minutes_from_env, reset_peak, status_kib, write_log};
 use imubake::read::{ReadOptions, read_take};
 use std::time::Instant;
 
@@ -52,8 +52,7 @@ fn main() {
         times.push(start.elapsed().as_secs_f64());
         assert_eq!(take.total_samples(), rows);
     }
-    times.sort_by(f64::total_cmp);
-    let median = times[2];
+    let median = median(times);
     let mb_s = bytes as f64 / 1e6 / median;
     println!(
         "read on {} core(s): median of 5 {median:.3} s = {mb_s:.0} MB/s (target ≥ 600 MB/s)",

@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{PAPER000_SENSORS, minutes_from_env, write_log};
+use common::{PAPER000_SENSORS, median, minutes_from_env, write_log};
 use imubake::convert::{ConvertSettings, convert};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -82,8 +82,7 @@ fn main() {
         );
         runs.push(opened);
     }
-    runs.sort_by(f64::total_cmp);
-    let median = runs[runs.len() / 2];
+    let median = median(runs);
     println!("open a {minutes}-minute take: median of 5 {median:.3} s (target < 2 s)");
     println!(
         "{}",
