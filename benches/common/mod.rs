@@ -64,8 +64,13 @@ pub fn median(mut v: Vec<f64>) -> f64 {
 
 /// A field of /proc/self/status in KiB (`VmRSS:`, `VmHWM:`).
 pub fn status_kib(field: &str) -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with(field))?;
+    proc_self_field("status", field)
+}
+
+/// The number after `field` in /proc/self/`file` (`field` with its colon).
+fn proc_self_field(file: &str, field: &str) -> Option<u64> {
+    let text = std::fs::read_to_string(format!("/proc/self/{file}")).ok()?;
+    let line = text.lines().find(|l| l.starts_with(field))?;
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
@@ -100,7 +105,8 @@ impl Cpu {
             system_s: seconds(usage.ru_stime),
             minor_faults: usage.ru_minflt as u64,
             waits: usage.ru_nvcsw as u64,
-            disk_read_bytes: proc_self_io("read_bytes:"),
+            // Every thread of the process, in bytes.
+            disk_read_bytes: proc_self_field("io", "read_bytes:"),
         }
     }
 
@@ -122,13 +128,6 @@ impl Cpu {
                 .map(|(now, then)| now - then),
         }
     }
-}
-
-/// A field of /proc/self/io (bytes; every thread of the process).
-fn proc_self_io(field: &str) -> Option<u64> {
-    let io = std::fs::read_to_string("/proc/self/io").ok()?;
-    let line = io.lines().find(|l| l.starts_with(field))?;
-    line.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// Resets the peak-memory mark (VmHWM) to the current resident size.
