@@ -3,9 +3,11 @@
 
 mod axes;
 mod legacy;
+mod suggest;
 
 pub use axes::{parse_axis, parse_mount_axes};
 pub use legacy::{EulerSource, LegacyChannel, LegacyMapping, LegacyTarget};
+pub use suggest::{nearest_bones, unknown_bone_message};
 
 use crate::rig::Rig;
 use crate::world::World;
@@ -348,8 +350,27 @@ impl crate::diagnostic::Diagnostic for MappingError {
     }
 }
 
+/// What a mapping looks like, for errors that have to say what to write.
+const SHAPE_EXAMPLE: &str = r#"{"rig": "mixamo", "sensors": {"pelvis": {"bone": "Hips"}, "left_thigh": {"bone": "LeftUpLeg"}}}"#;
+
+/// What to do with a mapping that maps nothing.
+fn what_to_write() -> String {
+    format!(
+        "map each sensor id of the take to a bone of the rig, e.g. {SHAPE_EXAMPLE} \
+         (full examples: mappings/*.json, such as mappings/paper000_16imu_mixamo.json; \
+         every key: the reference's Mappings page)"
+    )
+}
+
 /// Parses a mapping file's text (JSON). `file` names it in errors.
 pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingError> {
+    if text.trim().is_empty() {
+        return Err(MappingError::new(
+            file,
+            "",
+            format!("the file is empty; {}", what_to_write()),
+        ));
+    }
     let value: serde_json::Value = serde_json::from_str(text)
         .map_err(|e| MappingError::new(file, "", format!("not valid JSON: {e}")))?;
     if legacy::looks_like(&value) {
@@ -444,7 +465,11 @@ pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingErro
         });
     }
     if sensors.is_empty() {
-        return Err(MappingError::new(file, "sensors", "no sensors mapped"));
+        return Err(MappingError::new(
+            file,
+            "sensors",
+            format!("no sensors mapped; {}", what_to_write()),
+        ));
     }
     Ok(MappingFile::Quaternion(Mapping {
         rig: raw.rig,
@@ -483,7 +508,7 @@ impl Mapping {
                     MappingError::new(
                         file,
                         format!("sensors.{}.bone", s.sensor),
-                        format!("unknown bone `{}` in rig `{}`", s.bone, rig.name()),
+                        unknown_bone_message(rig, &s.bone),
                     )
                 })?;
                 Ok(ResolvedSensor {
@@ -698,5 +723,53 @@ mod tests {
             e.contains("`sensors.a.bone`") && e.contains("unknown bone `Tail`"),
             "{e}"
         );
+    }
+
+    /// A bone named with the wrong case is suggested, and the error lists the rig's bones.
+    #[test]
+    fn an_unknown_bone_suggests_the_nearest_and_lists_the_rig() {
+        let rig = crate::rig::load_rig("mixamo").unwrap();
+        let text = r#"{"sensors": {"hips": {"bone": "Hips"}, "fa": {"bone": "LeftForearm"}}}"#;
+        let MappingFile::Quaternion(m) = parse(text).unwrap() else {
+            panic!()
+        };
+        let e = m
+            .resolve(&rig, Path::new("m.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with(
+                "m.json: `sensors.fa.bone`: unknown bone `LeftForearm` in rig `mixamo`; \
+                 did you mean `LeftForeArm`? The rig's 22 bones: Hips, Spine, Spine1, Spine2, \
+                 Neck, Head, LeftShoulder, LeftArm, LeftForeArm, LeftHand,"
+            ),
+            "{e}"
+        );
+        assert!(e.ends_with("RightFoot, RightToeBase"), "{e}");
+    }
+
+    /// An empty file, or one that maps no sensor, says what to write.
+    #[test]
+    fn an_empty_mapping_says_what_to_write() {
+        for text in ["", "  \n", r#"{"rig": "mixamo", "sensors": {}}"#] {
+            let e = parse(text).unwrap_err().to_string();
+            let what = if text.trim().is_empty() {
+                "m.json: the file is empty; "
+            } else {
+                "m.json: `sensors`: no sensors mapped; "
+            };
+            assert!(e.starts_with(what), "{e}");
+            assert!(
+                e.contains("map each sensor id of the take to a bone of the rig, e.g. {")
+                    && e.contains("mappings/paper000_16imu_mixamo.json"),
+                "{e}"
+            );
+            // The example given is itself a mapping that parses.
+            let example = &e[e.find('{').unwrap()..=e.rfind('}').unwrap()];
+            assert!(
+                matches!(parse(example), Ok(MappingFile::Quaternion(_))),
+                "{example}"
+            );
+        }
     }
 }
