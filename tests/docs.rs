@@ -75,3 +75,42 @@ fn the_table_of_contents_names_existing_pages() {
         let _ = docs(&page);
     }
 }
+
+/// `--input-format`'s help lists exactly the formats the reference's format table documents
+/// (`docs/src/formats/index.md`), for every command that reads captures.
+#[test]
+fn input_format_help_lists_the_documented_formats() {
+    let table = docs("formats/index.md");
+    let row = regex::Regex::new(r"(?m)^\| \[`([a-z0-9-]+)`\]\(").unwrap();
+    let documented: BTreeSet<String> = row
+        .captures_iter(&table)
+        .map(|c| c[1].to_string())
+        .collect();
+    assert!(documented.len() >= 10, "{documented:?}");
+    let listed =
+        regex::Regex::new(r"--input-format <FORMAT>[^\[]*\[possible values: ([^\]]+)\]").unwrap();
+    for command in ["convert", "batch", "watch", "inspect"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_imubake"))
+            .args([command, "-h"])
+            .output()
+            .unwrap();
+        let help = String::from_utf8(out.stdout).unwrap();
+        let values: BTreeSet<String> = listed
+            .captures(&help)
+            .unwrap_or_else(|| panic!("{command} -h lists no --input-format values:\n{help}"))[1]
+            .split(", ")
+            .map(str::to_string)
+            .collect();
+        assert_eq!(values, documented, "{command}");
+        // `--help` tells what each one is.
+        let out = Command::new(env!("CARGO_BIN_EXE_imubake"))
+            .args([command, "--help"])
+            .output()
+            .unwrap();
+        let help = String::from_utf8(out.stdout).unwrap();
+        for name in &documented {
+            let line = regex::Regex::new(&format!(r"(?m)^\s+- {name}: +\S")).unwrap();
+            assert!(line.is_match(&help), "{command} --help: {name}:\n{help}");
+        }
+    }
+}

@@ -64,7 +64,7 @@ enum Command {
 #[derive(Debug, Args, Clone)]
 pub struct ReadArgs {
     /// Read as this format instead of detecting it from content.
-    #[arg(long, value_name = "FORMAT", value_parser = parse_format)]
+    #[arg(long, value_name = "FORMAT", value_parser = input_format_parser())]
     input_format: Option<InputFormat>,
     /// Drop the first N lines of the log (fixed-length cleaning).
     #[arg(long, value_name = "N")]
@@ -99,8 +99,17 @@ impl ReadArgs {
     }
 }
 
-fn parse_format(s: &str) -> Result<InputFormat, String> {
-    s.parse()
+/// `--input-format`'s values, from [`InputFormat::ALL`]: `-h` lists their names, `--help` each
+/// with what it reads, and a wrong one is refused with the list.
+fn input_format_parser() -> impl clap::builder::TypedValueParser<Value = InputFormat> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new(
+        InputFormat::ALL.map(|f| PossibleValue::new(f.name()).help(f.description())),
+    )
+    .map(|name| {
+        name.parse::<InputFormat>()
+            .expect("every possible value is a format's name")
+    })
 }
 
 fn parse_rate_hz(s: &str) -> Result<f64, String> {
