@@ -35,9 +35,12 @@ Engine conventions (README, "Batch export for game engines", gives the same with
 For glb, the engine changes nothing: glTF fixes axes (Y up, +Z front) and units (metres) by spec,
 and every engine's glTF importer converts from them.
 
-Prints one line per take, `[3/12] walk_24: exported out/walk_24.fbx (285 frames at 24 fps) in
-0.84 s` or `[4/12] bad: FAILED: <reason>`, then a summary. Exit status 0 when every take was
-exported, 1 when any failed (or none was found), 2 for usage errors.
+Prints on stdout one line per take, `[3/12] walk_24: exported out/walk_24.fbx (285 frames at 24
+fps) in 0.84 s` or `[4/12] bad: FAILED: <reason>`, then a summary, and nothing else: Blender's own
+messages (its importers' and exporters' progress, a failed import's report and traceback, which
+Blender cuts at a fixed length without ending the line) go to stderr, so they can never run into a
+progress line. Exit status 0 when every take was exported, 1 when any failed (or none was found),
+2 for usage errors.
 
 This is a script, not part of the registered add-on: it imports the add-on's modules through the
 package folder it sits in (the repository's `blender_addon/` or the installed extension's folder).
@@ -176,6 +179,36 @@ def rate_text(fps):
 
 def one_line(text):
     return " ".join(str(text).split())
+
+
+class Progress:
+    """This script's own lines, on the process's stdout and nothing else there.
+
+    Blender writes to file descriptor 1 too, from C and from Python (importers' prints, operator
+    reports, a failed import's traceback cut at a fixed length with no final newline), so a line
+    printed after those could begin in the middle of one of theirs. `Progress.take_stdout()` keeps
+    a duplicate of the original stdout for these lines and points descriptor 1 at stderr for the
+    rest of the run: whatever Blender prints, now or buffered for later, shows on stderr.
+    """
+
+    def __init__(self):
+        self.stream = sys.stdout
+
+    def take_stdout(self):
+        sys.stdout.flush()
+        try:
+            saved = os.dup(1)
+            os.dup2(2, 1)
+        except OSError:  # no separate descriptors here: lines go to stdout as they are
+            return
+        self.stream = os.fdopen(saved, "w", encoding="utf-8", errors="replace")
+
+    def line(self, text):
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+
+PROGRESS = Progress()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -318,6 +351,9 @@ def run(argv):
         raise UsageError("takes folder %s does not exist (or is not a folder)" % args.takes)
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         raise UsageError("output %s exists and is not a folder" % args.out)
+    # From here on stdout carries this script's lines only; Blender's go to stderr.
+    say = PROGRESS.line
+    PROGRESS.take_stdout()
     try:
         import bpy  # noqa: F401
     except ImportError:
@@ -330,14 +366,13 @@ def run(argv):
     sidecars = pkg.sidecar.find_sidecars(takes_dir)
     label = args.format + (" for " + args.engine if args.engine else "")
     if not sidecars:
-        print("no imubake takes (*%s) under %s" % (pkg.sidecar.SUFFIX, args.takes), flush=True)
+        say("no imubake takes (*%s) under %s" % (pkg.sidecar.SUFFIX, args.takes))
         return 1
     if args.engine == "godot" and args.format == "fbx":
-        print("note: glb is Godot's recommended format; FBX needs Godot 4.3+ (ufbx)", flush=True)
+        say("note: glb is Godot's recommended format; FBX needs Godot 4.3+ (ufbx)")
     if args.engine and args.format == "glb":
-        print("note: glb is the same for every engine (glTF is Y up, metres, +Z front by spec)",
-              flush=True)
-    print("exporting %d take(s) from %s as %s" % (len(sidecars), args.takes, label), flush=True)
+        say("note: glb is the same for every engine (glTF is Y up, metres, +Z front by spec)")
+    say("exporting %d take(s) from %s as %s" % (len(sidecars), args.takes, label))
 
     ext = "." + args.format
     failed = 0
@@ -355,21 +390,19 @@ def run(argv):
             failed += 1
             known = (pkg.take_import.TakeError, ExportError)
             reason = str(e) if isinstance(e, known) else "%s: %s" % (type(e).__name__, e)
-            print("[%d/%d] %s: FAILED: %s" % (i, len(sidecars), name, one_line(reason)), flush=True)
+            say("[%d/%d] %s: FAILED: %s" % (i, len(sidecars), name, one_line(reason)))
             continue
-        print(
+        say(
             "[%d/%d] %s: exported %s (%d frames at %s fps) in %.2f s"
             % (i, len(sidecars), name, out_path, imported.frames, rate_text(imported.take.fps),
-               time.perf_counter() - t0),
-            flush=True,
+               time.perf_counter() - t0)
         )
         for w in imported.warnings:
-            print("    warning: %s" % one_line(w), flush=True)
+            say("    warning: %s" % one_line(w))
     done = len(sidecars) - failed
-    print(
+    say(
         "%d of %d take(s) exported as %s to %s, %d failed, in %.2f s"
-        % (done, len(sidecars), label, args.out, failed, time.perf_counter() - started),
-        flush=True,
+        % (done, len(sidecars), label, args.out, failed, time.perf_counter() - started)
     )
     return 1 if failed else 0
 
