@@ -29,6 +29,7 @@ use crate::convert::{ConvertSettings, source_sha256};
 use crate::ledger::{
     FINGERPRINT_SCHEMA, Ledger, SourceStat, Status, fingerprint_schema, settings_fingerprint,
 };
+use crate::write::error_report::ErrorReport;
 use notify::RecursiveMode;
 use notify::event::{AccessKind, AccessMode, EventKind, ModifyKind, RenameMode};
 use notify_debouncer_full::{DebounceEventResult, new_debouncer};
@@ -211,7 +212,63 @@ struct Watch<'a> {
     closed: HashSet<PathBuf>,
     /// A take was abandoned after a stop signal: the watch is over.
     abandoned: bool,
-    summary: Summary,
+    /// Each take's latest outcome in this run, which the summary counts ([`Outcomes`]).
+    outcomes: Outcomes,
+}
+
+/// Each take's latest outcome in a watch run: a take that failed and then converted (its
+/// settings fixed, the file rewritten) counts as converted, one that converted and then failed
+/// as failed, and a take converted or failed before is not made "skipped" by a later look that
+/// found it current. The summary counts each take once.
+#[derive(Debug, Default)]
+struct Outcomes(HashMap<String, TakeStatus>);
+
+impl Outcomes {
+    fn record(&mut self, take: &str, status: TakeStatus) {
+        let earlier = self.0.get(take).copied();
+        let keep_earlier = status == TakeStatus::Skipped
+            && matches!(earlier, Some(TakeStatus::Converted | TakeStatus::Failed));
+        if !keep_earlier {
+            self.0.insert(take.to_string(), status);
+        }
+    }
+
+    fn summary(&self) -> Summary {
+        let mut s = Summary::default();
+        for status in self.0.values() {
+            match status {
+                TakeStatus::Converted => s.converted += 1,
+                TakeStatus::Failed => s.failed += 1,
+                TakeStatus::Skipped => s.skipped += 1,
+                TakeStatus::Abandoned => s.abandoned += 1,
+            }
+        }
+        s
+    }
+}
+
+/// The take's line on the terminal ([`TakeResult::log`]); a failed take's also gives its error
+/// report's hint, what to do about it, when the report has one.
+fn log_result(result: &TakeResult, out: &Path) {
+    let hint = match (&result.status, &result.error_report) {
+        (TakeStatus::Failed, Some(report)) => fs::read(out.join(report))
+            .ok()
+            .and_then(|bytes| serde_json::from_slice::<ErrorReport>(&bytes).ok())
+            .and_then(|report| report.hint),
+        _ => None,
+    };
+    let Some(hint) = hint else {
+        result.log();
+        return;
+    };
+    error!(
+        source = result.source.as_str(),
+        duration_ms = u64::try_from(result.duration.as_millis()).unwrap_or(u64::MAX),
+        error_report = result.error_report.as_deref().unwrap_or(""),
+        reason = result.reason.as_deref().unwrap_or(""),
+        hint = hint.as_str(),
+        "failed"
+    );
 }
 
 impl Watch<'_> {
@@ -389,19 +446,14 @@ impl Watch<'_> {
         self.done.insert(take.rel.clone(), stat);
         let (settings, fingerprint) = self.settings_for(take);
         if self.current_under_its_own_settings(take, stat, &fingerprint, force_hash) {
-            self.summary.skipped += 1;
+            self.outcomes.record(&take.rel, TakeStatus::Skipped);
             return;
         }
         let Some(result) = self.convert_on_worker(take, settings, fingerprint, stop) else {
             return;
         };
-        result.log();
-        match result.status {
-            TakeStatus::Converted => self.summary.converted += 1,
-            TakeStatus::Failed => self.summary.failed += 1,
-            TakeStatus::Skipped => self.summary.skipped += 1,
-            TakeStatus::Abandoned => self.summary.abandoned += 1,
-        }
+        log_result(&result, &self.opts.out);
+        self.outcomes.record(&take.rel, result.status);
         if result.status != TakeStatus::Skipped {
             match Ledger::load(&self.opts.out) {
                 Ok(ledger) => self.ledger = Arc::new(ledger),
@@ -467,7 +519,7 @@ impl Watch<'_> {
                         "removed {} temporary file(s)",
                         removed.len()
                     );
-                    self.summary.abandoned += 1;
+                    self.outcomes.record(&take.rel, TakeStatus::Abandoned);
                     self.abandoned = true;
                     return None;
                 }
@@ -590,7 +642,8 @@ type Wake = Vec<PathBuf>;
 
 /// Converts the inbox's backlog, then (unless `once`) follows it until `stop` is set, finishing
 /// the take in progress. `load_settings` gives the settings from a config file (or none); it is
-/// called again whenever the config file changes. Returns what was converted, failed and skipped.
+/// called again whenever the config file changes. Returns what was converted, failed and skipped,
+/// each take counted once, by its latest outcome ([`Outcomes`]).
 pub fn run(
     opts: &WatchOptions,
     load_settings: &dyn Fn(Option<&Path>) -> Result<ConvertSettings, String>,
@@ -616,11 +669,11 @@ pub fn run(
         folder_settings: HashMap::new(),
         closed: Default::default(),
         abandoned: false,
-        summary: Summary::default(),
+        outcomes: Outcomes::default(),
     };
     if opts.once {
         watch.scan(stop, false);
-        return Ok(watch.summary);
+        return Ok(watch.outcomes.summary());
     }
 
     // File-system events only wake the loop early; the scan decides. With --poll there is no
@@ -699,7 +752,7 @@ pub fn run(
     if let Some(debouncer) = debouncer {
         debouncer.stop();
     }
-    Ok(watch.summary)
+    Ok(watch.outcomes.summary())
 }
 
 #[cfg(test)]
@@ -765,6 +818,40 @@ mod tests {
             assert!(seen.contains(&inbox.join(name)), "{name}: {seen:?}");
         }
         debouncer.stop();
+    }
+
+    #[test]
+    fn each_take_counts_once_by_its_latest_outcome() {
+        use TakeStatus::{Abandoned, Converted, Failed, Skipped};
+        let mut o = Outcomes::default();
+        // Failed, then converted once its settings were fixed.
+        o.record("fixed.log", Failed);
+        o.record("fixed.log", Converted);
+        // Converted, then failed when rewritten badly.
+        o.record("broken.log", Converted);
+        o.record("broken.log", Failed);
+        // Failed twice (retried under new settings).
+        o.record("junk.log", Failed);
+        o.record("junk.log", Failed);
+        // Converted, then found current again: still converted in this run.
+        o.record("touched.log", Converted);
+        o.record("touched.log", Skipped);
+        // Current at start, then rewritten and converted.
+        o.record("old.log", Skipped);
+        o.record("old.log", Converted);
+        o.record("current.log", Skipped);
+        o.record("current.log", Skipped);
+        o.record("cut.log", Converted);
+        o.record("cut.log", Abandoned);
+        assert_eq!(
+            o.summary(),
+            Summary {
+                converted: 3,
+                failed: 2,
+                abandoned: 1,
+                skipped: 1,
+            }
+        );
     }
 
     #[test]

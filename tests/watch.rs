@@ -581,12 +581,12 @@ struct TakeLine {
 /// The per-take lines of a run's stderr. Every line that names a take's outcome must have the
 /// whole shape: `<UTC time>  INFO converted source="…" duration_ms=N [dropped_lines=N
 /// repaired_lines=N] outputs=[…]` or
-/// `<UTC time> ERROR failed source="…" duration_ms=N error_report="…" reason="…"`; and stderr,
-/// not a terminal here, carries no colour codes.
+/// `<UTC time> ERROR failed source="…" duration_ms=N error_report="…" reason="…" [hint="…"]`;
+/// and stderr, not a terminal here, carries no colour codes.
 fn take_lines(stderr: &str) -> Vec<TakeLine> {
     assert!(!stderr.contains('\x1b'), "ANSI codes on a pipe: {stderr}");
     let shape = regex::Regex::new(
-        r#"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d+Z +(?:INFO (converted) source="([^"]+)" duration_ms=(\d+)(?: dropped_lines=\d+ repaired_lines=\d+)? outputs=\[".+"\]|ERROR (failed) source="([^"]+)" duration_ms=(\d+) error_report="[^"]+\.error\.json" reason=".+")$"#,
+        r#"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d+Z +(?:INFO (converted) source="([^"]+)" duration_ms=(\d+)(?: dropped_lines=\d+ repaired_lines=\d+)? outputs=\[".+"\]|ERROR (failed) source="([^"]+)" duration_ms=(\d+) error_report="[^"]+\.error\.json" reason=".+?"(?: hint=".+")?)$"#,
     )
     .unwrap();
     let mut lines = Vec::new();
@@ -1057,4 +1057,165 @@ fn an_older_ledger_reconverts_each_take_once() {
     );
     let ledger = ledger(&out);
     assert_eq!(ledger["a.log"].len(), 2, "{:?}", ledger["a.log"]);
+}
+
+/// The README's `watch` example, run as written (with `--once` added so it ends) in a folder
+/// holding `inbox/walk.csv` (the bundled walk) and the mapping it names: the walk converts. The
+/// same command without its `--mapping` fails, and the failed take's terminal line carries the
+/// hint its `.error.json` gives.
+#[test]
+fn the_readme_watch_example_converts_the_bundled_walk() {
+    let readme = fs::read_to_string(repo("README.md")).unwrap();
+    let example: Vec<&str> = readme
+        .lines()
+        .find(|l| l.starts_with("imubake watch inbox"))
+        .expect("README has an `imubake watch inbox …` example")
+        .split_whitespace()
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    fs::create_dir_all(dir.path().join("inbox")).unwrap();
+    fs::copy(repo("samples/walk.csv"), dir.path().join("inbox/walk.csv")).unwrap();
+    // The files the example names, at the same relative paths.
+    for arg in &example {
+        if arg.ends_with(".json") || arg.ends_with(".yaml") {
+            let to = dir.path().join(arg);
+            fs::create_dir_all(to.parent().unwrap()).unwrap();
+            fs::copy(repo(arg), &to).unwrap();
+        }
+    }
+    let out_arg = example
+        .iter()
+        .position(|a| *a == "--out" || *a == "-o")
+        .map(|i| example[i + 1])
+        .expect("the example gives --out");
+    let run = Command::new(env!("CARGO_BIN_EXE_imubake"))
+        .args(&example[1..])
+        .arg("--once")
+        .current_dir(dir.path())
+        .env_remove("RUST_LOG")
+        .env_remove("IMUBAKE_LOG")
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr),
+    );
+    assert!(run.status.success(), "{example:?}: {stdout}{stderr}");
+    assert_eq!(
+        stdout.trim(),
+        "converted 1, failed 0, skipped 0",
+        "{stderr}"
+    );
+    let out = dir.path().join(out_arg);
+    for name in ["walk.bvh", "walk.glb", "walk.imubake.json"] {
+        assert!(out.join(name).is_file(), "{name}: {:?}", visible(&out));
+    }
+    let sidecar: Value =
+        serde_json::from_str(&fs::read_to_string(out.join("walk.imubake.json")).unwrap()).unwrap();
+    assert_eq!(sidecar["mapping"]["rig"], "mixamo");
+    assert_eq!(sidecar["mapping"]["sensors"].as_array().unwrap().len(), 16);
+
+    // Without the mapping (the example as it once was): the take fails, and its line says what
+    // to do, as its error report does.
+    let mut bare = example[1..].to_vec();
+    let at = bare.iter().position(|a| *a == "--mapping").unwrap();
+    bare.drain(at..at + 2);
+    let at = bare.iter().position(|a| *a == out_arg).unwrap();
+    bare[at] = "bare-out";
+    let run = Command::new(env!("CARGO_BIN_EXE_imubake"))
+        .args(&bare)
+        .arg("--once")
+        .current_dir(dir.path())
+        .env_remove("RUST_LOG")
+        .env_remove("IMUBAKE_LOG")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert_eq!(
+        String::from_utf8_lossy(&run.stdout).trim(),
+        "converted 0, failed 1, skipped 0"
+    );
+    let report: Value = serde_json::from_str(
+        &fs::read_to_string(dir.path().join("bare-out/walk.error.json")).unwrap(),
+    )
+    .unwrap();
+    let hint = report["hint"].as_str().expect("the report has a hint");
+    assert!(hint.contains("--mapping"), "{hint}");
+    let lines: Vec<&str> = stderr.lines().filter(|l| l.contains(" failed ")).collect();
+    assert_eq!(lines.len(), 1, "{stderr}");
+    assert!(
+        lines[0].contains(r#"source="walk.csv""#)
+            && lines[0].ends_with(&format!(r#" hint="{hint}""#)),
+        "{stderr}"
+    );
+    assert_eq!(take_lines(&stderr).len(), 1);
+}
+
+/// The summary counts each take once, by its latest outcome: a take that failed for want of a
+/// mapping and converted once the inbox's config arrived, and a take that failed and converted
+/// once rewritten, count as converted; a take that failed twice counts as one failure.
+#[test]
+fn a_take_that_converted_after_failing_counts_as_converted() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    fs::write(inbox.join("early.log"), sample()).unwrap();
+    fs::write(inbox.join("bad.log"), b"\0\0\0 not a capture yet").unwrap();
+    fs::write(inbox.join("junk.log"), b"\0\0\0 never a capture").unwrap();
+    let stdout = dir.path().join("stdout.txt");
+    let child = bare_watch(&inbox, &out, &["--poll", "100", "--format", "bvh"])
+        .stdout(fs::File::create(&stdout).unwrap())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    for stem in ["early", "bad", "junk"] {
+        assert!(
+            wait_for(&out.join(format!("{stem}.error.json")), 20),
+            "{stem}"
+        );
+    }
+    // The settings arrive: early converts; bad and junk are tried again and fail again.
+    fs::write(
+        inbox.join("imubake.yaml"),
+        format!(
+            "mapping: {}\nsmoothing: none\n",
+            repo("samples/sou_wave.mapping.json").display()
+        ),
+    )
+    .unwrap();
+    assert!(wait_for(&out.join("early.imubake.json"), 20));
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while ledger(&out).get("junk.log").map_or(0, Vec::len) < 2
+        || ledger(&out).get("bad.log").map_or(0, Vec::len) < 2
+    {
+        assert!(Instant::now() < deadline, "not retried: {:?}", ledger(&out));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // bad.log rewritten as a capture: it converts.
+    fs::write(inbox.join("bad.log"), sample()).unwrap();
+    assert!(wait_for(&out.join("bad.imubake.json"), 20));
+    assert_eq!(interrupt(child), 0);
+    let statuses: BTreeMap<String, Vec<String>> = ledger(&out)
+        .into_iter()
+        .map(|(k, v)| (k, v.into_iter().map(|(status, _)| status).collect()))
+        .collect();
+    assert_eq!(
+        statuses,
+        BTreeMap::from([
+            (
+                "bad.log".into(),
+                vec!["failed".into(), "failed".into(), "converted".into()]
+            ),
+            (
+                "early.log".into(),
+                vec!["failed".into(), "converted".into()]
+            ),
+            ("junk.log".into(), vec!["failed".into(), "failed".into()]),
+        ]),
+    );
+    assert_eq!(
+        fs::read_to_string(&stdout).unwrap().trim(),
+        "converted 2, failed 1, skipped 0"
+    );
 }
