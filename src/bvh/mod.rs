@@ -24,8 +24,16 @@
 //!   any number that is not finite (`nan`, `inf`, overflowing exponents).
 //! - bounded: no allocation is sized by a count read in the file beyond what the input's
 //!   length can hold; `Frames:` above [`MAX_FRAMES`] (100,000,000) is refused outright, and every
-//!   value stored was read from the text. Nothing recurses, so deep nesting cannot overflow the
-//!   stack. No input makes [`parse`] panic (property-tested on arbitrary bytes and mutations).
+//!   value stored was read from the text. A line longer than [`MAX_LINE_BYTES`] (1 MiB) is
+//!   refused, naming it, once that much of it is read: no line is held past the limit. A frame
+//!   line's values are counted as it is split and only the first channel-count of them stored,
+//!   so one with too many values is refused with its line, the count expected and the count
+//!   found (at least so many, for a line past the limit) without its values piling up. Nothing
+//!   recurses, so deep nesting cannot overflow the stack. No input makes [`parse`] panic
+//!   (property-tested on arbitrary bytes and mutations).
+//!
+//! [`read`] reads from any reader as it goes, [`parse`] from bytes in memory; both are the same
+//! reader.
 //!
 //! Position channels **replace** the joint's OFFSET component by component
 //! ([`Bvh::joint_translations`]). This is Blender's reading (its importer keys
@@ -36,7 +44,7 @@
 //!
 mod reader;
 
-pub use reader::{MAX_FRAMES, parse};
+pub use reader::{MAX_FRAMES, MAX_LINE_BYTES, parse, read};
 
 use crate::rotation::EulerOrder;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -493,5 +501,98 @@ Frame Time: 0.5
         let bvh = parse(zero.as_bytes()).unwrap();
         assert_eq!(bvh.frame_count(), 0);
         assert!(bvh.values().is_empty());
+    }
+
+    /// A reader that hands out one byte per read, so every line end (a `\r\n` too) and the
+    /// byte order mark fall across reads.
+    struct ByteByByte<'a>(&'a [u8]);
+
+    impl std::io::Read for ByteByByte<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            match (self.0.split_first(), buf.first_mut()) {
+                (Some((&b, rest)), Some(slot)) => {
+                    *slot = b;
+                    self.0 = rest;
+                    Ok(1)
+                }
+                _ => Ok(0),
+            }
+        }
+    }
+
+    /// [`read`] from a reader gives what [`parse`] gives from the bytes, the lines split across
+    /// reads anywhere: the documents, and the errors with their lines.
+    #[test]
+    fn reading_as_it_goes_is_parsing_the_bytes() {
+        let tolerant = "\u{feff}hierarchy\r\nROOT a {\r\n\tOFFSET\t0 0 0\r\n\tCHANNELS 3 Zrotation Xrotation Yrotation\r\
+            JOINT b\r{\rOFFSET 1 0 0\r}\r}\r\n\r\nMOTION\nFrames:\t2\nFrame Time:\t.5\n\n1 2 3\r\n4 5 6\r";
+        let texts = [
+            SMALL.to_string(),
+            tolerant.to_string(),
+            SMALL.replace("10 20 30 0 90 0 0 90 0", "10 20 30 0 90 0 0 90 0 1"),
+            SMALL.replace("Frames: 2", "Frames: 3"),
+            SMALL.replace("\t\tOFFSET 0 0 1", "\t\tOFFSET 0 x 1"),
+            "HIERARCHY\r".to_string(),
+            String::new(),
+        ];
+        for text in &texts {
+            let whole = parse(text.as_bytes());
+            let streamed = read(ByteByByte(text.as_bytes()));
+            assert_eq!(streamed, whole, "{text:?}");
+        }
+        let bvh = read(ByteByByte(tolerant.as_bytes())).unwrap();
+        assert_eq!(bvh.frame_count(), 2);
+        assert_eq!(bvh.values(), &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+    }
+
+    /// A frame line with more values than channels: the count found when the line is within the
+    /// limit; a line of exactly [`MAX_LINE_BYTES`] bytes is read, one byte more is refused.
+    #[test]
+    fn frame_lines_are_counted_and_held_to_the_limit() {
+        let head = SMALL.split("10 20 30 90").next().unwrap();
+        // 9 channels; the frame lines are lines 19 and 20.
+        let e = err(&format!("{head}1 2 3 4 5 6 7 8 9 10\n1 2 3 4 5 6 7 8 9\n"));
+        assert_eq!(e.line, 19, "{e}");
+        assert!(
+            e.message.ends_with(
+                "expected 9 values (one per channel of the hierarchy) on frame 0, found 10"
+            ),
+            "{e}"
+        );
+        // A valid frame line padded with spaces to exactly the limit, and one byte more.
+        let row = "1 2 3 4 5 6 7 8 9";
+        let at_limit = format!("{row}{}", " ".repeat(MAX_LINE_BYTES - row.len()));
+        let bvh = parse(format!("{head}{row}\n{at_limit}\n").as_bytes()).unwrap();
+        assert_eq!(bvh.frame_count(), 2);
+        let e = err(&format!("{head}{row}\n{at_limit} \n"));
+        assert_eq!(e.line, 20, "{e}");
+        assert!(
+            e.message
+                .contains(&format!("longer than {MAX_LINE_BYTES} bytes")),
+            "{e}"
+        );
+        // Past the limit with more values than channels: how many were seen, at least.
+        // `0 ` is two bytes, so the first MAX_LINE_BYTES + 1 bytes hold MAX_LINE_BYTES / 2 + 1
+        // values (the last one's digit is the byte past the limit).
+        let many = "0 ".repeat(MAX_LINE_BYTES);
+        let e = err(&format!("{head}{many}\n"));
+        assert_eq!(e.line, 19, "{e}");
+        assert!(
+            e.message.contains(&format!(
+                "expected 9 values (one per channel of the hierarchy) on frame 0, found at least {} in its first {} bytes",
+                MAX_LINE_BYTES / 2 + 1,
+                MAX_LINE_BYTES + 1
+            )),
+            "{e}"
+        );
+        // A hierarchy line past the limit: refused by number.
+        let name = "x".repeat(MAX_LINE_BYTES);
+        let e = err(&format!("HIERARCHY\nROOT {name}\n"));
+        assert_eq!(e.line, 2, "{e}");
+        assert!(
+            e.message
+                .contains(&format!("longer than {MAX_LINE_BYTES} bytes")),
+            "{e}"
+        );
     }
 }

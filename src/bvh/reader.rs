@@ -2,25 +2,65 @@
 
 use super::{Bvh, BvhError, BvhJoint, Channel};
 use nalgebra::Vector3;
+use std::io::{BufRead, BufReader, Read};
 
 /// The largest `Frames:` count accepted (about 9.6 days at 120 Hz). Larger counts are refused
 /// before anything is read; the values themselves are only ever stored as they are read.
 pub const MAX_FRAMES: u64 = 100_000_000;
 
-/// Splits input into lines, numbered from 1; `\n`, `\r\n` and a lone `\r` all end a line.
-struct Lines<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-    line: usize,
+/// The longest line the reader accepts, in bytes without its line end: 1 MiB, over a hundred
+/// times the frame line of a thousand-joint rig. A longer line is refused once its first
+/// `MAX_LINE_BYTES + 1` bytes are read, so no line is ever held whole past the limit.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
+/// A line as read: its 1-based number, its text (at most `MAX_LINE_BYTES + 1` bytes), and
+/// whether it was cut there, being longer than [`MAX_LINE_BYTES`].
+struct Line<'a> {
+    n: usize,
+    text: &'a [u8],
+    cut: bool,
 }
 
-impl<'a> Lines<'a> {
-    fn new(bytes: &'a [u8]) -> Lines<'a> {
-        let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+impl<'a> Line<'a> {
+    /// The whole line, or an error naming it and the limit when it was cut.
+    fn whole(self) -> Result<(usize, &'a [u8]), BvhError> {
+        if self.cut {
+            return Err(too_long(self.n));
+        }
+        Ok((self.n, self.text))
+    }
+}
+
+fn too_long(n: usize) -> BvhError {
+    error(
+        n,
+        format!(
+            "the line is longer than {MAX_LINE_BYTES} bytes, the longest line the BVH reader \
+             accepts; expected a BVH file with one frame per line"
+        ),
+    )
+}
+
+/// Splits input into lines, numbered from 1, as it reads; `\n`, `\r\n` and a lone `\r` all end
+/// a line. A line is held in one buffer, never past [`MAX_LINE_BYTES`]` + 1` bytes.
+struct Lines<R> {
+    reader: R,
+    buf: Vec<u8>,
+    line: usize,
+    /// The last line ended with `\r`: a `\n` right after belongs to it.
+    pending_cr: bool,
+    /// Bytes consumed so far.
+    consumed: u64,
+}
+
+impl<R: BufRead> Lines<R> {
+    fn new(reader: R) -> Lines<R> {
         Lines {
-            bytes,
-            pos: 0,
+            reader,
+            buf: Vec::new(),
             line: 0,
+            pending_cr: false,
+            consumed: 0,
         }
     }
 
@@ -29,31 +69,63 @@ impl<'a> Lines<'a> {
         self.line.max(1)
     }
 
-    fn remaining_bytes(&self) -> usize {
-        self.bytes.len() - self.pos
+    fn consume(&mut self, n: usize) {
+        self.reader.consume(n);
+        self.consumed += n as u64;
     }
-}
 
-impl<'a> Iterator for Lines<'a> {
-    type Item = (usize, &'a [u8]);
-
-    fn next(&mut self) -> Option<Self::Item> {
-        if self.pos >= self.bytes.len() {
-            return None;
+    /// The next line; a UTF-8 byte order mark at the start of line 1 is removed.
+    fn next_line(&mut self) -> Result<Option<Line<'_>>, BvhError> {
+        self.buf.clear();
+        let mut started = false;
+        let mut cut = false;
+        loop {
+            let available = match self.reader.fill_buf() {
+                Ok(bytes) => bytes,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(error(self.line + 1, format!("cannot read: {e}"))),
+            };
+            if available.is_empty() {
+                self.pending_cr = false;
+                if !started {
+                    return Ok(None);
+                }
+                break;
+            }
+            let skip = usize::from(self.pending_cr && available[0] == b'\n');
+            self.pending_cr = false;
+            let rest = &available[skip..];
+            let room = MAX_LINE_BYTES + 1 - self.buf.len();
+            match memchr::memchr2(b'\n', b'\r', rest) {
+                Some(i) if i < room => {
+                    self.buf.extend_from_slice(&rest[..i]);
+                    self.pending_cr = rest[i] == b'\r';
+                    self.consume(skip + i + 1);
+                    break;
+                }
+                found => {
+                    // No line end within reach: keep what fits, and stop at the limit.
+                    let take = found.unwrap_or(rest.len()).min(room);
+                    self.buf.extend_from_slice(&rest[..take]);
+                    started |= take > 0;
+                    self.consume(skip + take);
+                    if self.buf.len() > MAX_LINE_BYTES {
+                        cut = true;
+                        break;
+                    }
+                }
+            }
         }
-        let rest = &self.bytes[self.pos..];
         self.line += 1;
-        match memchr::memchr2(b'\n', b'\r', rest) {
-            Some(i) => {
-                let crlf = rest[i] == b'\r' && rest.get(i + 1) == Some(&b'\n');
-                self.pos += i + if crlf { 2 } else { 1 };
-                Some((self.line, &rest[..i]))
-            }
-            None => {
-                self.pos = self.bytes.len();
-                Some((self.line, rest))
-            }
+        let mut text = &self.buf[..];
+        if self.line == 1 {
+            text = text.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(text);
         }
+        Ok(Some(Line {
+            n: self.line,
+            text,
+            cut,
+        }))
     }
 }
 
@@ -137,9 +209,22 @@ fn describe(expect: Expect, joints: &[BvhJoint], stack: &[Open]) -> String {
     }
 }
 
-/// Reads a BVH file. See the module documentation for what is tolerated and what is refused.
+/// Reads a BVH file from its bytes. See the module documentation for what is tolerated and what
+/// is refused.
 pub fn parse(bytes: &[u8]) -> Result<Bvh, BvhError> {
-    let mut lines = Lines::new(bytes);
+    read_lines(Lines::new(bytes), Some(bytes.len() as u64))
+}
+
+/// Reads a BVH file from a reader as it goes (buffered here): no line is held past
+/// [`MAX_LINE_BYTES`], and a frame line is judged as it is split, so a file of any size costs
+/// the reader no more than its frames' values. Errors as [`parse`]'s; one that fails to read
+/// names the line it was reading.
+pub fn read(reader: impl Read) -> Result<Bvh, BvhError> {
+    read_lines(Lines::new(BufReader::with_capacity(1 << 16, reader)), None)
+}
+
+/// `size_hint`: the input's length when known, which bounds what is reserved for the values.
+fn read_lines<R: BufRead>(mut lines: Lines<R>, size_hint: Option<u64>) -> Result<Bvh, BvhError> {
     let joints = parse_hierarchy(&mut lines)?;
 
     let mut channel_start = Vec::with_capacity(joints.len());
@@ -149,7 +234,7 @@ pub fn parse(bytes: &[u8]) -> Result<Bvh, BvhError> {
         channel_count += j.channels.len();
     }
 
-    let (frame_count, frame_time_s, values) = parse_motion(&mut lines, channel_count)?;
+    let (frame_count, frame_time_s, values) = parse_motion(&mut lines, channel_count, size_hint)?;
     Ok(Bvh {
         joints,
         channel_start,
@@ -161,12 +246,13 @@ pub fn parse(bytes: &[u8]) -> Result<Bvh, BvhError> {
 }
 
 /// Parses up to and including the `MOTION` line.
-fn parse_hierarchy(lines: &mut Lines<'_>) -> Result<Vec<BvhJoint>, BvhError> {
+fn parse_hierarchy<R: BufRead>(lines: &mut Lines<R>) -> Result<Vec<BvhJoint>, BvhError> {
     let mut joints: Vec<BvhJoint> = Vec::new();
     let mut stack: Vec<Open> = Vec::new();
     let mut expect = Expect::Hierarchy;
 
-    for (n, line) in lines.by_ref() {
+    while let Some(line) = lines.next_line()? {
+        let (n, line) = line.whole()?;
         let toks = tokens(line);
         let mut i = 0;
         while i < toks.len() {
@@ -499,15 +585,16 @@ fn channels(toks: &[&[u8]], i: &mut usize, n: usize) -> Result<Vec<Channel>, Bvh
     Ok(out)
 }
 
-/// The next line with something on it.
-fn next_nonblank<'a>(lines: &mut Lines<'a>) -> Option<(usize, Vec<&'a [u8]>)> {
-    for (n, line) in lines.by_ref() {
+/// The next line with something on it: its number and its words joined.
+fn next_nonblank<R: BufRead>(lines: &mut Lines<R>) -> Result<Option<(usize, Vec<u8>)>, BvhError> {
+    while let Some(line) = lines.next_line()? {
+        let (n, line) = line.whole()?;
         let toks = tokens(line);
         if !toks.is_empty() {
-            return Some((n, toks));
+            return Ok(Some((n, toks.concat())));
         }
     }
-    None
+    Ok(None)
 }
 
 /// Strips an ASCII-case-insensitive prefix.
@@ -517,19 +604,19 @@ fn strip_prefix_ci<'a>(text: &'a [u8], prefix: &str) -> Option<&'a [u8]> {
 }
 
 /// `Frames: N`, `Frame Time: t`, then the frame lines.
-fn parse_motion(
-    lines: &mut Lines<'_>,
+fn parse_motion<R: BufRead>(
+    lines: &mut Lines<R>,
     channel_count: usize,
+    size_hint: Option<u64>,
 ) -> Result<(usize, f64, Vec<f64>), BvhError> {
     // `Frames: 12`, `Frames:\t12`, `Frames:12`, `Frames 12`: join the words and read past the
     // keyword and an optional colon.
-    let Some((n, toks)) = next_nonblank(lines) else {
+    let Some((n, joined)) = next_nonblank(lines)? else {
         return Err(error(
             lines.last_line(),
             "unexpected end of file: expected `Frames: <count>`",
         ));
     };
-    let joined = toks.concat();
     let frames_text = strip_prefix_ci(&joined, "frames")
         .map(|r| r.strip_prefix(b":").unwrap_or(r))
         .ok_or_else(|| {
@@ -559,13 +646,12 @@ fn parse_motion(
     }
     let frame_count = frame_count as usize;
 
-    let Some((n, toks)) = next_nonblank(lines) else {
+    let Some((n, joined)) = next_nonblank(lines)? else {
         return Err(error(
             lines.last_line(),
             "unexpected end of file: expected `Frame Time: <seconds>`",
         ));
     };
-    let joined = toks.concat();
     let time_text = strip_prefix_ci(&joined, "frametime")
         .map(|r| r.strip_prefix(b":").unwrap_or(r))
         .ok_or_else(|| {
@@ -587,15 +673,28 @@ fn parse_motion(
         )
     })?;
 
-    // Reserve only what the remaining bytes could hold (each value takes at least 2 bytes).
+    // Reserve only what the remaining bytes could hold (each value takes at least 2 bytes), or
+    // at most a million values when the length is not known; more grow as they are read.
     let claimed = frame_count.saturating_mul(channel_count);
-    let mut values = Vec::with_capacity(claimed.min(lines.remaining_bytes() / 2 + 1));
-    let mut frames_read = 0usize;
-    for (n, line) in lines.by_ref() {
-        let toks = tokens(line);
-        if toks.is_empty() {
-            continue;
+    let room = match size_hint {
+        Some(len) => {
+            usize::try_from(len.saturating_sub(lines.consumed) / 2 + 1).unwrap_or(usize::MAX)
         }
+        None => 1 << 20,
+    };
+    let mut values = Vec::with_capacity(claimed.min(room));
+    let mut frames_read = 0usize;
+    while let Some(Line { n, text, cut }) = lines.next_line()? {
+        // Split as read: values up to the channel count are stored, the rest only counted.
+        let mut toks = text
+            .split(|b| b.is_ascii_whitespace())
+            .filter(|t| !t.is_empty());
+        let Some(first) = toks.next() else {
+            if cut {
+                return Err(too_long(n));
+            }
+            continue;
+        };
         if channel_count == 0 || frames_read == frame_count {
             return Err(error(
                 n,
@@ -608,27 +707,50 @@ fn parse_motion(
                 },
             ));
         }
-        if toks.len() != channel_count {
+        let mut count = 0usize;
+        let mut bad: Option<(usize, String)> = None;
+        for tok in std::iter::once(first).chain(toks) {
+            count += 1;
+            if count > channel_count {
+                continue;
+            }
+            match number(tok) {
+                Some(v) => values.push(v),
+                None => {
+                    if bad.is_none() {
+                        bad = Some((count, show(tok)));
+                    }
+                }
+            }
+        }
+        let expected = format!(
+            "expected {channel_count} values (one per channel of the hierarchy) on frame {frames_read}"
+        );
+        if cut {
+            // Only the first MAX_LINE_BYTES + 1 bytes of the line were read.
+            return Err(error(
+                n,
+                if count > channel_count {
+                    format!(
+                        "{expected}, found at least {count} in its first {} bytes (a line longer \
+                         than {MAX_LINE_BYTES} bytes, the longest the BVH reader accepts)",
+                        MAX_LINE_BYTES + 1
+                    )
+                } else {
+                    too_long(n).message
+                },
+            ));
+        }
+        if count != channel_count {
+            return Err(error(n, format!("{expected}, found {count}")));
+        }
+        if let Some((k, tok)) = bad {
             return Err(error(
                 n,
                 format!(
-                    "expected {channel_count} values (one per channel of the hierarchy) on frame {frames_read}, found {}",
-                    toks.len()
+                    "expected a finite number for value {k} of frame {frames_read}, found `{tok}`"
                 ),
             ));
-        }
-        for (k, tok) in toks.iter().enumerate() {
-            let v = number(tok).ok_or_else(|| {
-                error(
-                    n,
-                    format!(
-                        "expected a finite number for value {} of frame {frames_read}, found `{}`",
-                        k + 1,
-                        show(tok)
-                    ),
-                )
-            })?;
-            values.push(v);
         }
         frames_read += 1;
     }
