@@ -37,6 +37,10 @@ pub struct LiveArgs {
     /// a free one, printed]
     #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "0")]
     preview: Option<u16>,
+    /// A source's time more than SECONDS ahead of its latest is a jump: dropped, or a restart
+    /// of its clock when the lines after it agree [default: 10]
+    #[arg(long, value_name = "SECONDS", value_parser = horizon)]
+    time_horizon: Option<f64>,
     /// Print the session's summary as JSON at the end.
     #[arg(long)]
     json: bool,
@@ -54,6 +58,14 @@ fn address(flag: &str, value: Option<&str>, default: &str) -> anyhow::Result<Opt
         .and_then(|mut a| a.next())
         .map(Some)
         .ok_or_else(|| anyhow::anyhow!("--{flag} {value}: expected HOST:PORT or off"))
+}
+
+fn horizon(s: &str) -> Result<f64, String> {
+    let min = imubake::live::clock::RESTART_S;
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= min => Ok(v),
+        _ => Err(format!("expected a number of seconds, at least {min}")),
+    }
 }
 
 fn status_line(s: &Status) -> String {
@@ -160,6 +172,9 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
         clock: args.clock,
         keys: std::io::stdin().is_terminal() && !args.sources.contains(&SourceSpec::Stdin),
         preview,
+        time_horizon_s: args
+            .time_horizon
+            .unwrap_or(imubake::live::clock::DEFAULT_HORIZON_S),
     };
     let terminal = std::io::stderr().is_terminal();
     if settings.keys {
@@ -193,22 +208,44 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
         .recording
         .as_ref()
         .map_or_else(|| "live".to_string(), |p| p.display().to_string());
-    for r in summary.dropped.iter().take(20) {
+    for r in summary.dropped.reports().iter().take(20) {
         eprintln!(
             "dropped: {where_}: line {}: {} ({})",
             r.line, r.reason, r.text
         );
     }
-    if summary.dropped.len() > 20 {
-        eprintln!("… and {} more dropped lines", summary.dropped.len() - 20);
+    let dropped = summary.dropped.total();
+    if dropped > 20 {
+        eprintln!("… and {} more dropped lines", dropped - 20);
+        if summary.dropped.omitted() > 0 {
+            let by_reason: Vec<String> = summary
+                .dropped
+                .omitted_by_reason()
+                .iter()
+                .map(|(reason, n)| format!("{n} {reason}"))
+                .collect();
+            eprintln!(
+                "  (the first {} are listed in --json; of the {} after them: {})",
+                summary.dropped.reports().len(),
+                summary.dropped.omitted(),
+                by_reason.join(", ")
+            );
+        }
     }
     for w in &summary.warnings {
         eprintln!("warning: {w}");
     }
-    if summary.overflowed > 0 {
+    if summary.overflowed > summary.too_long {
         eprintln!(
             "warning: {} lines lost: they came faster than the session could take them",
-            summary.overflowed
+            summary.overflowed - summary.too_long
+        );
+    }
+    if summary.too_long > 0 {
+        eprintln!(
+            "warning: {} lines longer than {} KiB dropped",
+            summary.too_long,
+            imubake::live::source::MAX_LINE >> 10
         );
     }
     if summary.lost_datagrams > 0 {
@@ -222,8 +259,16 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
         let json = serde_json::json!({
             "frames": summary.frames,
             "lines": summary.lines,
-            "dropped_lines": summary.dropped,
+            "dropped_lines": summary.dropped.reports(),
+            "dropped_total": summary.dropped.total(),
+            "dropped_omitted_by_reason": summary
+                .dropped
+                .omitted_by_reason()
+                .iter()
+                .map(|(reason, n)| serde_json::json!({"reason": reason, "lines": n}))
+                .collect::<Vec<_>>(),
             "overflowed": summary.overflowed,
+            "too_long": summary.too_long,
             "lost_datagrams": summary.lost_datagrams,
             "recording": summary.recording,
             "latency_ms": summary.latency_ms.map(|(m, p)| serde_json::json!({"median": m, "p99": p})),
@@ -235,7 +280,7 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
             "{} frames from {} lines ({} dropped){}",
             summary.frames,
             summary.lines,
-            summary.dropped.len(),
+            dropped,
             summary
                 .recording
                 .as_ref()

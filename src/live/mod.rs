@@ -11,6 +11,7 @@
 //! with the host's monotonic clock when it arrives (`--clock host`), as paper 002's driver does.
 //! The recording holds the lines as the stream saw them, so converting it gives the same frames.
 
+pub mod clock;
 pub mod record;
 pub mod source;
 pub mod vmc;
@@ -18,8 +19,9 @@ pub mod vmc;
 use crate::anim::Pose;
 use crate::convert::{ConvertError, ConvertSettings};
 use crate::pipeline::stream::{PoseStream, StreamStatus};
-use crate::read::stream::{HostStamps, LineClock, LineFormat, LineStream};
-use crate::take::{LineReport, StreamSample, StreamValue};
+use crate::read::stream::{HostStamps, LineFormat, LineStream, recorded_before_header};
+use crate::take::{DroppedLines, LineReport, StreamSample, StreamValue};
+use clock::{Judged, SourceClock};
 use source::{Allow, Event, Link, SourceCounters, SourceSpec};
 use std::net::{SocketAddr, UdpSocket};
 use std::path::PathBuf;
@@ -67,8 +69,10 @@ impl crate::diagnostic::Diagnostic for LiveError {
     }
 }
 
-/// Lines kept before the format is known (a device's boot messages); more are not kept.
+/// Lines kept before the format is known (a device's boot messages), and their bytes at most;
+/// more are not kept.
 const MAX_EARLY_LINES: usize = 10_000;
+const MAX_EARLY_BYTES: usize = 4 << 20;
 
 /// A sensor silent this long (stream time, seconds) is said to be held at its last pose.
 const STALE_NOTICE_S: f64 = 0.5;
@@ -112,6 +116,9 @@ pub struct LiveSettings {
     pub keys: bool,
     /// The browser preview's poses and status (`--preview`; its server runs beside the session).
     pub preview: Option<Arc<crate::view::Preview>>,
+    /// How far ahead of its latest a source's time may be and still be in step (seconds,
+    /// [`clock::DEFAULT_HORIZON_S`] by default): a time further is a jump ([`clock`]).
+    pub time_horizon_s: f64,
 }
 
 /// One sensor's figures on the status line.
@@ -167,9 +174,14 @@ pub enum Report {
 pub struct Summary {
     pub frames: u64,
     pub lines: u64,
-    pub dropped: Vec<LineReport>,
-    /// Lines lost at the session's channel (a burst it could not keep up with).
+    /// The lines dropped: the first reports whole (line numbers are the recording's), then
+    /// counts by reason.
+    pub dropped: DroppedLines,
+    /// Lines lost before the session read them: at its channel (a burst it could not keep up
+    /// with), or longer than [`source::MAX_LINE`] (`too_long`).
     pub overflowed: u64,
+    /// Of `overflowed`, the lines longer than [`source::MAX_LINE`].
+    pub too_long: u64,
     /// Datagrams the system dropped before a `udp:` source read them.
     pub lost_datagrams: u64,
     pub recording: Option<PathBuf>,
@@ -288,7 +300,12 @@ pub fn run(
             stop: Arc::clone(&stop),
             counters: c,
         };
-        threads.push(source::start(spec, link, settings.allow.clone())?);
+        let thread = source::start(spec, link, settings.allow.clone())?;
+        // Not joined: a read of stdin cannot be interrupted (a pipe that stays open and silent
+        // would hold the session's end forever); the thread ends with the process.
+        if *spec != SourceSpec::Stdin {
+            threads.push(thread);
+        }
     }
     if let Some(addr) = settings.listen {
         let socket = UdpSocket::bind(addr).map_err(|e| LiveError::Network {
@@ -342,24 +359,27 @@ pub fn run(
     let started = Instant::now();
     let stamp = record::stamp(SystemTime::now());
     let mut open = vec![true; settings.sources.len()];
-    let mut clocks: Vec<LineClock> = settings
-        .sources
-        .iter()
-        .map(|_| LineClock::default())
-        .collect();
     let mut host_stamps: Vec<HostStamps> = settings
         .sources
         .iter()
         .map(|_| HostStamps::default())
         .collect();
-    let mut continuing: Vec<Continuing> = settings
+    let mut source_clocks: Vec<SourceClock> = settings
         .sources
         .iter()
-        .map(|_| Continuing::default())
+        .map(|_| SourceClock::new(settings.time_horizon_s))
         .collect();
+    // What the source clocks decided, by source, in arrival order; `one`: a line's.
+    let mut judged: Vec<(usize, Judged)> = Vec::new();
+    let mut one: Vec<Judged> = Vec::new();
+    // When the lines being handled arrived (for the latency).
+    let mut batch_at = Instant::now();
+    // Lines the source clocks dropped (the streams' own drops are theirs).
+    let mut clock_dropped = DroppedLines::default();
     let mut format: Option<LineFormat> = None;
     // Lines before the format is known (a SOU log's debug text), bounded.
     let mut early: Vec<Vec<u8>> = Vec::new();
+    let mut early_bytes = 0usize;
     let mut early_full = false;
     let mut recorder: Option<record::Recorder> = None;
     let mut running: Option<Running> = None;
@@ -379,106 +399,46 @@ pub fn run(
     let name = PathBuf::from("live");
 
     let result: Result<(), LiveError> = (|| {
-        while open.iter().any(|o| *o) && !stop.load(Ordering::Relaxed) {
-            let event = match rx.recv_timeout(Duration::from_millis(50)) {
-                Ok(e) => Some(e),
-                Err(RecvTimeoutError::Timeout) => None,
-                Err(RecvTimeoutError::Disconnected) => break,
-            };
+        // The last pass (`ending`) decides what the source clocks still hold.
+        let mut ending = false;
+        loop {
+            let mut event = None;
+            if open.iter().any(|o| *o) && !stop.load(Ordering::Relaxed) {
+                match rx.recv_timeout(Duration::from_millis(50)) {
+                    Ok(e) => event = Some(e),
+                    Err(RecvTimeoutError::Timeout) => {}
+                    Err(RecvTimeoutError::Disconnected) => ending = true,
+                }
+            } else {
+                ending = true;
+            }
+            if ending {
+                for (source, c) in source_clocks.iter_mut().enumerate() {
+                    c.finish(&mut one);
+                    judged.extend(one.drain(..).map(|j| (source, j)));
+                }
+                batch_at = Instant::now();
+            }
             match event {
                 Some(Event::Lines { source, lines, at }) => {
                     // The host's clock when the lines arrived, not when they are handled.
                     let arrived_s = at.saturating_duration_since(started).as_secs_f64();
+                    batch_at = at;
                     for line in lines {
-                        let line = match clock {
+                        match clock {
                             Clock::Source => {
                                 // A SOU line without a timestamp gets the host's on arrival.
                                 let line = host_stamps[source]
                                     .stamp_untimed(&line, arrived_s)
                                     .unwrap_or(line);
-                                continuing[source].line(
-                                    &mut clocks[source],
-                                    line,
-                                    &settings.sources[source],
-                                    &mut report,
-                                )
+                                source_clocks[source].judge(line, &mut one);
                             }
-                            Clock::Host => {
-                                host_stamps[source].stamp(&line, arrived_s).unwrap_or(line)
-                            }
-                        };
-                        if format.is_none() {
-                            match LineFormat::recognise(&line) {
-                                Some(f) => {
-                                    format = Some(f);
-                                    if let Some(dir) = &settings.record {
-                                        let ext = if f == LineFormat::Sou { "log" } else { "csv" };
-                                        recorder = Some(
-                                            record::Recorder::start(dir, &stamp, ext).map_err(
-                                                |e| LiveError::Record {
-                                                    path: dir.clone(),
-                                                    reason: e.to_string(),
-                                                },
-                                            )?,
-                                        );
-                                    }
-                                    let stream_name = recorder
-                                        .as_ref()
-                                        .map_or_else(|| name.clone(), |r| r.path().to_path_buf());
-                                    let mut lines = LineStream::new(f, stream_name, None);
-                                    let held = std::mem::take(&mut early);
-                                    for l in held.iter().chain(std::iter::once(&line)) {
-                                        line_no += 1;
-                                        if let Some(r) = &mut recorder {
-                                            r.line(l).map_err(|e| record_error(settings, e))?;
-                                        }
-                                        lines
-                                            .push_line(line_no, l, &mut samples)
-                                            .map_err(|e| LiveError::Stream(e.to_string()))?;
-                                    }
-                                    running = start_running(
-                                        lines,
-                                        &rig,
-                                        &mapping,
-                                        &mapping_file,
-                                        &options,
-                                        settings,
-                                    )?;
-                                    continue;
-                                }
-                                None => {
-                                    if early.len() < MAX_EARLY_LINES {
-                                        early.push(line);
-                                    } else if !early_full {
-                                        early_full = true;
-                                        report(Report::Notice(format!(
-                                            "warning: {MAX_EARLY_LINES} lines and no SOU line or imubake CSV header yet: \
-                                             later lines are neither read nor recorded until one comes"
-                                        )));
-                                    }
-                                    continue;
-                                }
-                            }
+                            Clock::Host => one.push(Judged::Take {
+                                line: host_stamps[source].stamp(&line, arrived_s).unwrap_or(line),
+                                t_s: None,
+                            }),
                         }
-                        line_no += 1;
-                        if let Some(r) = &mut recorder {
-                            r.line(&line).map_err(|e| record_error(settings, e))?;
-                        }
-                        let Some(run) = &mut running else {
-                            // A CSV stream before its header: the stages start with it.
-                            continue;
-                        };
-                        run.lines
-                            .push_line(line_no, &line, &mut samples)
-                            .map_err(|e| LiveError::Stream(e.to_string()))?;
-                        feed(run, &mut samples, &mut per_sensor, &mut |pose: &Pose| {
-                            frames += 1;
-                            send_out(pose);
-                            latencies.push(at.elapsed().as_secs_f64() * 1e3);
-                        });
-                    }
-                    if let Some(r) = &mut recorder {
-                        r.batch_done().map_err(|e| record_error(settings, e))?;
+                        judged.extend(one.drain(..).map(|j| (source, j)));
                     }
                 }
                 Some(Event::Notice { source, text }) => {
@@ -489,6 +449,9 @@ pub fn run(
                 }
                 Some(Event::Closed { source, error }) => {
                     open[source] = false;
+                    source_clocks[source].finish(&mut one);
+                    judged.extend(one.drain(..).map(|j| (source, j)));
+                    batch_at = Instant::now();
                     report(Report::Notice(match error {
                         None => format!("{}: ended", settings.sources[source]),
                         Some(e) => format!("{}: ended: {e}", settings.sources[source]),
@@ -499,6 +462,94 @@ pub fn run(
                     report(Report::Notice(format!("calibration asked for ({from})")));
                 }
                 None => {}
+            }
+            for (source, judgement) in judged.drain(..) {
+                let (line, dropped_because) = match judgement {
+                    Judged::Take { line, .. } => (line, None),
+                    Judged::Drop { line, reason } => (line, Some(reason)),
+                    Judged::Notice(text) => {
+                        report(Report::Notice(format!(
+                            "warning: {}: {text}",
+                            settings.sources[source]
+                        )));
+                        continue;
+                    }
+                };
+                if format.is_none() {
+                    let Some(f) = LineFormat::recognise(&line) else {
+                        if early.len() < MAX_EARLY_LINES
+                            && early_bytes + line.len() <= MAX_EARLY_BYTES
+                        {
+                            early_bytes += line.len();
+                            early.push(line);
+                        } else if !early_full {
+                            early_full = true;
+                            report(Report::Notice(format!(
+                                "warning: {MAX_EARLY_LINES} lines (or {} MiB) and no SOU line \
+                                 or imubake CSV header yet: later lines are neither read nor \
+                                 recorded until one comes",
+                                MAX_EARLY_BYTES >> 20
+                            )));
+                        }
+                        continue;
+                    };
+                    format = Some(f);
+                    if let Some(dir) = &settings.record {
+                        let ext = if f == LineFormat::Sou { "log" } else { "csv" };
+                        recorder =
+                            Some(record::Recorder::start(dir, &stamp, ext).map_err(|e| {
+                                LiveError::Record {
+                                    path: dir.clone(),
+                                    reason: e.to_string(),
+                                }
+                            })?);
+                    }
+                    let stream_name = recorder
+                        .as_ref()
+                        .map_or_else(|| name.clone(), |r| r.path().to_path_buf());
+                    let mut lines = LineStream::new(f, stream_name, None);
+                    early_bytes = 0;
+                    for l in std::mem::take(&mut early) {
+                        line_no += 1;
+                        if let Some(r) = &mut recorder {
+                            // A CSV's recording must read as one: text before its header is
+                            // kept as a comment.
+                            let recorded = match f {
+                                LineFormat::ImubakeCsv => recorded_before_header(&l),
+                                LineFormat::Sou => l.as_slice().into(),
+                            };
+                            r.line(&recorded).map_err(|e| record_error(settings, e))?;
+                        }
+                        lines
+                            .push_line(line_no, &l, &mut samples)
+                            .map_err(|e| LiveError::Stream(e.to_string()))?;
+                    }
+                    running =
+                        start_running(lines, &rig, &mapping, &mapping_file, &options, settings)?;
+                }
+                line_no += 1;
+                if let Some(r) = &mut recorder {
+                    r.line(&line).map_err(|e| record_error(settings, e))?;
+                }
+                if let Some(reason) = dropped_because {
+                    clock_dropped.push(LineReport::new(None, line_no, reason, &line));
+                    continue;
+                }
+                let Some(run) = &mut running else {
+                    continue;
+                };
+                run.lines
+                    .push_line(line_no, &line, &mut samples)
+                    .map_err(|e| LiveError::Stream(e.to_string()))?;
+                let at = batch_at;
+                feed(run, &mut samples, &mut per_sensor, &mut |pose: &Pose| {
+                    frames += 1;
+                    send_out(pose);
+                    latencies.push(at.elapsed().as_secs_f64() * 1e3);
+                });
+            }
+            if let Some(r) = &mut recorder {
+                r.batch_done().map_err(|e| record_error(settings, e))?;
             }
             if pending_calibration {
                 pending_calibration = false;
@@ -554,6 +605,7 @@ pub fn run(
                     &mut per_sensor,
                     period,
                     latencies.summary(),
+                    clock_dropped.total(),
                 );
                 // A sensor that stops is held at its last pose (the resampler's rule): say so
                 // once, and again when it returns.
@@ -575,6 +627,9 @@ pub fn run(
                 }
                 report(Report::Status(now));
             }
+            if ending {
+                break;
+            }
         }
         Ok(())
     })();
@@ -584,7 +639,7 @@ pub fn run(
     drop(rx);
     // The end: what the reorder buffer and the smoothers hold comes out, the recording closes.
     let mut warnings = Vec::new();
-    let mut dropped = Vec::new();
+    let mut dropped = clock_dropped;
     if let Some(run) = &mut running {
         let mut send = |pose: &Pose| {
             frames += 1;
@@ -596,9 +651,9 @@ pub fn run(
             warnings.push(e.to_string());
         }
         warnings.extend(run.poses.warnings().iter().cloned());
-        dropped.extend(run.lines.dropped_lines().iter().cloned());
+        dropped.extend(run.lines.dropped_lines());
         if let Some(take) = run.lines.take() {
-            dropped.extend(take.dropped_lines().iter().cloned());
+            dropped.extend(take.dropped_lines());
         }
     }
     let recording = match recorder {
@@ -613,58 +668,15 @@ pub fn run(
         frames,
         lines: line_no,
         dropped,
-        overflowed: total(&counters, |c| c.overflowed.load(Ordering::Relaxed)),
+        overflowed: total(&counters, |c| {
+            c.overflowed.load(Ordering::Relaxed) + c.too_long.load(Ordering::Relaxed)
+        }),
+        too_long: total(&counters, |c| c.too_long.load(Ordering::Relaxed)),
         lost_datagrams: total(&counters, |c| c.lost_datagrams.load(Ordering::Relaxed)),
         recording,
         warnings,
         latency_ms: latencies.summary(),
     })
-}
-
-/// A source's own clock kept going when its device restarts (an Arduino reset): a data line
-/// more than [`CLOCK_RESTART_S`] before the source's latest is taken as its clock starting
-/// again, and it and the source's later lines are restamped to carry on from the latest (one
-/// nominal step on, [`RESTART_STEP_S`]), said once per restart. The stream and the recording get
-/// the restamped lines, so the take converts as it was shown.
-#[derive(Debug, Default)]
-struct Continuing {
-    offset_s: f64,
-    latest_s: Option<f64>,
-}
-
-/// A jump back this long is a clock restart, not a late line (the readers' rule for files).
-const CLOCK_RESTART_S: f64 = 1.0;
-/// Where a restarted clock carries on from: the latest time plus this.
-const RESTART_STEP_S: f64 = 0.01;
-
-impl Continuing {
-    fn line(
-        &mut self,
-        clock: &mut LineClock,
-        line: Vec<u8>,
-        source: &SourceSpec,
-        report: &mut impl FnMut(Report),
-    ) -> Vec<u8> {
-        let Some(raw) = clock.time_s(&line) else {
-            return line;
-        };
-        let mut t = raw + self.offset_s;
-        if let Some(latest) = self.latest_s
-            && t < latest - CLOCK_RESTART_S
-        {
-            self.offset_s += latest + RESTART_STEP_S - t;
-            t = raw + self.offset_s;
-            report(Report::Notice(format!(
-                "warning: {source}: the device's clock restarted ({raw:.3} s after {latest:.3} s); \
-                 its lines carry on from {t:.3} s"
-            )));
-        }
-        self.latest_s = Some(self.latest_s.map_or(t, |l| l.max(t)));
-        if self.offset_s == 0.0 {
-            return line;
-        }
-        clock.restamp(&line, t).unwrap_or(line)
-    }
 }
 
 fn record_error(settings: &LiveSettings, e: std::io::Error) -> LiveError {
@@ -785,6 +797,7 @@ fn status(
     per_sensor: &mut [(u64, f64)],
     period_s: f64,
     latency_ms: Option<(f64, f64)>,
+    clock_dropped: u64,
 ) -> Status {
     let phase = match running.map(|r| r.poses.status()) {
         None => Phase::Waiting,
@@ -792,7 +805,7 @@ fn status(
         Some(StreamStatus::Running { .. }) => Phase::Running,
     };
     let mut sensors = Vec::new();
-    let mut dropped_lines = 0;
+    let mut dropped_lines = clock_dropped;
     if let Some(run) = running {
         let latest = run.poses.latest_s();
         for (i, s) in run.poses.sensors().iter().enumerate() {
@@ -807,11 +820,8 @@ fn status(
                 },
             });
         }
-        dropped_lines = run.lines.dropped_lines().len() as u64
-            + run
-                .lines
-                .take()
-                .map_or(0, |t| t.dropped_lines().len() as u64);
+        dropped_lines += run.lines.dropped_lines().total()
+            + run.lines.take().map_or(0, |t| t.dropped_lines().total());
     }
     for p in per_sensor.iter_mut() {
         p.0 = 0;

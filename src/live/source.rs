@@ -3,7 +3,7 @@
 //! session over one bounded channel.
 
 use super::LiveError;
-use std::io::{BufRead, BufReader, Read};
+use std::io::Read;
 use std::net::{IpAddr, SocketAddr, TcpStream, UdpSocket};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -370,7 +370,7 @@ pub fn start(
     let handle = match spec.clone() {
         SourceSpec::File { path, speed } => {
             let file = std::fs::File::open(&path).map_err(io)?;
-            std::thread::spawn(move || replay(BufReader::new(file), speed, &link))
+            std::thread::spawn(move || replay(file, speed, &link))
         }
         SourceSpec::Stdin => std::thread::spawn(move || {
             let stdin = std::io::stdin();
@@ -439,7 +439,15 @@ impl Framing {
 
     fn push(&mut self, bytes: &[u8], out: &mut Vec<Vec<u8>>, link: &Link) {
         match self {
-            Framing::Lines(split) => split.push(bytes, out),
+            Framing::Lines(split) => {
+                split.push(bytes, out);
+                // Counted as they come: the session's summary must not wait for the end.
+                if split.too_long > 0 {
+                    link.counters
+                        .too_long
+                        .fetch_add(std::mem::take(&mut split.too_long), Ordering::Relaxed);
+                }
+            }
             Framing::WitMotion {
                 lines,
                 started,
@@ -555,35 +563,75 @@ fn reopening<R: Read>(
 }
 
 /// A capture replayed at its own pace × `speed`: each data line is sent when its time (since the
-/// first data line's) has come, by the same line parsers the session uses.
-fn replay(reader: impl BufRead, speed: f64, link: &Link) {
-    let mut clock = crate::read::stream::LineClock::default();
+/// first data line's) has come. Times are read by the session's own parsers and judged by its
+/// clock rules ([`super::clock::SourceClock`]), so a damaged or far-future time is not waited
+/// for and a restarted clock paces on from where it was; lines are split as a stream's are
+/// (at most [`MAX_LINE`] bytes, longer ones counted in `too_long`), never held whole.
+fn replay(mut reader: impl Read, speed: f64, link: &Link) {
+    let mut clock = super::clock::SourceClock::new(super::clock::DEFAULT_HORIZON_S);
+    let mut split = LineSplitter::default();
+    let mut buf = vec![0u8; 64 * 1024];
+    let mut lines = Vec::new();
+    let mut judged = Vec::new();
     let start = Instant::now();
     let mut first: Option<f64> = None;
-    for line in reader.split(b'\n') {
+    loop {
         if link.stopped() {
             return;
         }
-        let mut line = match line {
-            Ok(l) => l,
+        let n = match reader.read(&mut buf) {
+            Ok(0) => {
+                split.finish(&mut lines);
+                0
+            }
+            Ok(n) => {
+                split.push(&buf[..n], &mut lines);
+                n
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             Err(e) => {
                 link.closed(Some(e.to_string()));
                 return;
             }
         };
-        if line.last() == Some(&b'\r') {
-            line.pop();
+        if split.too_long > 0 {
+            link.counters
+                .too_long
+                .fetch_add(std::mem::take(&mut split.too_long), Ordering::Relaxed);
         }
-        if let Some(t) = clock.time_s(&line) {
-            let t0 = *first.get_or_insert(t);
-            let due = Duration::from_secs_f64(((t - t0) / speed).max(0.0));
-            let now = start.elapsed();
-            if due > now {
-                std::thread::sleep(due - now);
+        for line in lines.drain(..) {
+            clock.push(line, &mut judged);
+        }
+        if n == 0 {
+            clock.finish(&mut judged);
+        }
+        for j in judged.drain(..) {
+            let (line, t_s) = match j {
+                super::clock::Judged::Take { line, t_s } => (line, t_s),
+                // The session judges the same lines the same way and reports them.
+                super::clock::Judged::Drop { line, .. } => (line, None),
+                super::clock::Judged::Notice(_) => continue,
+            };
+            if let Some(t) = t_s {
+                let t0 = *first.get_or_insert(t);
+                let due = Duration::try_from_secs_f64((t - t0) / speed).unwrap_or(Duration::ZERO);
+                // Slept in slices, so a stop is seen within 100 ms.
+                while let Some(wait) = due.checked_sub(start.elapsed()) {
+                    if link.stopped() {
+                        return;
+                    }
+                    if wait.is_zero() {
+                        break;
+                    }
+                    std::thread::sleep(wait.min(Duration::from_millis(100)));
+                }
+            }
+            if !link.send(vec![line]) {
+                return;
             }
         }
-        if !link.send(vec![line]) {
-            return;
+        if n == 0 {
+            break;
         }
     }
     link.closed(None);

@@ -4,12 +4,16 @@
 //! per-sensor rules.
 //!
 //! Formats: paper 002's SOU lines, and imubake CSV rows after their header line (and any
-//! `# world:` comment before it).
+//! `# world:` comment before it). A CSV stream's lines before its header (a device's boot
+//! messages, a `# world:` naming no world) are dropped lines with their reason, never the end of
+//! the stream. Memory does not grow with the stream: at most
+//! [`MAX_STREAM_SENSORS`](crate::take::MAX_STREAM_SENSORS) sensor ids (a line naming one more is
+//! dropped), and dropped-line reports bounded ([`DroppedLines`]).
 
 use super::{ReadError, imubake_csv, sou};
 use crate::take::{
-    ClockUnit, DEFAULT_REORDER_S, LineReport, SensorIdx, StreamSample, StreamValue, TakeStream,
-    YawPitchRollDeg,
+    ClockUnit, DEFAULT_REORDER_S, DroppedLines, LineReport, SensorIdx, StreamSample, StreamValue,
+    TakeStream, YawPitchRollDeg,
 };
 use crate::world::World;
 use std::collections::HashMap;
@@ -37,6 +41,23 @@ impl LineFormat {
             .is_ok()
             .then_some(LineFormat::ImubakeCsv)
     }
+}
+
+/// What a CSV stream's recording holds for a line that came before the header: the line as it
+/// came when a file's reader takes it there (blank, a comment, a `# world:` naming a world), else
+/// the line behind `# dropped before the header: `, so that the recording reads as an imubake CSV
+/// and still shows every byte that came.
+pub fn recorded_before_header(line: &[u8]) -> std::borrow::Cow<'_, [u8]> {
+    let t = line.trim_ascii();
+    let fine = t.is_empty()
+        || t.strip_prefix(b"#")
+            .is_some_and(|c| !matches!(imubake_csv::world_directive(c), Some(Err(_))));
+    if fine {
+        return line.into();
+    }
+    let mut out = b"# dropped before the header: ".to_vec();
+    out.extend_from_slice(line);
+    out.into()
 }
 
 /// A SOU line without a timestamp of its own (`N0,yaw1,pitch1,roll1,yaw2,pitch2,roll2`, as some
@@ -145,7 +166,7 @@ pub struct LineStream {
     nodes: HashMap<String, (SensorIdx, SensorIdx)>,
     /// CSV sensor id → its index.
     ids: HashMap<Vec<u8>, SensorIdx>,
-    dropped: Vec<LineReport>,
+    dropped: DroppedLines,
 }
 
 impl LineStream {
@@ -169,7 +190,7 @@ impl LineStream {
             csv: None,
             nodes: HashMap::new(),
             ids: HashMap::new(),
-            dropped: Vec::new(),
+            dropped: DroppedLines::default(),
         }
     }
 
@@ -185,7 +206,7 @@ impl LineStream {
     }
 
     /// Lines dropped by the line parsers (the stream's own are in [`TakeStream::dropped_lines`]).
-    pub fn dropped_lines(&self) -> &[LineReport] {
+    pub fn dropped_lines(&self) -> &DroppedLines {
         &self.dropped
     }
 
@@ -227,12 +248,15 @@ impl LineStream {
         let (n0, n1) = match self.nodes.get(id) {
             Some(&pair) => pair,
             None => {
-                let pair = (
+                let (Some(n0), Some(n1)) = (
                     take.sensor(&format!("{id}_0")),
                     take.sensor(&format!("{id}_1")),
-                );
-                self.nodes.insert(id.to_string(), pair);
-                pair
+                ) else {
+                    take.too_many_sensors(line_no, line);
+                    return Ok(());
+                };
+                self.nodes.insert(id.to_string(), (n0, n1));
+                (n0, n1)
             }
         };
         let ypr = |a: &[f64]| {
@@ -260,15 +284,28 @@ impl LineStream {
         let Some(layout) = &self.csv else {
             let t = line.trim_ascii();
             if let Some(comment) = t.strip_prefix(b"#") {
-                if let Some(w) = imubake_csv::world_directive(comment) {
-                    self.world =
-                        w.map_err(|e| ReadError::line(&self.name, line_no, e.to_string()))?;
+                match imubake_csv::world_directive(comment) {
+                    Some(Ok(w)) => self.world = w,
+                    Some(Err(e)) => self.drop_line(
+                        line_no,
+                        format!("before the CSV header: {e}; the world stays {}", self.world),
+                        line,
+                    ),
+                    None => {}
                 }
                 return Ok(());
             }
-            let layout = imubake_csv::Layout::from_header(line, &self.name, line_no)?;
-            self.take = Some(TakeStream::new(layout.clock.clone(), self.reorder_s));
-            self.csv = Some(layout);
+            match imubake_csv::Layout::from_header(line, &self.name, line_no) {
+                Ok(layout) => {
+                    self.take = Some(TakeStream::new(layout.clock.clone(), self.reorder_s));
+                    self.csv = Some(layout);
+                }
+                Err(_) => self.drop_line(
+                    line_no,
+                    "before the CSV header (a device's message?): not a header; dropped",
+                    line,
+                ),
+            }
             return Ok(());
         };
         let row = match imubake_csv::parse_row(layout, line) {
@@ -302,7 +339,10 @@ impl LineStream {
                     ));
                     return Ok(());
                 };
-                let s = take.sensor(name);
+                let Some(s) = take.sensor(name) else {
+                    take.too_many_sensors(line_no, line);
+                    return Ok(());
+                };
                 self.ids.insert(row.id.to_vec(), s);
                 s
             }
@@ -402,6 +442,21 @@ impl HostStamps {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lines_before_a_header_are_recorded_as_a_file_reader_takes_them() {
+        for kept in ["", "# a note", "# world: ned", "#world=nwu"] {
+            assert_eq!(&*recorded_before_header(kept.as_bytes()), kept.as_bytes());
+        }
+        assert_eq!(
+            &*recorded_before_header(b"Booting v1.2"),
+            b"# dropped before the header: Booting v1.2"
+        );
+        assert_eq!(
+            &*recorded_before_header(b"# world: mars"),
+            b"# dropped before the header: # world: mars"
+        );
+    }
 
     #[test]
     fn formats_are_recognised_and_lines_restamped() {

@@ -2,6 +2,7 @@
 //! repaired on the way in (conventions.md, "Time and frames", "Takes and names").
 
 mod builder;
+mod dropped;
 mod format;
 mod samples;
 mod sequence;
@@ -9,10 +10,11 @@ mod stream;
 mod track;
 
 pub use builder::{BuildError, ClockUnit, ContactSample, SensorIdx, TakeBuilder};
+pub use dropped::DroppedLines;
 pub use format::InputFormat;
 pub use samples::{ImuSample, YawPitchRollDeg};
 pub use sequence::LOOKAHEAD_ROWS;
-pub use stream::{DEFAULT_REORDER_S, StreamSample, StreamValue, TakeStream};
+pub use stream::{DEFAULT_REORDER_S, MAX_STREAM_SENSORS, StreamSample, StreamValue, TakeStream};
 pub use track::{Track, TrackError};
 
 use crate::world::World;

@@ -20,7 +20,7 @@
 
 use super::builder::{BuildError, CLOCK_RESET_S, ClockUnit, clock_reset, dropped_report};
 use super::sequence::{Dropped, Held, Sequencer, Sink};
-use super::{ImuSample, LineReport, SensorIdx, YawPitchRollDeg};
+use super::{DroppedLines, ImuSample, LineReport, SensorIdx, YawPitchRollDeg};
 use nalgebra::{UnitQuaternion, Vector3};
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
@@ -120,6 +120,11 @@ impl Ord for Pending {
 const TOO_LATE: &str = "arrived after later samples had been released (the reorder buffer is \
      shorter than this row's delay); dropped";
 const LATE_IN_SENSOR: &str = "earlier than the previous sample of the same sensor; dropped";
+const NOT_FINITE: &str = "time is not a finite number; dropped";
+
+/// Distinct sensor ids a stream keeps state for: a body has tens of sensors, so a stream naming
+/// more is sending garbage ids, and each would cost its own rules' state.
+pub const MAX_STREAM_SENSORS: usize = 1024;
 
 /// The released samples of one push, and what was dropped.
 struct Out<'a> {
@@ -127,7 +132,7 @@ struct Out<'a> {
     seconds_per_unit: f64,
     sensor: SensorIdx,
     samples: &'a mut Vec<StreamSample>,
-    dropped: &'a mut Vec<LineReport>,
+    dropped: &'a mut DroppedLines,
 }
 
 impl Sink<StreamValue> for Out<'_> {
@@ -148,11 +153,8 @@ impl Sink<StreamValue> for Out<'_> {
     }
 
     fn dropped(&mut self, row: Dropped) {
-        let report = dropped_report(row);
         // A row carrying several sensors (a SOU line) is reported once.
-        if self.dropped.last() != Some(&report) {
-            self.dropped.push(report);
-        }
+        self.dropped.push_unless_repeated(dropped_report(row));
     }
 }
 
@@ -173,7 +175,7 @@ pub struct TakeStream {
     ids: Vec<String>,
     by_id: HashMap<String, SensorIdx>,
     sequencers: Vec<Sequencer<StreamValue>>,
-    dropped: Vec<LineReport>,
+    dropped: DroppedLines,
 }
 
 impl TakeStream {
@@ -194,20 +196,42 @@ impl TakeStream {
             ids: Vec::new(),
             by_id: HashMap::new(),
             sequencers: Vec::new(),
-            dropped: Vec::new(),
+            dropped: DroppedLines::default(),
         }
     }
 
-    /// The index of sensor `id`, added on first use.
-    pub fn sensor(&mut self, id: &str) -> SensorIdx {
+    /// The index of sensor `id`, added on first use; `None` once [`MAX_STREAM_SENSORS`] ids
+    /// are known and `id` is not one of them (the caller drops its line,
+    /// [`TakeStream::too_many_sensors`]).
+    pub fn sensor(&mut self, id: &str) -> Option<SensorIdx> {
         if let Some(&idx) = self.by_id.get(id) {
-            return idx;
+            return Some(idx);
+        }
+        if self.ids.len() >= MAX_STREAM_SENSORS {
+            return None;
         }
         let idx = SensorIdx(self.ids.len());
         self.ids.push(id.to_string());
         self.by_id.insert(id.to_string(), idx);
         self.sequencers.push(Sequencer::new(self.reset_units));
-        idx
+        Some(idx)
+    }
+
+    /// Reports a line dropped because its sensor id would be one too many.
+    pub fn too_many_sensors(&mut self, line: u64, raw: &[u8]) {
+        self.dropped.push(LineReport::new(
+            None,
+            line,
+            format!(
+                "a new sensor id past the stream's {MAX_STREAM_SENSORS} (garbage ids?); dropped"
+            ),
+            raw,
+        ));
+    }
+
+    /// Reports a line dropped before it reached the stream (by the line parsers).
+    pub fn drop_line(&mut self, report: LineReport) {
+        self.dropped.push(report);
     }
 
     /// The sensors' ids, by index.
@@ -220,8 +244,8 @@ impl TakeStream {
         self.zero.map(|z| self.clock.describe(z))
     }
 
-    /// Every line dropped so far.
-    pub fn dropped_lines(&self) -> &[LineReport] {
+    /// Every line dropped so far (the first reports whole, then counts).
+    pub fn dropped_lines(&self) -> &DroppedLines {
         &self.dropped
     }
 
@@ -236,7 +260,12 @@ impl TakeStream {
         raw: &[u8],
         out: &mut Vec<StreamSample>,
     ) -> Result<(), BuildError> {
-        if self.released.is_some_and(|r| raw_time < r) || !raw_time.is_finite() {
+        if !raw_time.is_finite() {
+            self.dropped
+                .push(RowText::new(raw).report(line, NOT_FINITE));
+            return Ok(());
+        }
+        if self.released.is_some_and(|r| raw_time < r) {
             self.dropped.push(RowText::new(raw).report(line, TOO_LATE));
             return Ok(());
         }
@@ -334,7 +363,7 @@ mod tests {
     #[test]
     fn rows_shuffled_within_the_buffer_come_out_in_order() {
         let mut stream = TakeStream::new(ClockUnit::Seconds, 0.25);
-        let (a, b) = (stream.sensor("a"), stream.sensor("b"));
+        let (a, b) = (stream.sensor("a").unwrap(), stream.sensor("b").unwrap());
         let mut out = Vec::new();
         // 10 Hz per sensor from t = 5 s; rows arrive up to 0.1 s out of order.
         let rows = [
@@ -373,7 +402,7 @@ mod tests {
     #[test]
     fn too_late_repeated_and_damaged_rows_are_dropped_and_reported() {
         let mut stream = TakeStream::new(ClockUnit::Seconds, 0.1);
-        let a = stream.sensor("a");
+        let a = stream.sensor("a").unwrap();
         let mut out = Vec::new();
         let mut line = 0;
         let mut push = |stream: &mut TakeStream, t: f64, out: &mut Vec<StreamSample>| {
@@ -394,6 +423,7 @@ mod tests {
         stream.finish(&mut out).unwrap();
         let lines: Vec<(u64, &str)> = stream
             .dropped_lines()
+            .reports()
             .iter()
             .map(|d| (d.line, d.reason.split(':').next().unwrap()))
             .collect();
