@@ -2,7 +2,10 @@
 
 use std::io::{self, Read};
 
-/// Lines longer than this are not text logs (a binary file without newlines, say).
+/// The longest line of a text log, in bytes without its line end: 1 MiB. Longer lines are not
+/// text logs (a binary file without newlines, say). Every line-based reader (all but MVNX's
+/// XML) holds its lines to it, from files and streams alike, as it reads: a longer line is
+/// refused by number once the limit is passed, never read whole.
 pub const MAX_LINE_BYTES: usize = 1 << 20;
 
 const CHUNK_BYTES: usize = 1 << 20;

@@ -1,5 +1,12 @@
 //! Readers: one module per capture format, each turning a file or session folder into a
 //! [`Take`]. The format is detected from content; [`ReadOptions::format`] overrides.
+//!
+//! Nothing is read whole before it is judged: the format is detected from a source's first
+//! 8 KiB, a stream's (a FIFO, `/dev/stdin`) as a file's, so an unknown one is refused having read
+//! no more; then the format's reader reads on, and every line-based reader (all but MVNX's XML)
+//! holds each line to [`lines::MAX_LINE_BYTES`] (1 MiB) as it reads, refusing a longer one by
+//! number without holding it. A stream is read as it comes ([`read_take`]); only WitMotion's
+//! binary packets are gathered whole first.
 
 pub mod apdm;
 pub mod blocks;
@@ -137,7 +144,15 @@ impl ReadError {
     pub(crate) fn lines(path: &Path, e: lines::LineError) -> Self {
         match e {
             lines::LineError::Io(source) => ReadError::io(path, source),
-            lines::LineError::TooLong { line } => ReadError::line(path, line, e.to_string()),
+            lines::LineError::TooLong { line } => ReadError::line(
+                path,
+                line,
+                format!(
+                    "the line is longer than {} bytes (1 MiB), the longest line of a text log \
+                     imubake reads; expected one sample per line",
+                    lines::MAX_LINE_BYTES
+                ),
+            ),
         }
     }
 }
@@ -524,40 +539,116 @@ pub(crate) fn visible_files(dir: &Path) -> Result<Vec<PathBuf>, ReadError> {
     Ok(files)
 }
 
-/// How much of a stream (a FIFO, a device) is checked for NUL bytes before the rest is read.
-pub const STREAM_CHECK_BYTES: usize = 1 << 20;
-
 /// Whether `path` is a stream to read once (a FIFO, `/dev/stdin`, a process substitution) rather
 /// than a regular file or a folder, which can be opened again.
 pub fn is_stream(path: &Path) -> bool {
     fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
-/// Reads a stream to its end, refusing it as binary when its first [`STREAM_CHECK_BYTES`] hold a
-/// NUL byte (so `/dev/zero` is refused after 1 MiB instead of read forever).
+/// How much of a stream read whole ([`read_stream`]) is checked for NUL bytes.
+pub const STREAM_CHECK_BYTES: usize = 1 << 20;
+
+/// Reads a stream to its end, for a caller that needs its bytes (to hash them, say), checking
+/// as it reads: a NUL byte in its first [`STREAM_CHECK_BYTES`] refuses a stream that does not
+/// start like a binary format (so `/dev/zero` is refused at once), and in a text stream no line
+/// may pass [`lines::MAX_LINE_BYTES`]: the first that does is refused by number once the limit
+/// is passed, so a stream without line ends is never read whole. (A stream that starts like
+/// WitMotion's packets, HDF5 or an MVNX document is read whole as it is.) [`read_take`] reads a
+/// stream without holding it.
 pub fn read_stream(path: &Path) -> Result<Vec<u8>, ReadError> {
     let mut file = fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
-    let mut bytes = Vec::new();
-    file.by_ref()
-        .take(STREAM_CHECK_BYTES as u64)
-        .read_to_end(&mut bytes)
-        .map_err(|e| ReadError::io(path, e))?;
-    if !is_binary_format(&bytes, None) {
+    let mut bytes = read_head(&mut file, path)?;
+    let binary = is_binary_format(&bytes, None);
+    if !binary {
         check_text(path, &bytes)?;
     }
-    file.read_to_end(&mut bytes)
-        .map_err(|e| ReadError::io(path, e))?;
-    Ok(bytes)
+    let check_lines = !binary && !xsens_mvnx::looks_like(&bytes);
+    let mut lines = LineLengths::default();
+    if check_lines {
+        lines.scan(&bytes).map_err(|e| ReadError::lines(path, e))?;
+    }
+    let mut chunk = vec![0u8; 1 << 16];
+    loop {
+        let n = match file.read(&mut chunk) {
+            Ok(0) => return Ok(bytes),
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(ReadError::io(path, e)),
+        };
+        let new = &chunk[..n];
+        if !binary && bytes.len() < STREAM_CHECK_BYTES {
+            let checked = &new[..n.min(STREAM_CHECK_BYTES - bytes.len())];
+            if let Some(at) = memchr::memchr(0, checked) {
+                return Err(ReadError::Binary {
+                    path: path.to_path_buf(),
+                    offset: bytes.len() + at,
+                });
+            }
+        }
+        if check_lines {
+            lines.scan(new).map_err(|e| ReadError::lines(path, e))?;
+        }
+        bytes.extend_from_slice(new);
+    }
 }
 
-/// Reads one take from a single file's bytes (a stream read with [`read_stream`]).
-pub fn read_take_from_bytes(
-    bytes: &[u8],
+/// The first [`SNIFF_BYTES`] of a source (fewer when it ends first), read from a stream as they
+/// come.
+fn read_head(source: &mut impl Read, path: &Path) -> Result<Vec<u8>, ReadError> {
+    let mut head = Vec::with_capacity(SNIFF_BYTES);
+    source
+        .take(SNIFF_BYTES as u64)
+        .read_to_end(&mut head)
+        .map_err(|e| ReadError::io(path, e))?;
+    Ok(head)
+}
+
+/// The length of the line being read, checked against [`lines::MAX_LINE_BYTES`] as bytes come;
+/// a line is counted without its end (`\n` or `\r\n`), as the line reader counts it.
+#[derive(Default)]
+struct LineLengths {
+    /// Lines ended so far.
+    ended: u64,
+    /// Bytes of the line being read so far, a `\r` at its end included.
+    current: usize,
+    /// The last byte seen was `\r`.
+    last_cr: bool,
+}
+
+impl LineLengths {
+    fn scan(&mut self, bytes: &[u8]) -> Result<(), lines::LineError> {
+        let mut start = 0;
+        for end in memchr::memchr_iter(b'\n', bytes).chain(std::iter::once(bytes.len())) {
+            let run = end - start;
+            self.current += run;
+            if run > 0 {
+                self.last_cr = bytes[end - 1] == b'\r';
+            }
+            // A `\r` at the end may be the first half of a `\r\n`, which is no part of the line.
+            if self.current - usize::from(self.last_cr) > lines::MAX_LINE_BYTES {
+                return Err(lines::LineError::TooLong {
+                    line: self.ended + 1,
+                });
+            }
+            if end < bytes.len() {
+                self.ended += 1;
+                self.current = 0;
+                self.last_cr = false;
+            }
+            start = end + 1;
+        }
+        Ok(())
+    }
+}
+
+/// The format of a single-file source from its first bytes: `forced`, or detected; the text
+/// check for all but the binary formats.
+fn format_of_head(
+    head: &[u8],
     path: &Path,
-    options: &ReadOptions,
-) -> Result<Take, ReadError> {
-    let head = &bytes[..bytes.len().min(SNIFF_BYTES)];
-    let format = match options.format {
+    forced: Option<InputFormat>,
+) -> Result<InputFormat, ReadError> {
+    let format = match forced {
         Some(f) => f,
         None if witmotion::looks_like(head) => InputFormat::WitMotion,
         None if apdm::looks_like(head) => InputFormat::ApdmH5,
@@ -569,19 +660,17 @@ pub fn read_take_from_bytes(
     if !matches!(format, InputFormat::WitMotion | InputFormat::ApdmH5) {
         check_text(path, head)?;
     }
-    match format {
-        InputFormat::Sou => sou::read_from(bytes, path, options),
-        InputFormat::ImubakeCsv => imubake_csv::read_from(bytes, path, options),
-        InputFormat::OpensenseSto => opensense_sto::read_from(bytes, path, options),
-        InputFormat::XsensDot => xsens_dot::read_from(bytes, path, options),
-        InputFormat::XsensMtw => xsens_mtw::read_from(bytes, path, options),
-        InputFormat::XioFusionCsv => xio_fusion_csv::read_from(bytes, path, options),
-        InputFormat::XsensMvnx => xsens_mvnx::read_from(bytes, path, options),
-        InputFormat::XioSession => Err(ReadError::format(
-            path,
-            "an x-IMU3 session is a folder; a stream cannot hold one. Hint: pass the session folder",
-        )),
-        InputFormat::Bvh => Err(bvh_is_motion(path)),
+    Ok(format)
+}
+
+/// Reads one take from a single file's bytes (a stream read with [`read_stream`]).
+pub fn read_take_from_bytes(
+    bytes: &[u8],
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Take, ReadError> {
+    let head = &bytes[..bytes.len().min(SNIFF_BYTES)];
+    match format_of_head(head, path, options.format)? {
         InputFormat::WitMotion => witmotion::take_of(
             &[witmotion::Recording {
                 id: take_stem(path),
@@ -590,6 +679,53 @@ pub fn read_take_from_bytes(
             path,
             options,
         ),
+        format => read_format_from(format, bytes, path, options),
+    }
+}
+
+/// Reads one take from a stream as it comes: the format from its first [`SNIFF_BYTES`] (an
+/// unknown one is refused having read no more), then the reader of that format on the stream,
+/// which checks each line's length as it reads ([`lines::MAX_LINE_BYTES`]). Only WitMotion's
+/// binary packets are read whole first.
+fn read_take_from_stream(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
+    let mut file = fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
+    let head = read_head(&mut file, path)?;
+    let format = format_of_head(&head, path, options.format)?;
+    read_format_from(
+        format,
+        std::io::Cursor::new(head).chain(file),
+        path,
+        options,
+    )
+}
+
+/// Reads a single-file take of a text format (or refuses the formats a stream cannot hold).
+fn read_format_from(
+    format: InputFormat,
+    source: impl Read + Send,
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Take, ReadError> {
+    match format {
+        InputFormat::Sou => sou::read_from(source, path, options),
+        InputFormat::ImubakeCsv => imubake_csv::read_from(source, path, options),
+        InputFormat::OpensenseSto => opensense_sto::read_from(source, path, options),
+        InputFormat::XsensDot => xsens_dot::read_from(source, path, options),
+        InputFormat::XsensMtw => xsens_mtw::read_from(source, path, options),
+        InputFormat::XioFusionCsv => xio_fusion_csv::read_from(source, path, options),
+        InputFormat::XsensMvnx => xsens_mvnx::read_from(source, path, options),
+        InputFormat::XioSession => Err(ReadError::format(
+            path,
+            "an x-IMU3 session is a folder; a stream cannot hold one. Hint: pass the session folder",
+        )),
+        InputFormat::Bvh => Err(bvh_is_motion(path)),
+        InputFormat::WitMotion => {
+            let mut bytes = Vec::new();
+            { source }
+                .read_to_end(&mut bytes)
+                .map_err(|e| ReadError::io(path, e))?;
+            read_take_from_bytes(&bytes, path, options)
+        }
         InputFormat::ApdmH5 => Err(ReadError::format(
             path,
             "an HDF5 file is read from a file, not a stream (libhdf5 opens files). Hint: save it first",
@@ -600,7 +736,7 @@ pub fn read_take_from_bytes(
 /// Reads one take from a file, a session folder, or a stream (FIFO, process substitution).
 pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
     if is_stream(path) {
-        return read_take_from_bytes(&read_stream(path)?, path, options);
+        return read_take_from_stream(path, options);
     }
     let format = match options.format {
         Some(f) => f,
@@ -648,6 +784,39 @@ pub(crate) fn calibrate_directive(comment: &[u8]) -> Option<Result<f64, String>>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A stream's lines are held to the limit wherever its reads split them: a line of exactly
+    /// `MAX_LINE_BYTES` bytes passes, with `\n`, `\r\n` (its `\r` split from its `\n` or not) or
+    /// at the end; one byte more is refused as line 2.
+    #[test]
+    fn stream_lines_are_checked_across_reads() {
+        let max = lines::MAX_LINE_BYTES;
+        for len in [max, max + 1] {
+            for end in ["\n", "\r\n", ""] {
+                let mut text = b"time_s,sensor,qw,qx,qy,qz\n".to_vec();
+                text.extend(std::iter::repeat_n(b'1', len));
+                if !end.is_empty() {
+                    text.extend_from_slice(end.as_bytes());
+                    text.extend_from_slice(b"0,a,1,0,0,0\n");
+                }
+                let header = 26;
+                for split in [1, header, header + len - 1, header + len, header + len + 1] {
+                    let split = split.min(text.len());
+                    let mut check = LineLengths::default();
+                    let result = check
+                        .scan(&text[..split])
+                        .and_then(|()| check.scan(&text[split..]));
+                    match result {
+                        Ok(()) => assert_eq!(len, max, "{len} {end:?} {split}"),
+                        Err(lines::LineError::TooLong { line }) => {
+                            assert_eq!((len, line), (max + 1, 2), "{end:?} {split}")
+                        }
+                        Err(e) => panic!("{e}"),
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn two_files_of_one_sensor_are_refused() {
