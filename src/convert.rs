@@ -1163,6 +1163,8 @@ fn write_take(
         .collect();
     let outputs = written.into_iter().collect::<Result<Vec<_>, _>>()?;
     drop(take_outputs);
+    let (dropped_lines, dropped_lines_total, dropped_lines_omitted) =
+        Sidecar::bound_dropped(dropped_lines);
     let out_rig = animation.rig();
     let sidecar = Sidecar {
         imubake_version: env!("CARGO_PKG_VERSION"),
@@ -1193,6 +1195,8 @@ fn write_take(
         outputs,
         sensors: sensor_summaries,
         dropped_lines,
+        dropped_lines_total,
+        dropped_lines_omitted,
         repaired_lines,
         warnings,
     };

@@ -398,3 +398,39 @@ fn raw_readings_that_cannot_be_right_are_clear_errors() {
         assert!(!out.join(format!("raw{i}.bvh")).exists());
     }
 }
+
+/// A log with 100 000 garbage lines among its data (issue 43): the take converts, and the sidecar
+/// lists the first 1000 dropped lines whole and counts the other 99 000 by reason — kilobytes,
+/// not the ~10 MB a full list would take.
+#[test]
+fn a_flood_of_garbage_lines_gives_a_bounded_sidecar() {
+    let dir = tempfile::tempdir().unwrap();
+    let walk = fs::read_to_string(repo_file(WALK)).unwrap();
+    let mut text = String::new();
+    for (i, line) in walk.lines().enumerate() {
+        text.push_str(line);
+        text.push('\n');
+        if i == 100 {
+            for k in 0..100_000 {
+                text.push_str(&format!("garbage {k}\n"));
+            }
+        }
+    }
+    let input = dir.path().join("flood.csv");
+    fs::write(&input, &text).unwrap();
+    let out = dir.path().join("out");
+    let o = convert_with_walk_mapping(&input, &out, &["--format", "bvh"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let sc = sidecar(&out, "flood");
+    let listed = sc["dropped_lines"].as_array().unwrap();
+    assert_eq!(listed.len(), 1000);
+    // The first listed is the first garbage line: line 102 of the file.
+    assert_eq!(listed[0]["line"], 102);
+    assert_eq!(listed[999]["line"], 1101);
+    assert_eq!(sc["dropped_lines_total"], 100_000);
+    let omitted = sc["dropped_lines_omitted"].as_array().unwrap();
+    let counted: u64 = omitted.iter().map(|r| r["lines"].as_u64().unwrap()).sum();
+    assert_eq!(counted, 99_000, "{omitted:?}");
+    let size = fs::metadata(out.join("flood.imubake.json")).unwrap().len();
+    assert!(size < 1 << 20, "a sidecar of {size} bytes");
+}

@@ -4,7 +4,7 @@
 use crate::fps::Fps;
 use crate::inspect::SensorSummaries;
 use crate::mapping::MappingRecord;
-use crate::take::LineReport;
+use crate::take::{DroppedLines, LineReport};
 use serde::Serialize;
 
 #[derive(Debug, Clone, Serialize)]
@@ -27,9 +27,47 @@ pub struct Sidecar {
     pub vendor_contacts: Option<VendorContactsRecord>,
     pub outputs: Vec<OutputRecord>,
     pub sensors: SensorSummaries,
+    /// The first [`DroppedLines::KEEP`] dropped lines, whole ([`Sidecar::bound_dropped`]).
     pub dropped_lines: Vec<LineReport>,
+    /// Every dropped line, listed or not.
+    pub dropped_lines_total: u64,
+    /// The dropped lines past those listed, counted by reason; absent when all are listed.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub dropped_lines_omitted: Vec<OmittedRecord>,
     pub repaired_lines: Vec<LineReport>,
     pub warnings: Vec<String>,
+}
+
+/// Dropped lines of one reason past those listed.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OmittedRecord {
+    pub reason: String,
+    pub lines: u64,
+}
+
+impl Sidecar {
+    /// A take's dropped lines as the sidecar holds them: the first [`DroppedLines::KEEP`] whole,
+    /// the rest counted by reason (a source of a million garbage lines gives a sidecar of
+    /// kilobytes, not of a hundred megabytes); with the total.
+    pub fn bound_dropped(all: Vec<LineReport>) -> (Vec<LineReport>, u64, Vec<OmittedRecord>) {
+        let total = all.len() as u64;
+        if all.len() <= DroppedLines::KEEP {
+            return (all, total, Vec::new());
+        }
+        let mut bounded = DroppedLines::default();
+        for r in all {
+            bounded.push(r);
+        }
+        let omitted = bounded
+            .omitted_by_reason()
+            .iter()
+            .map(|(reason, lines)| OmittedRecord {
+                reason: reason.clone(),
+                lines: *lines,
+            })
+            .collect();
+        (bounded.reports().to_vec(), total, omitted)
+    }
 }
 
 /// A capture system's own foot contacts as frame intervals `[start, end]` (inclusive) of the
@@ -141,4 +179,41 @@ pub struct TrimRecord {
 pub struct OutputRecord {
     pub format: &'static str,
     pub path: String,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dropped_lines_past_the_first_thousand_are_counted_by_reason() {
+        let few: Vec<LineReport> = (1..=3)
+            .map(|i| LineReport::new(None, i, "bad", b"x"))
+            .collect();
+        let (listed, total, omitted) = Sidecar::bound_dropped(few.clone());
+        assert_eq!((listed, total, omitted), (few, 3, Vec::new()));
+        let many: Vec<LineReport> = (1..=1500)
+            .map(|i| {
+                let reason = if i % 3 == 0 {
+                    "time out of sequence: x"
+                } else {
+                    "garbage"
+                };
+                LineReport::new(None, i, reason, b"x")
+            })
+            .collect();
+        let (listed, total, omitted) = Sidecar::bound_dropped(many);
+        assert_eq!(listed.len(), 1000);
+        assert_eq!(listed[999].line, 1000);
+        assert_eq!(total, 1500);
+        // Lines 1001..=1500: 167 multiples of 3 (1002, …, 1500), 333 others; 1001 comes first.
+        let record = |reason: &str, lines| OmittedRecord {
+            reason: reason.into(),
+            lines,
+        };
+        assert_eq!(
+            omitted,
+            [record("garbage", 333), record("time out of sequence", 167)]
+        );
+    }
 }
