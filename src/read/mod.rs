@@ -475,8 +475,18 @@ impl PerSensorFolder {
     pub(crate) fn anchored_clock(
         &self,
         modulus: u64,
-        mut first_value: impl FnMut(fs::File, &Path, &str) -> Result<Option<u64>, ReadError>,
+        first_value: impl FnMut(fs::File, &Path, &str) -> Result<Option<u64>, ReadError>,
     ) -> Result<clock::WrappingClock, ReadError> {
+        let firsts = self.first_values(first_value)?;
+        Ok(clock::WrappingClock::anchored_at_earliest(modulus, &firsts))
+    }
+
+    /// `first_value` of each file (opened, with its path and name), in reading order; the files
+    /// without one are left out.
+    pub(crate) fn first_values(
+        &self,
+        mut first_value: impl FnMut(fs::File, &Path, &str) -> Result<Option<u64>, ReadError>,
+    ) -> Result<Vec<u64>, ReadError> {
         let mut firsts = Vec::new();
         for (file, name) in &self.files {
             let f = fs::File::open(file).map_err(|e| ReadError::io(file, e))?;
@@ -484,7 +494,7 @@ impl PerSensorFolder {
                 firsts.push(first);
             }
         }
-        Ok(clock::WrappingClock::anchored_at_earliest(modulus, &firsts))
+        Ok(firsts)
     }
 
     /// Reads every file into `take` with `read_file`, each under its own name in reports, after

@@ -1,6 +1,8 @@
 //! Xsens MTw `.txt` exports (MT Manager; the files OpenSim's OpenSense reads): one file is a take,
 //! and a folder of such files (one per sensor, one recording) is one take.
 //!
+//! MT Manager 4.x:
+//!
 //! ```text
 //! // Start Time: Unknown
 //! // Update Rate: 100.0Hz
@@ -9,15 +11,37 @@
 //! 00472<TAB><TAB>...<TAB>0.492747<TAB>-5.241669<TAB>-8.223521<TAB>0.856410<TAB>-0.513606<TAB>...
 //! ```
 //!
-//! - `//` lines are header comments; `// Update Rate: 100.0Hz` is required (it gives times to the
-//!   packet counter). The first other line is the column row: tab-separated (`,` or `;` also
-//!   accepted when the row has no tab), names matched case-insensitively in any order. Many
-//!   columns (UTC, SampleTimeFine, ...) are often empty and are not used.
-//! - Time: `PacketCounter`, a 16-bit counter that wraps at 65536, unwrapped (each row placed at
-//!   the nearest unwrapped value to the previous row's; the files of a folder are placed within
-//!   half a wrap of the earliest-starting file) and counted at the header's update rate:
-//!   `ClockUnit::Counter { name: "PacketCounter", rate_hz }`. A gap of more than half a wrap
-//!   (327 s at 100 Hz) cannot be told from a step back.
+//! MT Manager 2019.2 and later (no update rate; the columns are those ticked for the export):
+//!
+//! ```text
+//! // General information:
+//! //  MT Manager version: 2019.2.0
+//! //  XDA version: 2019.2.0 build 3853 rev 94535 built on 2019-09-09
+//! // Device information:
+//! //  DeviceId: 00B40DE4
+//! ...
+//! // Coordinate system: ENU
+//! PacketCounter<TAB>SampleTimeFine<TAB>Year<TAB>...<TAB>UTC_Valid<TAB>Acc_X<TAB>...<TAB>Quat_q0<TAB>Quat_q1<TAB>Quat_q2<TAB>Quat_q3
+//! 03027<TAB>4294967046<TAB><TAB>...<TAB>0.051234<TAB>...<TAB>1.000000<TAB>0.000000<TAB>0.000000<TAB>0.000000
+//! ```
+//!
+//! - `//` lines are header comments. The first other line is the column row: tab-separated (`,`
+//!   or `;` also accepted when the row has no tab), names matched case-insensitively in any
+//!   order. Many columns (UTC, SampleTimeFine, ...) are often empty; the unused ones are ignored.
+//! - Time, from the first of these the file has:
+//!   - a `// Update Rate: 100.0Hz` line: `PacketCounter`, a 16-bit counter that wraps at 65536,
+//!     counted at that rate: `ClockUnit::Counter { name: "PacketCounter", rate_hz }`. A gap of
+//!     more than half a wrap (327 s at 100 Hz) cannot be told from a step back.
+//!   - a `SampleTimeFine` on the first data row: the sensor's clock in ticks of 100 µs (10 kHz),
+//!     a 32-bit counter that wraps at 2³² (4.97 days): `ClockUnit::Counter { name:
+//!     "SampleTimeFine", rate_hz: 10000 }`. The sensors of one Awinda recording share it.
+//!   - `--rate HZ`: PacketCounter at that rate.
+//!   - none: an error naming the missing `// Update Rate:` line and SampleTimeFine column (or
+//!     the first data row, where MT Manager left SampleTimeFine empty), with what to do.
+//!
+//!   Either counter is unwrapped (each row placed at the nearest unwrapped value to the previous
+//!   row's; the files of a folder, which must all have the same clock, are placed within half a
+//!   wrap of the earliest-starting file).
 //! - Orientation, the first present of: `Quat_q0..Quat_q3` (q_GS, w first), the rotation matrix
 //!   `Mat[r][c]`, or `Roll, Pitch, Yaw` (degrees; Xsens' "XYZ earth-fixed" sequence, which is
 //!   R = Rz(yaw)·Ry(pitch)·Rx(roll), stored verbatim with `push_yaw_pitch_roll`).
@@ -44,9 +68,9 @@
 //! upward), rotated by this matrix, points along world +z (tested in tests/vendor_readers.rs).
 //! The columns are looked up by name, so a file with another column order reads the same.
 //!
-//! Rows with the wrong number of fields, an empty or bad PacketCounter, or an unusable value in
-//! a used column (empty, NaN, a zero quaternion, a matrix that is not a rotation) are dropped and
-//! reported. `--skip-lines N` drops data rows whose line number is at most N in each file.
+//! Rows with the wrong number of fields, an empty or bad counter (PacketCounter, or SampleTimeFine
+//! when it gives the times), or an unusable value in a used column (empty, NaN, a zero
+//! quaternion, a matrix that is not a rotation) are dropped and reported. `--skip-lines N` drops data rows whose line number is at most N in each file.
 
 use super::clock::{WrappingClock, parse_counter};
 use super::lines::{LineReader, number_problem, parse_f64, split_fields};
@@ -66,6 +90,13 @@ use std::path::Path;
 /// `PacketCounter` wraps at 2¹⁶.
 pub const PACKET_COUNTER_MODULUS: u64 = 1 << 16;
 
+/// `SampleTimeFine` wraps at 2³².
+pub const SAMPLE_TIME_FINE_MODULUS: u64 = 1 << 32;
+
+/// `SampleTimeFine` counts ticks of this clock: 10 kHz, 100 µs a tick (Xsens' MTi user manual
+/// MT0605P, 4.12.3: "a 0.1 ms resolution 4 byte time stamp"; Movella DOT's is 1 MHz instead).
+pub const SAMPLE_TIME_FINE_HZ: f64 = 10_000.0;
+
 /// At most this many columns are looked at.
 const MAX_COLUMNS: usize = 160;
 
@@ -75,8 +106,9 @@ const MAX_HEADER_LINES: u64 = 1000;
 /// Largest deviation of RᵀR from the identity accepted for a rotation matrix.
 const ORTHONORMAL_TOLERANCE: f64 = 0.01;
 
-const EXPECTED_HEADER: &str = "`// Update Rate: <n>Hz` and a tab-separated column row with PacketCounter and \
-     Quat_q0..Quat_q3, Mat[1][1]..Mat[3][3] or Roll,Pitch,Yaw (or Acc_X..Z with Gyr_X..Z), as MT Manager exports";
+const EXPECTED_HEADER: &str = "a tab-separated column row with PacketCounter and Quat_q0..Quat_q3, \
+     Mat[1][1]..Mat[3][3] or Roll,Pitch,Yaw (or Acc_X..Z with Gyr_X..Z), and times: SampleTimeFine or a \
+     `// Update Rate: <n>Hz` header line, as MT Manager exports";
 
 /// Sensor id of an MTw file: the file name after its last `_`, without extension.
 pub fn sensor_id(path: &Path) -> String {
@@ -172,6 +204,7 @@ struct Layout {
     sep: u8,
     columns: usize,
     counter: usize,
+    sample_time_fine: Option<usize>,
     orientation: Option<Orientation>,
     inertial: Option<([usize; 3], [usize; 3])>,
     mag: Option<[usize; 3]>,
@@ -180,8 +213,86 @@ struct Layout {
 /// Header comments and column row of one file.
 #[derive(Debug, Clone, PartialEq)]
 struct Header {
-    rate_hz: f64,
+    /// The `// Update Rate:` line's rate, when there is one.
+    rate_hz: Option<f64>,
     layout: Layout,
+    /// The column row's line.
+    line: u64,
+}
+
+/// What gives a file's rows their times.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Clock {
+    /// `PacketCounter` (16 bits) at the header's `// Update Rate:`, or at `--rate`.
+    Packets { rate_hz: f64 },
+    /// `SampleTimeFine` (32 bits, 10 kHz ticks), when the header names no update rate.
+    Fine,
+}
+
+impl Clock {
+    fn name(self) -> &'static str {
+        match self {
+            Clock::Packets { .. } => "PacketCounter",
+            Clock::Fine => "SampleTimeFine",
+        }
+    }
+
+    fn modulus(self) -> u64 {
+        match self {
+            Clock::Packets { .. } => PACKET_COUNTER_MODULUS,
+            Clock::Fine => SAMPLE_TIME_FINE_MODULUS,
+        }
+    }
+
+    fn unit(self) -> ClockUnit {
+        ClockUnit::Counter {
+            name: self.name().to_string(),
+            rate_hz: match self {
+                Clock::Packets { rate_hz } => rate_hz,
+                Clock::Fine => SAMPLE_TIME_FINE_HZ,
+            },
+        }
+    }
+
+    /// The column of the counter, `None` for a `Fine` clock in a file without SampleTimeFine.
+    fn column(self, layout: &Layout) -> Option<usize> {
+        match self {
+            Clock::Packets { .. } => Some(layout.counter),
+            Clock::Fine => layout.sample_time_fine,
+        }
+    }
+
+    /// The counter's value in a row's field (below the modulus), or why it has none.
+    fn value(self, field: &[u8]) -> Result<u64, String> {
+        match parse_counter(field) {
+            Ok(c) if c < self.modulus() => Ok(c),
+            Ok(_) => Err(match self {
+                Clock::Packets { .. } => {
+                    "PacketCounter is larger than a 16-bit counter (0-65535)".to_string()
+                }
+                Clock::Fine => {
+                    "SampleTimeFine is larger than a 32-bit counter (0-4294967295)".to_string()
+                }
+            }),
+            Err(problem) => Err(format!("{} {problem}", self.name())),
+        }
+    }
+
+    /// Whether two files' clocks are one take's.
+    fn same(self, other: Clock) -> bool {
+        match (self, other) {
+            (Clock::Packets { rate_hz: a }, Clock::Packets { rate_hz: b }) => same_rate(a, b),
+            (Clock::Fine, Clock::Fine) => true,
+            _ => false,
+        }
+    }
+
+    fn describe(self) -> String {
+        match self {
+            Clock::Packets { rate_hz } => format!("PacketCounter at {rate_hz} Hz"),
+            Clock::Fine => "SampleTimeFine (no `// Update Rate:` line)".to_string(),
+        }
+    }
 }
 
 const MAT_NAMES: [[&str; 3]; 3] = [
@@ -210,6 +321,7 @@ impl Layout {
         let mag = group(&["Mag_X", "Mag_Y", "Mag_Z"]);
         let three = |v: Vec<usize>| <[usize; 3]>::try_from(v).ok();
         let counter = check.required(find("PacketCounter"), "PacketCounter")?;
+        let sample_time_fine = find("SampleTimeFine");
         check.complete(&missing)?;
         let orientation = if let Some(q) = quat.and_then(|v| <[usize; 4]>::try_from(v).ok()) {
             Some(Orientation::Quaternion(q))
@@ -239,6 +351,7 @@ impl Layout {
             sep,
             columns: names.len(),
             counter,
+            sample_time_fine,
             orientation,
             inertial,
             mag: mag.and_then(three),
@@ -271,19 +384,86 @@ fn read_header<R: Read>(lines: &mut LineReader<R>, path: &Path) -> Result<Header
             continue;
         }
         let layout = Layout::from_header(line, path, line_no)?;
-        let Some(rate_hz) = rate else {
-            return Err(ReadError::line(
-                path,
-                line_no,
-                "no `// Update Rate: <n>Hz` line before the column row; the PacketCounter needs the \
-                 update rate to give times. Hint: export from MT Manager with the header comments on",
-            ));
-        };
-        return Ok(Header { rate_hz, layout });
+        return Ok(Header {
+            rate_hz: rate,
+            layout,
+            line: line_no,
+        });
     }
     Err(ReadError::format(
         path,
         format!("no column row found; expected {EXPECTED_HEADER}"),
+    ))
+}
+
+/// Lines read ahead for the first data row of a file without an update rate.
+const LOOKAHEAD_LINES: usize = 1000;
+
+/// Lines read ahead of the rows (their numbers and text), to be read as rows in turn.
+type Ahead = Vec<(u64, Vec<u8>)>;
+
+/// A file's header and the clock of its rows; when the header names no rate, the lines up to
+/// the first data row are read ahead (returned, for the caller to read as rows first):
+/// - the header's `// Update Rate:` line: PacketCounter at that rate (MT Manager 4.x, and the
+///   files OpenSense ships);
+/// - else SampleTimeFine, when the first data row has one (MT Manager 2019.2 and later write no
+///   update rate);
+/// - else PacketCounter at `rate_hz` (`--rate`), when given;
+/// - else an error naming the missing line and columns.
+fn header_and_clock<R: Read>(
+    lines: &mut LineReader<R>,
+    path: &Path,
+    rate_hz: Option<f64>,
+) -> Result<(Header, Clock, Ahead), ReadError> {
+    let header = read_header(lines, path)?;
+    if let Some(rate_hz) = header.rate_hz {
+        return Ok((header, Clock::Packets { rate_hz }, Vec::new()));
+    }
+    let layout = &header.layout;
+    let mut ahead = Vec::new();
+    let mut first = None;
+    while ahead.len() < LOOKAHEAD_LINES
+        && let Some((line_no, line)) = lines.next_line().map_err(|e| ReadError::lines(path, e))?
+    {
+        ahead.push((line_no, line.to_vec()));
+        let mut f = [&b""[..]; MAX_COLUMNS];
+        let n = split_fields(line, layout.sep, &mut f);
+        if !line.trim_ascii().is_empty() && field_count_ok(layout, &f, n) {
+            first = layout
+                .sample_time_fine
+                .map(|column| (line_no, Clock::Fine.value(f[column])));
+            break;
+        }
+    }
+    let (line, problem) = match (layout.sample_time_fine, first) {
+        (None, _) => (
+            header.line,
+            "no `// Update Rate: <n>Hz` line in the header and no SampleTimeFine column"
+                .to_string(),
+        ),
+        // No data row to judge by: the rows are dropped one by one, each with its reason.
+        (Some(_), None) | (Some(_), Some((_, Ok(_)))) => {
+            return Ok((header, Clock::Fine, ahead));
+        }
+        (Some(_), Some((line_no, Err(problem)))) => (
+            line_no,
+            format!(
+                "no `// Update Rate: <n>Hz` line in the header, and on this first data row \
+                 {problem}"
+            ),
+        ),
+    };
+    if let Some(rate_hz) = rate_hz {
+        return Ok((header, Clock::Packets { rate_hz }, ahead));
+    }
+    Err(ReadError::line(
+        path,
+        line,
+        format!(
+            "{problem}: PacketCounter alone gives no times (MT Manager 2019.2 and later export no \
+             update rate). Hint: export again with SampleTimeFine among the exported data, or give \
+             the update rate with --rate <HZ>"
+        ),
     ))
 }
 
@@ -300,36 +480,34 @@ pub fn read(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
         &format!("files with {EXPECTED_HEADER}"),
         sensor_id,
     )?;
-    // First pass: the update rate (one for the take) and each file's first counter value.
-    let mut rate: Option<(f64, String)> = None;
-    let mut clock = folder.anchored_clock(PACKET_COUNTER_MODULUS, |f, file, name| {
+    // First pass: the clock (one for the take) and each file's first counter value.
+    let mut take_clock: Option<(Clock, String)> = None;
+    let firsts = folder.first_values(|f, file, name| {
         let mut lines = LineReader::new(f);
-        let header = read_header(&mut lines, file)?;
-        match &rate {
-            None => rate = Some((header.rate_hz, name.to_string())),
-            Some((r, first)) if !same_rate(*r, header.rate_hz) => {
+        let (header, clock, ahead) = header_and_clock(&mut lines, file, options.rate_hz)?;
+        match &take_clock {
+            None => take_clock = Some((clock, name.to_string())),
+            Some((other, first)) if !other.same(clock) => {
                 return Err(ReadError::format(
                     file,
                     format!(
-                        "update rate {} Hz differs from {r} Hz in `{first}`; expected the files of one \
+                        "times from {} differ from `{first}`'s, {}; expected the files of one \
                          recording. Hint: read the files one by one",
-                        header.rate_hz
+                        clock.describe(),
+                        other.describe()
                     ),
                 ));
             }
             Some(_) => {}
         }
-        first_counter(&mut lines, &header.layout, file)
+        first_counter(ahead, &mut lines, &header.layout, clock, file)
     })?;
-    let rate_hz = rate.map(|r| r.0).unwrap_or(1.0);
+    let take_clock = take_clock.map_or(Clock::Packets { rate_hz: 1.0 }, |c| c.0);
+    let mut clock = WrappingClock::anchored_at_earliest(take_clock.modulus(), &firsts);
     let world = options.world.unwrap_or(World::Enu);
-    let clock_unit = ClockUnit::Counter {
-        name: "PacketCounter".to_string(),
-        rate_hz,
-    };
-    let mut take = TakeBuilder::new(path, InputFormat::XsensMtw, world, clock_unit);
+    let mut take = TakeBuilder::new(path, InputFormat::XsensMtw, world, take_clock.unit());
     folder.read_into(&mut take, &mut clock, |take, clock, f, file| {
-        read_file_into(take, clock, f, file, rate_hz, options.skip_lines)
+        read_file_with(take, clock, f, file, take_clock, options)
     })?;
     take.finish(options.skip_seconds)
         .map_err(|e| ReadError::take(path, e))
@@ -339,19 +517,31 @@ fn same_rate(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
 }
 
-/// The first parseable PacketCounter after the column row.
+/// The first parseable counter of `clock` after the column row (the lines read ahead first).
 fn first_counter<R: Read>(
+    ahead: Ahead,
     lines: &mut LineReader<R>,
     layout: &Layout,
+    clock: Clock,
     path: &Path,
 ) -> Result<Option<u64>, ReadError> {
-    while let Some((_, line)) = lines.next_line().map_err(|e| ReadError::lines(path, e))? {
+    let Some(column) = clock.column(layout) else {
+        return Ok(None);
+    };
+    let first_of = |line: &[u8]| {
         let mut f = [&b""[..]; MAX_COLUMNS];
         let n = split_fields(line, layout.sep, &mut f);
-        if field_count_ok(layout, &f, n)
-            && let Ok(c) = parse_counter(f[layout.counter])
-            && c < PACKET_COUNTER_MODULUS
-        {
+        if field_count_ok(layout, &f, n) {
+            clock.value(f[column]).ok()
+        } else {
+            None
+        }
+    };
+    if let Some(c) = ahead.iter().find_map(|(_, line)| first_of(line)) {
+        return Ok(Some(c));
+    }
+    while let Some((_, line)) = lines.next_line().map_err(|e| ReadError::lines(path, e))? {
+        if let Some(c) = first_of(line) {
             return Ok(Some(c));
         }
     }
@@ -361,21 +551,15 @@ fn first_counter<R: Read>(
 /// Reads one MTw file as a take; `path` names it in reports and gives the sensor id.
 pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
     let mut lines = LineReader::new(reader);
-    let header = read_header(&mut lines, path)?;
+    let (header, clock, ahead) = header_and_clock(&mut lines, path, options.rate_hz)?;
     let world = options.world.unwrap_or(World::Enu);
-    let clock_unit = ClockUnit::Counter {
-        name: "PacketCounter".to_string(),
-        rate_hz: header.rate_hz,
-    };
-    let mut take = TakeBuilder::new(path, InputFormat::XsensMtw, world, clock_unit);
-    let mut clock = WrappingClock::new(PACKET_COUNTER_MODULUS);
-    read_rows(
+    let mut take = TakeBuilder::new(path, InputFormat::XsensMtw, world, clock.unit());
+    let mut counter = WrappingClock::new(clock.modulus());
+    Rows::new(&mut take, &header.layout, clock, path, options.skip_lines).read(
+        ahead,
         &mut lines,
-        &header.layout,
         &mut take,
-        &mut clock,
-        path,
-        options.skip_lines,
+        &mut counter,
     )?;
     take.finish(options.skip_seconds)
         .map_err(|e| ReadError::take(path, e))
@@ -384,7 +568,7 @@ pub fn read_from(reader: impl Read, path: &Path, options: &ReadOptions) -> Resul
 /// Parses one MTw file into `take`, whose clock counts PacketCounter at `rate_hz` (the caller
 /// sets the file name for reports with [`TakeBuilder::set_file`]). The sensor id comes from
 /// `path`'s file name; `clock` carries the take's unwrapped counter from file to file. A file
-/// with another update rate is an error.
+/// with another update rate, or none, is an error.
 pub fn read_file_into(
     take: &mut TakeBuilder,
     clock: &mut WrappingClock,
@@ -393,18 +577,50 @@ pub fn read_file_into(
     rate_hz: f64,
     skip_lines: u64,
 ) -> Result<(), ReadError> {
+    let options = ReadOptions {
+        skip_lines,
+        ..ReadOptions::default()
+    };
+    read_file_with(
+        take,
+        clock,
+        reader,
+        path,
+        Clock::Packets { rate_hz },
+        &options,
+    )
+}
+
+/// [`read_file_into`] for a take whose times come from `expected`: a file whose clock is
+/// another is an error.
+fn read_file_with(
+    take: &mut TakeBuilder,
+    clock: &mut WrappingClock,
+    reader: impl Read,
+    path: &Path,
+    expected: Clock,
+    options: &ReadOptions,
+) -> Result<(), ReadError> {
     let mut lines = LineReader::new(reader);
-    let header = read_header(&mut lines, path)?;
-    if !same_rate(header.rate_hz, rate_hz) {
+    let (header, file_clock, ahead) = header_and_clock(&mut lines, path, options.rate_hz)?;
+    if !file_clock.same(expected) {
+        let detail = match (file_clock, expected) {
+            (Clock::Packets { rate_hz: a }, Clock::Packets { rate_hz: b }) => {
+                format!("update rate {a} Hz differs from the take's {b} Hz")
+            }
+            _ => format!(
+                "times from {} differ from the take's, {}",
+                file_clock.describe(),
+                expected.describe()
+            ),
+        };
         return Err(ReadError::format(
             path,
-            format!(
-                "update rate {} Hz differs from the take's {rate_hz} Hz; expected the files of one recording",
-                header.rate_hz
-            ),
+            format!("{detail}; expected the files of one recording"),
         ));
     }
-    read_rows(&mut lines, &header.layout, take, clock, path, skip_lines)
+    Rows::new(take, &header.layout, expected, path, options.skip_lines)
+        .read(ahead, &mut lines, take, clock)
 }
 
 fn field_count_ok(layout: &Layout, f: &[&[u8]; MAX_COLUMNS], n: usize) -> bool {
@@ -413,24 +629,79 @@ fn field_count_ok(layout: &Layout, f: &[&[u8]; MAX_COLUMNS], n: usize) -> bool {
         || (n == layout.columns + 1 && f.get(n - 1).is_some_and(|x| x.trim_ascii().is_empty()))
 }
 
-fn read_rows<R: Read>(
-    lines: &mut LineReader<R>,
-    layout: &Layout,
-    take: &mut TakeBuilder,
-    clock: &mut WrappingClock,
-    path: &Path,
+/// What reading a file's rows needs, row after row.
+struct Rows<'a> {
+    layout: &'a Layout,
+    clock: Clock,
+    sensor: SensorIdx,
+    worst_norm_error: f64,
     skip_lines: u64,
-) -> Result<(), ReadError> {
-    let sensor = take.sensor(&sensor_id(path));
-    clock.start_file();
-    let mut worst_norm_error: f64 = 0.0;
-    while let Some((line_no, line)) = lines.next_line().map_err(|e| ReadError::lines(path, e))? {
-        if line.trim_ascii().is_empty() {
-            continue;
+    path: &'a Path,
+}
+
+impl<'a> Rows<'a> {
+    /// The rows of `path` (its sensor named in `take`), timed by `clock`.
+    fn new(
+        take: &mut TakeBuilder,
+        layout: &'a Layout,
+        clock: Clock,
+        path: &'a Path,
+        skip_lines: u64,
+    ) -> Self {
+        Rows {
+            layout,
+            clock,
+            sensor: take.sensor(&sensor_id(path)),
+            worst_norm_error: 0.0,
+            skip_lines,
+            path,
         }
-        if line_no <= skip_lines {
+    }
+
+    /// Reads the rows: the lines read ahead, then the rest of `lines`.
+    fn read<R: Read>(
+        mut self,
+        ahead: Ahead,
+        lines: &mut LineReader<R>,
+        take: &mut TakeBuilder,
+        counter: &mut WrappingClock,
+    ) -> Result<(), ReadError> {
+        counter.start_file();
+        for (line_no, line) in &ahead {
+            self.row(take, counter, *line_no, line)?;
+        }
+        while let Some((line_no, line)) = lines
+            .next_line()
+            .map_err(|e| ReadError::lines(self.path, e))?
+        {
+            self.row(take, counter, line_no, line)?;
+        }
+        let file = self
+            .path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned());
+        warn_if_denormalised(
+            take,
+            self.worst_norm_error,
+            Some(file.as_deref().unwrap_or_default()),
+        );
+        Ok(())
+    }
+
+    fn row(
+        &mut self,
+        take: &mut TakeBuilder,
+        counter: &mut WrappingClock,
+        line_no: u64,
+        line: &[u8],
+    ) -> Result<(), ReadError> {
+        let layout = self.layout;
+        if line.trim_ascii().is_empty() {
+            return Ok(());
+        }
+        if line_no <= self.skip_lines {
             take.drop_line(line_no, "skipped by --skip-lines", line);
-            continue;
+            return Ok(());
         }
         let mut f = [&b""[..]; MAX_COLUMNS];
         let n = split_fields(line, layout.sep, &mut f);
@@ -448,47 +719,37 @@ fn read_rows<R: Read>(
                 ),
                 line,
             );
-            continue;
+            return Ok(());
         }
-        let counter = match parse_counter(f[layout.counter]) {
-            Ok(c) if c < PACKET_COUNTER_MODULUS => c,
-            Ok(_) => {
-                take.drop_line(
-                    line_no,
-                    "PacketCounter is larger than a 16-bit counter (0-65535)",
-                    line,
-                );
-                continue;
-            }
+        let Some(column) = self.clock.column(layout) else {
+            take.drop_line(line_no, "no SampleTimeFine column", line);
+            return Ok(());
+        };
+        let value = match self.clock.value(f[column]) {
+            Ok(v) => v,
             Err(problem) => {
-                take.drop_line(line_no, format!("PacketCounter {problem}"), line);
-                continue;
+                take.drop_line(line_no, problem, line);
+                return Ok(());
             }
         };
-        let t = clock.unwrap(counter) as f64;
+        let t = counter.unwrap(value) as f64;
         match parse_values(layout, &f) {
-            Ok(values) => {
-                push_values(
-                    take,
-                    sensor,
-                    t,
-                    values,
-                    line_no,
-                    line,
-                    &mut worst_norm_error,
-                )
-                .map_err(|e| ReadError::take(path, e))?;
+            Ok(values) => push_values(
+                take,
+                self.sensor,
+                t,
+                values,
+                line_no,
+                line,
+                &mut self.worst_norm_error,
+            )
+            .map_err(|e| ReadError::take(self.path, e)),
+            Err(problem) => {
+                take.drop_line(line_no, problem, line);
+                Ok(())
             }
-            Err(problem) => take.drop_line(line_no, problem, line),
         }
     }
-    let file = path.file_name().map(|n| n.to_string_lossy().into_owned());
-    warn_if_denormalised(
-        take,
-        worst_norm_error,
-        Some(file.as_deref().unwrap_or_default()),
-    );
-    Ok(())
 }
 
 enum OrientationValue {
@@ -855,6 +1116,54 @@ mod tests {
         );
         let b_times: Vec<f64> = quats(&take, "B").iter().map(|s| s.0).collect();
         assert!((b_times[0] - 0.08).abs() < 1e-9, "{b_times:?}");
+    }
+
+    /// Without an update rate the clock is judged by the first data row; the lines read ahead
+    /// for it (a damaged row, a blank line) are read as rows after, the damaged one reported.
+    /// A folder's files must agree on their clock.
+    #[test]
+    fn rows_read_ahead_for_the_clock_are_read_and_reported() {
+        let text = "// Coordinate system: ENU\nPacketCounter\tSampleTimeFine\tQuat_q0\tQuat_q1\tQuat_q2\tQuat_q3\n\
+                    00001\t100\t1\t0\n\n00002\t200\t1\t0\t0\t0\n00003\t300\t1\t0\t0\t0\n";
+        let take = read_str("a_S.txt", text).unwrap();
+        let times: Vec<f64> = quats(&take, "S").iter().map(|s| s.0).collect();
+        assert_eq!(times.len(), 2);
+        assert!((times[1] - 0.01).abs() < 1e-12, "{times:?}");
+        assert_eq!(
+            take.source().start_timestamp,
+            "SampleTimeFine 200 at 10000 Hz"
+        );
+        let dropped: Vec<(u64, &str)> = take
+            .dropped_lines()
+            .iter()
+            .map(|d| (d.line, d.reason.as_str()))
+            .collect();
+        assert_eq!(
+            dropped,
+            [(
+                3,
+                "expected 6 tab-separated fields as in the column row, found 4"
+            )]
+        );
+
+        let mut take =
+            TakeBuilder::new("dir", InputFormat::XsensMtw, World::Enu, Clock::Fine.unit());
+        let mut clock = WrappingClock::new(SAMPLE_TIME_FINE_MODULUS);
+        let e = read_file_with(
+            &mut take,
+            &mut clock,
+            HEAD.as_bytes(),
+            Path::new("x_B.txt"),
+            Clock::Fine,
+            &ReadOptions::default(),
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().contains(
+                "times from PacketCounter at 100 Hz differ from the take's, SampleTimeFine"
+            ),
+            "{e}"
+        );
     }
 
     #[test]
