@@ -698,15 +698,43 @@ pub fn read_take_from_bytes(
 /// which checks each line's length as it reads ([`lines::MAX_LINE_BYTES`]). Only WitMotion's
 /// binary packets are read whole first.
 fn read_take_from_stream(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> {
-    let mut file = fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
-    let head = read_head(&mut file, path)?;
+    let file = fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
+    read_take_from_source(file, path, options)
+}
+
+/// [`read_take_from_stream`] from an open source.
+fn read_take_from_source(
+    mut source: impl Read + Send,
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<Take, ReadError> {
+    let head = read_head(&mut source, path)?;
     let format = format_of_head(&head, path, options.format)?;
     read_format_from(
         format,
-        std::io::Cursor::new(head).chain(file),
+        std::io::Cursor::new(head).chain(source),
         path,
         options,
     )
+}
+
+/// Reads one take from a stream (a FIFO, `/dev/stdin`) as [`read_take`] does, showing every byte
+/// of the stream to `observe` in order as it is read, so a caller can hash the source (the
+/// sidecar's SHA-256) without holding it: what the format's reader leaves unread (after an
+/// MVNX document, say) is read after it, for `observe`. It works on a regular file too.
+pub fn read_stream_observed(
+    path: &Path,
+    options: &ReadOptions,
+    observe: &mut (dyn FnMut(&[u8]) + Send),
+) -> Result<Take, ReadError> {
+    let file = fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
+    let mut source = blocks::Observed {
+        inner: file,
+        observe,
+    };
+    let take = read_take_from_source(&mut source, path, options)?;
+    std::io::copy(&mut source, &mut std::io::sink()).map_err(|e| ReadError::io(path, e))?;
+    Ok(take)
 }
 
 /// Reads a single-file take of a text format (or refuses the formats a stream cannot hold).
@@ -794,6 +822,26 @@ pub(crate) fn calibrate_directive(comment: &[u8]) -> Option<Result<f64, String>>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A take read while observed is the take read plainly, and the observer sees every byte of
+    /// the source in order.
+    #[test]
+    fn an_observed_stream_shows_every_byte() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("take.csv");
+        let mut text = b"time_s,sensor,qw,qx,qy,qz\n".to_vec();
+        for i in 0..5000 {
+            text.extend_from_slice(format!("{}.{:02},a,1,0,0,0\n", i / 100, i % 100).as_bytes());
+        }
+        fs::write(&path, &text).unwrap();
+        let mut seen = Vec::new();
+        let take = read_stream_observed(&path, &ReadOptions::default(), &mut |b| {
+            seen.extend_from_slice(b)
+        })
+        .unwrap();
+        assert_eq!(take, read_take(&path, &ReadOptions::default()).unwrap());
+        assert_eq!(seen, text);
+    }
 
     /// A stream's lines are held to the limit wherever its reads split them: a line of exactly
     /// `MAX_LINE_BYTES` bytes passes, with `\n`, `\r\n` (its `\r` split from its `\n` or not) or
