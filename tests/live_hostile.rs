@@ -326,56 +326,64 @@ impl Ended {
     }
 }
 
-/// The walk for 2 s, then `bad` lines, then the walk for 2 s more: frames must keep coming in
-/// the second after the bad lines (at 60 fps, at least 30 of them).
-fn walk_with(via: Via, bad: &[&str], extra: &[&str]) -> Ended {
+/// The walk with each of `bad`'s lines sent after `at_s` seconds of it (in order), then 1.5 s
+/// more: frames must keep coming in the second after each (60 at 60 fps; at least 10 asked, so
+/// that a busy machine passes and a stalled session, which sends none, does not).
+fn walk_with(via: Via, bad: &[(f64, &str)]) -> Ended {
     let (header, rows) = walk();
-    let mut s = Session::start(via, extra);
+    let mut s = Session::start(via, &[]);
     s.feed.send(header.as_bytes());
     let start = Instant::now();
-    pace(&mut s.feed, &rows, 0.0, 2.0, start);
-    for b in bad {
-        s.feed.send(b.as_bytes());
+    let mut from = 0.0;
+    let mut sent_at = Vec::new();
+    for (at_s, line) in bad {
+        pace(&mut s.feed, &rows, from, *at_s, start);
+        s.feed.send(line.as_bytes());
+        s.feed.flush();
+        sent_at.push(Instant::now());
+        from = *at_s;
     }
-    s.feed.flush();
-    let after = Instant::now();
-    pace(&mut s.feed, &rows, 2.0, 4.0, start);
+    pace(&mut s.feed, &rows, from, from + 1.5, start);
     std::thread::sleep(Duration::from_millis(200));
-    let later = s.frames.between(
-        after + Duration::from_millis(500),
-        after + Duration::from_millis(1500),
-    );
-    assert!(
-        later >= 30,
-        "{via:?} {bad:?}: {later} frames in the second after the bad lines"
-    );
+    for (after, (_, line)) in sent_at.iter().zip(bad) {
+        let later = s.frames.between(
+            *after + Duration::from_millis(300),
+            *after + Duration::from_millis(1300),
+        );
+        let line = &line[..line.len().min(40)];
+        assert!(
+            later >= 10,
+            "{via:?} {line}: {later} frames in the second after it"
+        );
+    }
     s.stop()
 }
 
 /// Case 1: one huge timestamp after valid lines stalled the session (no frame, not even
-/// `/VMC/Ext/OK`; memory growing ~0.5 GB/s; SIGTERM ignored). Now it is one dropped line.
+/// `/VMC/Ext/OK`; memory growing ~0.5 GB/s; SIGTERM ignored). Now each is one dropped line.
 #[test]
 fn a_huge_timestamp_is_one_dropped_line() {
+    let bad = [
+        (1.5, "1e308,pelvis,1,0,0,0"),
+        (3.0, "1e23,left_thigh,1,0,0,0"),
+        (4.5, "-1e308,sternum,1,0,0,0"),
+    ];
     for via in [Via::Stdin, Via::Udp, Via::Tcp] {
-        for bad in [
-            "1e308,pelvis,1,0,0,0",
-            "1e23,pelvis,1,0,0,0",
-            "-1e308,pelvis,1,0,0,0",
-        ] {
-            let ended = walk_with(via, &[bad], &[]);
-            let label = format!("{via:?} {bad}");
-            let dropped = ended.dropped();
-            let hit: Vec<&(u64, String)> = dropped
-                .iter()
-                .filter(|(_, r)| r.contains("far from the stream"))
-                .collect();
-            assert_eq!(hit.len(), 1, "{label}: {dropped:?}");
-            // The line number is the recording's: that line is the bad one.
-            let text = std::fs::read_to_string(ended.recording()).unwrap();
-            let line = text.lines().nth(hit[0].0 as usize - 1).unwrap();
-            assert_eq!(line, bad, "{label}");
-            ended.check_bounded_and_converts(&label);
+        let ended = walk_with(via, &bad);
+        let label = format!("{via:?}");
+        let dropped = ended.dropped();
+        let hits: Vec<&(u64, String)> = dropped
+            .iter()
+            .filter(|(_, r)| r.contains("far from the stream"))
+            .collect();
+        assert_eq!(hits.len(), 3, "{label}: {dropped:?}");
+        // Each line number is the recording's: those lines are the bad ones.
+        let text = std::fs::read_to_string(ended.recording()).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        for (hit, (_, line)) in hits.iter().zip(&bad) {
+            assert_eq!(lines[hit.0 as usize - 1], *line, "{label}");
         }
+        ended.check_bounded_and_converts(&label);
     }
 }
 
@@ -420,7 +428,8 @@ fn an_hour_jump_bursts_no_frames() {
 
 /// Case 2: distinct unknown sensor ids and garbage lines grew memory (~0.84 KB an id, 430 MB at
 /// 500 k ids; 1 M garbage lines, a 110 MB summary). Now a stream keeps 1024 ids at most and the
-/// first 1000 dropped lines whole, the rest counted by reason.
+/// first 1000 dropped lines whole, the rest counted by reason. (The recording keeps every line:
+/// converting it, a file, reads all 100 000 ids — quickly, see `SensorTable`.)
 #[test]
 fn unknown_ids_and_garbage_do_not_grow_memory() {
     let (header, rows) = walk();
@@ -429,12 +438,12 @@ fn unknown_ids_and_garbage_do_not_grow_memory() {
         s.feed.send(header.as_bytes());
         let start = Instant::now();
         pace(&mut s.feed, &rows, 0.0, 1.5, start);
-        // 300 000 lines of distinct ids, then 400 000 of garbage: ~15 MB, at full speed (the
-        // code before issue 43 held ~250 MB for the ids, ~400 MB for the garbage's reports).
+        // 100 000 lines of distinct ids, then 400 000 of garbage: ~10 MB, at full speed (the
+        // code before issue 43 held ~85 MB for the ids, ~400 MB for the garbage's reports).
         let t = 1.5;
         let mut sent_ids = 0u64;
         let mut block = Vec::with_capacity(1 << 20);
-        for k in 0..300_000u64 {
+        for k in 0..100_000u64 {
             block.extend_from_slice(format!("{t:.6},ghost{k},1,0,0,0\n").as_bytes());
             sent_ids += 1;
             if block.len() > 1 << 20 {
@@ -455,22 +464,55 @@ fn unknown_ids_and_garbage_do_not_grow_memory() {
         let after = Instant::now();
         let resume = start.elapsed().as_secs_f64();
         pace(&mut s.feed, &rows, resume, resume + 2.0, start);
-        std::thread::sleep(Duration::from_millis(300));
-        let later = s
-            .frames
-            .between(after + Duration::from_millis(200), Instant::now());
-        assert!(later >= 30, "{via:?}: {later} frames after the flood");
+        // Frames come again once the session has read the flood (seconds on a busy machine).
+        let waited = Instant::now();
+        while s.frames.between(after, Instant::now()) < 30 {
+            assert!(
+                waited.elapsed() < Duration::from_secs(60),
+                "{via:?}: no frames after the flood"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
         let ended = s.stop();
         let summary = &ended.summary;
         let total = summary["dropped_total"].as_u64().unwrap();
         // Every garbage line, and every ghost line past the stream's 1024 ids (16 of them are
         // the walk's sensors), is reported; ghost lines within the ids are unmapped, not dropped.
         let ghosts_dropped = sent_ids - (1024 - 16);
+        assert_eq!(total, 400_000 + ghosts_dropped, "{via:?}");
+        // The first 1000 listed are ghosts past the cap; the rest are counted by kind.
+        let listed = summary["dropped_lines"].as_array().unwrap();
+        assert_eq!(listed.len(), 1000);
         assert!(
-            total >= 400_000 + ghosts_dropped,
-            "{via:?}: {total} dropped"
+            listed
+                .iter()
+                .all(|d| d["text"].as_str().unwrap().contains(",ghost")),
+            "{via:?}"
         );
-        assert_eq!(summary["dropped_lines"].as_array().unwrap().len(), 1000);
+        let kinds: Vec<(String, u64)> = summary["dropped_omitted_by_reason"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| {
+                (
+                    r["reason"].as_str().unwrap().into(),
+                    r["lines"].as_u64().unwrap(),
+                )
+            })
+            .collect();
+        assert_eq!(kinds.len(), 2, "{kinds:?}");
+        let of = |words: &str| {
+            kinds
+                .iter()
+                .find(|(k, _)| k.contains(words))
+                .map(|(_, n)| *n)
+        };
+        assert_eq!(
+            of("new sensor id"),
+            Some(ghosts_dropped - 1000),
+            "{kinds:?}"
+        );
+        assert_eq!(of("fields"), Some(400_000), "{kinds:?}");
         let json_len = summary.to_string().len();
         assert!(json_len < 1 << 20, "{via:?}: a summary of {json_len} bytes");
         let by_reason = summary["dropped_omitted_by_reason"].as_array().unwrap();
@@ -561,7 +603,7 @@ fn a_replayed_file_with_a_huge_time_is_read_to_its_end() {
 fn over_long_lines_are_counted_in_the_summary() {
     let long = "9".repeat(100 * 1024);
     for via in [Via::Stdin, Via::Tcp] {
-        let ended = walk_with(via, &[&long, &long, &long], &[]);
+        let ended = walk_with(via, &[(1.0, &long), (1.1, &long), (1.2, &long)]);
         assert_eq!(ended.summary["too_long"], 3, "{via:?}: {}", ended.summary);
         assert!(
             ended.summary["overflowed"].as_u64().unwrap() >= 3,

@@ -639,7 +639,7 @@ pub fn run(
     drop(rx);
     // The end: what the reorder buffer and the smoothers hold comes out, the recording closes.
     let mut warnings = Vec::new();
-    let mut dropped = clock_dropped;
+    let mut dropped = clock_dropped.clone();
     if let Some(run) = &mut running {
         let mut send = |pose: &Pose| {
             frames += 1;
@@ -651,10 +651,9 @@ pub fn run(
             warnings.push(e.to_string());
         }
         warnings.extend(run.poses.warnings().iter().cloned());
-        dropped.extend(run.lines.dropped_lines());
-        if let Some(take) = run.lines.take() {
-            dropped.extend(take.dropped_lines());
-        }
+        let mut parts = vec![&clock_dropped, run.lines.dropped_lines()];
+        parts.extend(run.lines.take().map(|t| t.dropped_lines()));
+        dropped = DroppedLines::merged(&parts);
     }
     let recording = match recorder {
         Some(r) => Some(r.finish().map_err(|e| record_error(settings, e))?),

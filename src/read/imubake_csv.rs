@@ -360,17 +360,24 @@ pub fn read_from(
 }
 
 /// Looks a sensor id up; the previous row's successor is tried first, as sensors usually take
-/// turns.
+/// turns. Past [`SensorTable::SCAN`] ids (a file naming thousands of garbage ids) a hash index
+/// answers instead of a scan, so a lookup never costs a pass over every id.
 struct SensorTable<T> {
     ids: Vec<(Box<[u8]>, T)>,
     next_guess: usize,
+    /// Id → position in `ids`, once there are more than [`SensorTable::SCAN`].
+    index: Option<std::collections::HashMap<Box<[u8]>, usize>>,
 }
 
 impl<T: Copy> SensorTable<T> {
+    /// Ids looked up by a scan; a body's sensors are far fewer.
+    const SCAN: usize = 64;
+
     fn new() -> Self {
         SensorTable {
             ids: Vec::new(),
             next_guess: 0,
+            index: None,
         }
     }
 
@@ -385,13 +392,27 @@ impl<T: Copy> SensorTable<T> {
             self.next_guess = guess + 1;
             return Some(self.ids[guess].1);
         }
-        let pos = self.ids.iter().position(|(k, _)| **k == *id)?;
+        let pos = match &self.index {
+            Some(index) => *index.get(id)?,
+            None => self.ids.iter().position(|(k, _)| **k == *id)?,
+        };
         self.next_guess = pos + 1;
         Some(self.ids[pos].1)
     }
 
     fn insert(&mut self, id: &[u8], value: T) {
         self.ids.push((id.into(), value));
+        if let Some(index) = &mut self.index {
+            index.insert(id.into(), self.ids.len() - 1);
+        } else if self.ids.len() > Self::SCAN {
+            self.index = Some(
+                self.ids
+                    .iter()
+                    .enumerate()
+                    .map(|(i, (k, _))| (k.clone(), i))
+                    .collect(),
+            );
+        }
     }
 }
 
@@ -961,6 +982,22 @@ pub(crate) fn world_directive(comment: &[u8]) -> Option<Result<World, crate::wor
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_sensor_table_finds_every_id_by_scan_and_by_index() {
+        let mut table = SensorTable::new();
+        let id = |k: u32| format!("sensor{k}").into_bytes();
+        for k in 0..1000u32 {
+            assert_eq!(table.find(&id(k)), None);
+            table.insert(&id(k), k);
+            // Past SCAN ids the index answers; every earlier id is still found.
+            for j in [0, k / 2, k] {
+                assert_eq!(table.find(&id(j)), Some(j), "{j} of {k}");
+            }
+        }
+        assert!(table.index.is_some());
+        assert_eq!(table.find(b"sensor1000"), None);
+    }
     use proptest::prelude::*;
 
     /// A row's outcome as text (Debug prints every double so it reads back to the same bits).

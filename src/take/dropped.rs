@@ -65,14 +65,22 @@ impl DroppedLines {
         self.kept.is_empty()
     }
 
-    /// Adds every report of `other` (its counted ones as counts).
-    pub fn extend(&mut self, other: &DroppedLines) {
-        for r in &other.kept {
-            self.push(r.clone());
+    /// Several streams' reports as one: the reports each kept whole, in line order, then counts
+    /// (a part's counted reports are counted, even where their lines come before another part's
+    /// kept ones).
+    pub fn merged(parts: &[&DroppedLines]) -> DroppedLines {
+        let mut kept: Vec<&LineReport> = parts.iter().flat_map(|p| p.kept.iter()).collect();
+        kept.sort_by_key(|r| r.line);
+        let mut out = DroppedLines::default();
+        for r in kept {
+            out.push(r.clone());
         }
-        for (kind, n) in &other.omitted {
-            self.count(kind, *n);
+        for p in parts {
+            for (kind, n) in &p.omitted {
+                out.count(kind, *n);
+            }
         }
+        out
     }
 
     /// Counts `n` reports of `kind` (under [`DroppedLines::OTHER`] once the kinds are full).
@@ -162,11 +170,29 @@ mod tests {
                 100 - DroppedLines::REASONS as u64
             )
         );
-        let mut merged = DroppedLines::default();
-        merged.extend(&d);
-        merged.extend(&d);
+        let merged = DroppedLines::merged(&[&d, &d]);
         assert_eq!(merged.total(), 2 * d.total());
         assert_eq!(merged.omitted_by_reason().len(), DroppedLines::REASONS + 1);
+    }
+
+    #[test]
+    fn merged_parts_list_their_reports_in_line_order() {
+        let mut a = DroppedLines::default();
+        let mut b = DroppedLines::default();
+        for line in (1..=1200).step_by(2) {
+            a.push(report(line, "odd"));
+        }
+        for line in (2..=1200).step_by(2) {
+            b.push(report(line, "even: x"));
+        }
+        let m = DroppedLines::merged(&[&a, &b]);
+        assert_eq!(m.total(), 1200);
+        let lines: Vec<u64> = m.reports().iter().map(|r| r.line).collect();
+        assert_eq!(lines, (1..=1000).collect::<Vec<u64>>());
+        assert_eq!(
+            m.omitted_by_reason(),
+            [("odd".to_string(), 100), ("even".to_string(), 100)]
+        );
     }
 
     #[test]
