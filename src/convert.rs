@@ -12,10 +12,7 @@ use crate::mapping::{
 use crate::pipeline::calibrate::HeadingSource;
 use crate::pipeline::sources::Origin;
 use crate::pipeline::{self, PipelineError, PipelineOptions};
-use crate::read::{
-    ReadError, ReadOptions, check_text, is_stream, read_stream, read_take, read_take_from_bytes,
-    sniff,
-};
+use crate::read::{ReadError, ReadOptions, check_text, is_stream, read_take, sniff};
 use crate::rig::file::RigLoadError;
 use crate::rig::subject::Subject;
 use crate::rig::{LengthUnit, Rig, load_rig};
@@ -340,9 +337,12 @@ fn hex(bytes: &[u8]) -> String {
 /// substitution) is read once into memory, then hashed and parsed.
 fn read_and_hash(input: &Path, options: &ReadOptions) -> Result<(Take, String), ReadError> {
     if is_stream(input) {
-        let bytes = read_stream(input)?;
-        let sha256 = hex(&Sha256::digest(&bytes));
-        return Ok((read_take_from_bytes(&bytes, input, options)?, sha256));
+        // Read as it arrives, hashed on the way: the format is judged from the first 8 KiB and
+        // each line is held to the readers' limit, so a pipe of garbage is refused early.
+        let mut hasher = Sha256::new();
+        let take =
+            crate::read::read_stream_observed(input, options, &mut |bytes| hasher.update(bytes))?;
+        return Ok((take, hex(&hasher.finalize())));
     }
     if input.is_file() {
         let head = sniff(input)?;

@@ -173,24 +173,36 @@ fn imubake() -> Command {
 /// KiB tell. The child must answer from them, never holding the rest, and stop reading.
 #[test]
 fn an_unknown_format_on_stdin_is_refused_after_its_first_bytes() {
-    let run = run_fed(
-        imubake().args(["inspect", "/dev/stdin"]),
-        vec![Segment {
-            chunk: vec![b'a'; MIB as usize],
-            times: 300,
-        }],
-        Duration::from_secs(300),
-    );
-    eprintln!("{}", run.describe());
-    assert_eq!(run.code, Some(1), "{}", run.describe());
-    assert!(
-        run.stderr.contains("unknown capture format"),
-        "{}",
-        run.describe()
-    );
-    assert!(run.peak_kib < PEAK_BOUND_KIB, "{}", run.describe());
-    // It read its prefix and left: the pipe took at most a few MiB before it closed.
-    assert!(run.fed < 16 * MIB, "{}", run.describe());
+    for command in ["inspect", "convert"] {
+        let out = tempfile::tempdir().unwrap();
+        let mut cmd = imubake();
+        cmd.args([command, "/dev/stdin"]);
+        if command == "convert" {
+            cmd.args(["--rig", "mixamo", "--out"]).arg(out.path());
+        }
+        let run = run_fed(
+            &mut cmd,
+            vec![Segment {
+                chunk: vec![b'a'; MIB as usize],
+                times: 300,
+            }],
+            Duration::from_secs(300),
+        );
+        eprintln!("{command}: {}", run.describe());
+        assert_eq!(run.code, Some(1), "{command}: {}", run.describe());
+        assert!(
+            run.stderr.contains("unknown capture format"),
+            "{command}: {}",
+            run.describe()
+        );
+        assert!(
+            run.peak_kib < PEAK_BOUND_KIB,
+            "{command}: {}",
+            run.describe()
+        );
+        // It read its prefix and left: the pipe took at most a few MiB before it closed.
+        assert!(run.fed < 16 * MIB, "{command}: {}", run.describe());
+    }
 }
 
 /// An imubake CSV header, then one 300 MB line without a newline: the header decides the
