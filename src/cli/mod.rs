@@ -75,7 +75,8 @@ pub struct ReadArgs {
     /// The sensors' world frame, overriding the format's (enu, ned, nwu, opensim, rig).
     #[arg(long, value_name = "WORLD")]
     world: Option<World>,
-    /// Samples per second of recordings without timestamps (WitMotion without time packets)
+    /// Samples per second of recordings without timestamps (WitMotion without time packets; an
+    /// Xsens MTw export with neither `// Update Rate:` nor SampleTimeFine)
     #[arg(long, value_name = "HZ", value_parser = parse_rate_hz)]
     rate: Option<f64>,
 }
