@@ -32,6 +32,12 @@ pub enum ViewError {
     Bind { addr: String, reason: String },
     #[error("chunk {chunk}: {reason}")]
     Chunk { chunk: usize, reason: String },
+    /// A rig of more joints than the page can be given ([`motion::MAX_JOINTS`]).
+    #[error(
+        "the rig has {joints} joints; imubake view shows at most {max} (the glTF writer's limit)",
+        max = motion::MAX_JOINTS
+    )]
+    TooManyJoints { joints: usize },
 }
 
 impl ViewError {

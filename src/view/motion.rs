@@ -15,6 +15,11 @@ use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+/// The most joints a take's rig may have to be shown: the glTF writer's limit (its chunks are
+/// GLBs). A take past it is refused when it is opened and when a server is bound to it, before
+/// anything is served.
+pub const MAX_JOINTS: usize = 65536;
+
 /// A take as the viewer serves it.
 #[derive(Debug)]
 pub struct ViewTake {
@@ -169,11 +174,13 @@ impl ViewTake {
         let (motion, fps, frames, (joints, feet)) = if has_extension(path, "glb") {
             let (fps, frames, joints) =
                 glb_timing(&bytes).map_err(|e| ViewError::input(path, e))?;
+            check_joints(path, joints.len())?;
             let feet = foot_names(&joints);
             (Motion::Glb(bytes), fps, frames, (joints, feet))
         } else {
             let bvh = crate::bvh::parse(&bytes).map_err(|e| ViewError::input(path, e))?;
             drop(bytes);
+            check_joints(path, bvh.joints().len())?;
             let units = match &sidecar {
                 Some((_, s)) => s.rig.units,
                 None => guess_units(&bvh),
@@ -328,6 +335,20 @@ impl ViewTake {
             imubake_version: env!("CARGO_PKG_VERSION"),
         }
     }
+}
+
+/// At most [`MAX_JOINTS`] joints.
+fn check_joints(path: &Path, joints: usize) -> Result<(), ViewError> {
+    if joints > MAX_JOINTS {
+        return Err(ViewError::input(
+            path,
+            format!(
+                "its rig has {joints} joints; imubake view shows at most {MAX_JOINTS} (the glTF \
+                 writer's limit)"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// A rig's joint names and feet.
