@@ -1,5 +1,6 @@
 //! The viewer's inputs never panic or hang: the files it opens (a BVH, a GLB, a sidecar) mutated
-//! byte by byte, and whatever a client sends the server as a request.
+//! byte by byte, and whatever a client sends the server as a request (answered with one
+//! well-formed response, heads near the limits with the status the limits give).
 
 use imubake::view::{ServeOptions, Server, ViewTake};
 use proptest::prelude::*;
@@ -142,6 +143,67 @@ fn status(answer: &[u8]) -> Option<u16> {
     text.strip_prefix("HTTP/1.1 ")?.get(..3)?.parse().ok()
 }
 
+/// An answer is nothing (closed) or one well-formed HTTP/1.1 response: a status line, headers,
+/// and a body of its `Content-Length`. Its status, if any.
+fn well_formed(answer: &[u8]) -> Result<Option<u16>, String> {
+    if answer.is_empty() {
+        return Ok(None);
+    }
+    let mut headers = [httparse::EMPTY_HEADER; 32];
+    let mut response = httparse::Response::new(&mut headers);
+    let at = match response.parse(answer) {
+        Ok(httparse::Status::Complete(at)) => at,
+        other => return Err(format!("{other:?}: {:?}", String::from_utf8_lossy(answer))),
+    };
+    if response.version != Some(1) {
+        return Err(format!(
+            "not HTTP/1.1: {:?}",
+            String::from_utf8_lossy(answer)
+        ));
+    }
+    let length = response
+        .headers
+        .iter()
+        .find(|h| h.name.eq_ignore_ascii_case("Content-Length"))
+        .and_then(|h| std::str::from_utf8(h.value).ok()?.parse::<usize>().ok())
+        .ok_or("no Content-Length")?;
+    if answer.len() - at != length {
+        return Err(format!(
+            "{} body bytes, Content-Length {length}",
+            answer.len() - at
+        ));
+    }
+    Ok(response.code)
+}
+
+/// A head with a request line of `line` bytes and, after `Host`, header lines of `lines`
+/// bytes (line ends excluded), and the status the limits give it: 414 when the request line
+/// is over 8192 bytes; else 431 when a header line is over 8192 bytes, there are over 100 of
+/// them (`Host` counted) or they total over 65 536 bytes with their line ends; else 200.
+fn head_near_the_limits(host: &str, line: usize, lines: &[usize]) -> (Vec<u8>, u16) {
+    let mut head = format!("GET /?{} HTTP/1.1\r\n", "a".repeat(line - 15));
+    let host_line = format!("Host: {host}");
+    let mut total = host_line.len() + 2;
+    head.push_str(&host_line);
+    head.push_str("\r\n");
+    for (i, &n) in lines.iter().enumerate() {
+        let name = format!("X-{i}: ");
+        head.push_str(&name);
+        head.push_str(&"p".repeat(n - name.len()));
+        head.push_str("\r\n");
+        total += n + 2;
+    }
+    head.push_str("\r\n");
+    let want = if line > 8192 {
+        414
+    } else if lines.iter().any(|&n| n > 8192) || lines.len() + 1 > 100 || total > 65536 {
+        431
+    } else {
+        200
+    };
+    (head.into_bytes(), want)
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(300))]
 
@@ -160,11 +222,29 @@ proptest! {
         prop_assert_eq!(status(&again), Some(200));
     }
 
-    /// Arbitrary bytes as a request: no crash, and the server keeps serving.
+    /// Arbitrary bytes as a request: no crash, the answer nothing or one well-formed HTTP/1.1
+    /// response, and the server keeps serving.
     #[test]
     fn arbitrary_request_bytes_never_stop_the_server(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
-        let _ = exchange(&bytes);
+        let answer = exchange(&bytes);
+        prop_assert!(well_formed(&answer).is_ok(), "{:?}", well_formed(&answer));
         let host = server();
+        let again = exchange(format!("GET / HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n").as_bytes());
+        prop_assert_eq!(status(&again), Some(200));
+    }
+
+    /// Heads around the limits (request lines of 15 to 8400 bytes, up to 105 header lines
+    /// of up to 8300 bytes): the answer is a well-formed response with the status the limits
+    /// give (414, 431, else 200), and the server keeps serving.
+    #[test]
+    fn heads_near_the_limits_get_the_limits_answer(
+        line in prop_oneof![15usize..200, 8180usize..8210, 8210usize..8400],
+        lines in proptest::collection::vec(prop_oneof![4 => 10usize..64, 1 => 7000usize..8300], 0..105),
+    ) {
+        let host = server();
+        let (head, want) = head_near_the_limits(host, line, &lines);
+        let answer = exchange(&head);
+        prop_assert_eq!(well_formed(&answer), Ok(Some(want)));
         let again = exchange(format!("GET / HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n").as_bytes());
         prop_assert_eq!(status(&again), Some(200));
     }
