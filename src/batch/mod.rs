@@ -11,7 +11,7 @@ pub use discover::{
     BatchTake, DiscoverError, DiscoverOptions, Discovery, FOLDER_CONFIG, SkipReason, Skipped,
     discover, is_session_folder, settings_file_kind, slash,
 };
-pub use process::{TakeJob, process_take};
+pub use process::{Attempt, TakeJob, attempt_take, environmental, process_take};
 pub use shard::Shard;
 
 use crate::convert::ConvertSettings;
