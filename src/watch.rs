@@ -18,12 +18,26 @@
 //! then abandons it ([`crate::write::abandon_writes`]: its temporary files removed, no ledger
 //! line) and returns.
 //!
+//! A take that failed for the environment's sake — its outputs or its ledger line could not be
+//! written: a read-only or full output folder, a quota, a file size limit
+//! ([`crate::batch::environmental`]) — is tried again while the watcher runs, [`RETRY_FIRST`]
+//! after the failure, then after twice as long each time up to [`RETRY_MAX`], each attempt told
+//! on the terminal; a take whose own data or settings failed it waits, as before, for the file or
+//! the settings to change.
+//!
+//! One watcher per output folder: [`WatchLock`] holds an exclusive lock (`flock`) on
+//! `<out>/.imubake/watch.lock`, which names the holder's PID and inbox, for as long as the watch
+//! runs; a second watcher on the same output stops at once with [`WatchError::AlreadyWatched`].
+//! The kernel releases the lock when its process dies, however it dies, so a lock file left by a
+//! killed watcher never blocks the next one. (`batch` takes no lock: its shards share a ledger on
+//! purpose.)
+//!
 //! Everything worth telling is a `tracing` event (one `converted`/`failed` line per take with its
 //! duration, [`crate::batch::TakeResult::log`]); the binary installs the subscriber.
 
 use crate::batch::{
-    BatchTake, DiscoverOptions, Skipped, Summary, TakeJob, TakeResult, TakeStatus, discover,
-    process_take,
+    Attempt, BatchTake, DiscoverOptions, Skipped, Summary, TakeJob, TakeResult, TakeStatus,
+    attempt_take, discover,
 };
 use crate::convert::{ConvertSettings, source_sha256};
 use crate::ledger::{
@@ -33,9 +47,10 @@ use crate::write::error_report::ErrorReport;
 use notify::RecursiveMode;
 use notify::event::{AccessKind, AccessMode, EventKind, ModifyKind, RenameMode};
 use notify_debouncer_full::{DebounceEventResult, new_debouncer};
+use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};
 use std::fs;
-use std::io;
+use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -56,6 +71,124 @@ pub const FINISH_GRACE: Duration = Duration::from_secs(2);
 /// modifies, close-write) into one wake-up, and leaves most of the budget to the scan, the
 /// `/proc` check and the conversion.
 pub const DEBOUNCE: Duration = Duration::from_millis(50);
+
+/// How long after a take failed for the environment's sake it is tried again the first time;
+/// each further failure doubles the wait, up to [`RETRY_MAX`].
+pub const RETRY_FIRST: Duration = Duration::from_secs(1);
+
+/// The longest wait between two attempts at a take the environment failed.
+pub const RETRY_MAX: Duration = Duration::from_secs(60);
+
+/// The wait after the `attempts`-th failure in a row (1: [`RETRY_FIRST`]).
+pub fn retry_delay(attempts: u32) -> Duration {
+    let doublings = attempts.saturating_sub(1).min(16);
+    (RETRY_FIRST * (1u32 << doublings)).min(RETRY_MAX)
+}
+
+/// The lock file of an output folder's watcher.
+pub fn lock_path(out: &Path) -> PathBuf {
+    out.join(".imubake").join("watch.lock")
+}
+
+/// What a watcher's lock file says of it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LockHolder {
+    pub pid: u32,
+    /// The inbox it follows (absolute when it could be made so).
+    pub inbox: PathBuf,
+}
+
+/// Why a watch could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum WatchError {
+    /// Another watcher holds the output folder's lock.
+    #[error("{}", already_watched(.out, .lock, .holder.as_ref()))]
+    AlreadyWatched {
+        out: PathBuf,
+        lock: PathBuf,
+        /// What the lock file says of the watcher holding it (`None`: it says nothing readable).
+        holder: Option<LockHolder>,
+    },
+    #[error(transparent)]
+    Io(#[from] io::Error),
+}
+
+fn already_watched(out: &Path, lock: &Path, holder: Option<&LockHolder>) -> String {
+    let who = match holder {
+        Some(h) => format!("pid {}, inbox {}", h.pid, h.inbox.display()),
+        None => format!("its pid and inbox unknown: {} does not say", lock.display()),
+    };
+    format!(
+        "{}: another `imubake watch` is following this output folder ({who}); one watcher per \
+         output folder: stop that one, or give this one another --out",
+        out.display()
+    )
+}
+
+/// The lock that makes a watcher the only one on its output folder: an exclusive `flock` on
+/// `<out>/.imubake/watch.lock` (through `File::try_lock`), held until it is dropped or the
+/// process dies (the kernel releases it then, so a killed watcher's lock file blocks nothing).
+/// The file holds the holder's [`LockHolder`] as JSON, for the message a second watcher gives;
+/// it is never removed (removing it could let two watchers lock two different files).
+#[derive(Debug)]
+pub struct WatchLock {
+    _file: fs::File,
+}
+
+impl WatchLock {
+    /// Takes the lock of `out` for a watcher of `inbox`, or says who holds it.
+    pub fn acquire(out: &Path, inbox: &Path) -> Result<WatchLock, WatchError> {
+        let path = lock_path(out);
+        if let Some(dir) = path.parent() {
+            fs::create_dir_all(dir)?;
+        }
+        let mut file = fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(fs::TryLockError::WouldBlock) => {
+                return Err(WatchError::AlreadyWatched {
+                    out: out.to_path_buf(),
+                    holder: read_holder(&path),
+                    lock: path,
+                });
+            }
+            Err(fs::TryLockError::Error(e)) => return Err(e.into()),
+        }
+        let holder = LockHolder {
+            pid: std::process::id(),
+            inbox: inbox.canonicalize().unwrap_or_else(|_| inbox.to_path_buf()),
+        };
+        let mut json = serde_json::to_vec(&holder).map_err(io::Error::other)?;
+        json.push(b'\n');
+        file.set_len(0)?;
+        file.write_all(&json)?;
+        Ok(WatchLock { _file: file })
+    }
+}
+
+/// The holder a lock file names. The holder writes it just after taking the lock, so an empty
+/// file is read again for up to a second.
+fn read_holder(path: &Path) -> Option<LockHolder> {
+    let deadline = Instant::now() + Duration::from_secs(1);
+    loop {
+        let mut text = String::new();
+        let read = fs::File::open(path).and_then(|mut f| f.read_to_string(&mut text));
+        if read.is_ok()
+            && let Ok(holder) = serde_json::from_str::<LockHolder>(text.trim())
+        {
+            return Some(holder);
+        }
+        if Instant::now() >= deadline {
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
 
 #[derive(Debug, Clone)]
 pub struct WatchOptions {
@@ -184,6 +317,16 @@ struct Pending {
     busy: bool,
 }
 
+/// A take the environment failed: tried again at `at` unless it changes first.
+#[derive(Debug, Clone, Copy)]
+struct Retry {
+    /// The take's stat when it failed.
+    stat: SourceStat,
+    /// Failures in a row.
+    attempts: u32,
+    at: Instant,
+}
+
 /// A subfolder config's stat when last loaded, and its last good settings and fingerprint.
 type FolderSettings = (Option<SourceStat>, Option<(ConvertSettings, String)>);
 
@@ -214,6 +357,8 @@ struct Watch<'a> {
     abandoned: bool,
     /// Each take's latest outcome in this run, which the summary counts ([`Outcomes`]).
     outcomes: Outcomes,
+    /// Takes the environment failed, waiting to be tried again.
+    retries: HashMap<String, Retry>,
 }
 
 /// Each take's latest outcome in a watch run: a take that failed and then converted (its
@@ -445,14 +590,53 @@ impl Watch<'_> {
         self.pending.remove(&take.rel);
         self.done.insert(take.rel.clone(), stat);
         let (settings, fingerprint) = self.settings_for(take);
+        let retry = self.retries.remove(&take.rel);
         if self.current_under_its_own_settings(take, stat, &fingerprint, force_hash) {
             self.outcomes.record(&take.rel, TakeStatus::Skipped);
             return;
         }
-        let Some(result) = self.convert_on_worker(take, settings, fingerprint, stop) else {
+        let again = retry.is_some();
+        let Some(Attempt {
+            result,
+            environment,
+        }) = self.convert_on_worker(take, settings, fingerprint, again, stop)
+        else {
             return;
         };
-        log_result(&result, &self.opts.out);
+        match environment {
+            Some(kind) => {
+                let attempts = retry.map_or(1, |r| r.attempts + 1);
+                let wait = retry_delay(attempts);
+                self.retries.insert(
+                    take.rel.clone(),
+                    Retry {
+                        stat,
+                        attempts,
+                        at: Instant::now() + wait,
+                    },
+                );
+                warn!(
+                    source = result.source.as_str(),
+                    duration_ms = u64::try_from(result.duration.as_millis()).unwrap_or(u64::MAX),
+                    attempt = attempts,
+                    retry_in_s = wait.as_secs(),
+                    error_kind = ?kind,
+                    error_report = result.error_report.as_deref().unwrap_or(""),
+                    reason = result.reason.as_deref().unwrap_or(""),
+                    "cannot write the take's outputs or its ledger line; retrying"
+                );
+            }
+            None => {
+                log_result(&result, &self.opts.out);
+                if let Some(retry) = retry {
+                    info!(
+                        source = result.source.as_str(),
+                        attempts = retry.attempts + 1,
+                        "written after retrying"
+                    );
+                }
+            }
+        }
         self.outcomes.record(&take.rel, result.status);
         if result.status != TakeStatus::Skipped {
             match Ledger::load(&self.opts.out) {
@@ -472,8 +656,9 @@ impl Watch<'_> {
         take: &BatchTake,
         settings: ConvertSettings,
         fingerprint: String,
+        retry: bool,
         stop: &AtomicBool,
-    ) -> Option<TakeResult> {
+    ) -> Option<Attempt> {
         let (tx, rx) = mpsc::channel();
         let ledger = Arc::clone(&self.ledger);
         let (owned_take, out) = (take.clone(), self.opts.out.clone());
@@ -486,7 +671,7 @@ impl Watch<'_> {
                     fingerprint: &fingerprint,
                     ledger: &ledger,
                 };
-                let _ = tx.send(process_take(&owned_take, &job));
+                let _ = tx.send(attempt_take(&owned_take, &job, retry));
             });
         if let Err(e) = spawned {
             error!(
@@ -536,6 +721,7 @@ impl Watch<'_> {
         let live: HashSet<&str> = takes.iter().map(|t| t.rel.as_str()).collect();
         self.pending.retain(|rel, _| live.contains(rel.as_str()));
         self.done.retain(|rel, _| live.contains(rel.as_str()));
+        self.retries.retain(|rel, _| live.contains(rel.as_str()));
         // Settled or closed: complete unless some process still has them open for writing.
         let mut candidates: Vec<(&BatchTake, SourceStat, PathBuf, bool)> = Vec::new();
         for take in &takes {
@@ -547,6 +733,16 @@ impl Watch<'_> {
             };
             // Written (an event) or changed since this watcher handled it: its hash decides.
             let written = self.closed.contains(&take.path);
+            // The environment failed it: tried again when due, unless it changed since.
+            if let Some(retry) = self.retries.get(&take.rel) {
+                if retry.stat == stat && !written {
+                    if Instant::now() >= retry.at {
+                        self.convert(take, stat, false, stop);
+                    }
+                    continue;
+                }
+                self.retries.remove(&take.rel);
+            }
             let seen = self.done.get(&take.rel).copied();
             if seen == Some(stat) && !written && !self.failed_under_other_settings(take) {
                 continue;
@@ -604,6 +800,11 @@ impl Watch<'_> {
         }
     }
 
+    /// When the next take the environment failed is due to be tried again.
+    fn next_retry(&self) -> Option<Instant> {
+        self.retries.values().map(|r| r.at).min()
+    }
+
     /// When the next pending take settles (not counting the busy ones).
     fn next_settle(&self) -> Option<Instant> {
         self.pending
@@ -643,13 +844,16 @@ type Wake = Vec<PathBuf>;
 /// Converts the inbox's backlog, then (unless `once`) follows it until `stop` is set, finishing
 /// the take in progress. `load_settings` gives the settings from a config file (or none); it is
 /// called again whenever the config file changes. Returns what was converted, failed and skipped,
-/// each take counted once, by its latest outcome ([`Outcomes`]).
+/// each take counted once, by its latest outcome ([`Outcomes`]). The output folder's
+/// [`WatchLock`] is held throughout (`--once` too); when another watcher holds it, returns
+/// [`WatchError::AlreadyWatched`] before doing anything else.
 pub fn run(
     opts: &WatchOptions,
     load_settings: &dyn Fn(Option<&Path>) -> Result<ConvertSettings, String>,
     stop: &AtomicBool,
-) -> io::Result<Summary> {
+) -> Result<Summary, WatchError> {
     fs::create_dir_all(&opts.out)?;
+    let _lock = WatchLock::acquire(&opts.out, &opts.inbox)?;
     let config_seen = config_stat(&opts.config);
     let config_arg = opts.config.is_file().then_some(opts.config.as_path());
     let settings = load_settings(config_arg).map_err(io::Error::other)?;
@@ -670,6 +874,7 @@ pub fn run(
         closed: Default::default(),
         abandoned: false,
         outcomes: Outcomes::default(),
+        retries: HashMap::new(),
     };
     if opts.once {
         watch.scan(stop, false);
@@ -720,9 +925,13 @@ pub fn run(
     // The backlog: current takes are done at once, the others once they are settled.
     watch.scan(stop, true);
     while !stop.load(Ordering::SeqCst) && !watch.abandoned {
-        // Until the next poll (events: a fallback rescan) or the next take to settle, if sooner.
+        // Until the next poll (events: a fallback rescan) or the next take to settle or to try
+        // again, if sooner.
         let until_settle = watch
             .next_settle()
+            .into_iter()
+            .chain(watch.next_retry())
+            .min()
             .map(|at| at.saturating_duration_since(Instant::now()));
         let wait = opts
             .poll
@@ -852,6 +1061,45 @@ mod tests {
                 skipped: 1,
             }
         );
+    }
+
+    #[test]
+    fn retries_wait_one_second_doubling_to_a_minute() {
+        let waits: Vec<u64> = (1..=9).map(|n| retry_delay(n).as_secs()).collect();
+        assert_eq!(waits, [1, 2, 4, 8, 16, 32, 60, 60, 60]);
+        assert_eq!(retry_delay(u32::MAX), RETRY_MAX);
+    }
+
+    /// A second lock on one output folder is refused and names the holder (`flock` locks belong
+    /// to open files, so a second open in this process is refused as another process would
+    /// be); dropped, the lock is free again and its file names the new holder.
+    #[test]
+    fn one_lock_per_output_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let (out, inbox) = (dir.path().join("out"), dir.path().join("in"));
+        fs::create_dir_all(&inbox).unwrap();
+        let first = WatchLock::acquire(&out, &inbox).unwrap();
+        let holder = LockHolder {
+            pid: std::process::id(),
+            inbox: inbox.canonicalize().unwrap(),
+        };
+        match WatchLock::acquire(&out, Path::new("elsewhere")) {
+            Err(e @ WatchError::AlreadyWatched { .. }) => {
+                let WatchError::AlreadyWatched { holder: seen, .. } = &e else {
+                    unreachable!()
+                };
+                assert_eq!(seen.as_ref(), Some(&holder));
+                let text = e.to_string();
+                assert!(text.contains(&format!("pid {}", holder.pid)), "{text}");
+                assert!(text.contains(&holder.inbox.display().to_string()), "{text}");
+            }
+            other => panic!("{other:?}"),
+        }
+        drop(first);
+        let _again = WatchLock::acquire(&out, dir.path()).unwrap();
+        let text = fs::read_to_string(lock_path(&out)).unwrap();
+        let now: LockHolder = serde_json::from_str(text.trim()).unwrap();
+        assert_eq!(now.inbox, dir.path().canonicalize().unwrap());
     }
 
     #[test]

@@ -64,8 +64,17 @@ pub fn run(args: WatchArgs) -> anyhow::Result<ExitCode> {
             .settings_with(user_config.as_deref().or(config))
             .map_err(|e| format!("{e:#}"))
     };
-    let summary = watch::run(&opts, &load, &stop)
-        .with_context(|| format!("{}: cannot watch", args.inbox.display()))?;
+    let summary = match watch::run(&opts, &load, &stop) {
+        Ok(summary) => summary,
+        // Another watcher follows this output folder: say which, and stop at once.
+        Err(e @ watch::WatchError::AlreadyWatched { .. }) => {
+            tracing::error!("{e}");
+            return Ok(ExitCode::from(1));
+        }
+        Err(e) => {
+            return Err(e).with_context(|| format!("{}: cannot watch", args.inbox.display()));
+        }
+    };
     println!("{summary}");
     Ok(if args.once && summary.failed > 0 {
         ExitCode::from(1)
