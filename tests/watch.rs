@@ -1219,3 +1219,492 @@ fn a_take_that_converted_after_failing_counts_as_converted() {
         "converted 2, failed 1, skipped 0"
     );
 }
+
+// ── Issue 44: the environment's failures retried, one watcher per output folder ─────────────────
+
+/// The bundled walk's first second (16 sensors, 30 frames at 30 fps): a quick take whose BVH
+/// (22 KB) and GLB (46 KB) are both larger than 16 KiB.
+fn short_walk() -> Vec<u8> {
+    static SHORT: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    SHORT
+        .get_or_init(|| {
+            let text = fs::read_to_string(repo("samples/walk.csv")).unwrap();
+            let mut out = String::new();
+            for line in text.lines() {
+                let time = line.split(',').next().and_then(|t| t.parse::<f64>().ok());
+                if time.is_none_or(|t| t < 1.0) {
+                    out.push_str(line);
+                    out.push('\n');
+                }
+            }
+            out.into_bytes()
+        })
+        .clone()
+}
+
+/// `imubake watch <inbox> --out <out>` for the walk (its mapping; BVH, GLB and sidecar), stdout
+/// dropped, stderr piped (a file would be held to the child's file size limit too).
+fn walk_watch(inbox: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_imubake"));
+    cmd.arg("watch")
+        .arg(inbox)
+        .arg("--out")
+        .arg(out)
+        .arg("--mapping")
+        .arg(repo("mappings/paper000_16imu_mixamo.json"))
+        .args(extra)
+        .env_remove("RUST_LOG")
+        .env_remove("IMUBAKE_LOG")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    cmd
+}
+
+/// A child's stderr, gathered line by line on a thread as it comes.
+#[derive(Clone)]
+struct Stderr(Arc<std::sync::Mutex<String>>);
+
+impl Stderr {
+    fn of(child: &mut Child) -> Stderr {
+        let pipe = child.stderr.take().expect("stderr piped");
+        let text = Arc::new(std::sync::Mutex::new(String::new()));
+        let sink = Arc::clone(&text);
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(pipe).lines() {
+                let Ok(line) = line else { break };
+                let mut text = sink.lock().unwrap();
+                text.push_str(&line);
+                text.push('\n');
+            }
+        });
+        Stderr(text)
+    }
+
+    fn text(&self) -> String {
+        self.0.lock().unwrap().clone()
+    }
+
+    /// The lines holding every one of `parts`.
+    fn lines_with(&self, parts: &[&str]) -> Vec<String> {
+        self.text()
+            .lines()
+            .filter(|l| parts.iter().all(|p| l.contains(p)))
+            .map(str::to_string)
+            .collect()
+    }
+
+    /// Waits up to `secs` for `n` lines holding every one of `parts`.
+    fn wait_lines(&self, parts: &[&str], n: usize, secs: u64) -> Vec<String> {
+        let deadline = Instant::now() + Duration::from_secs(secs);
+        loop {
+            let lines = self.lines_with(parts);
+            if lines.len() >= n {
+                return lines;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "no {n} line(s) with {parts:?} within {secs} s:\n{}",
+                self.text()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+/// Waits up to `secs` for `path` to exist; how long it took.
+fn time_until(path: &Path, secs: u64) -> Duration {
+    let start = Instant::now();
+    assert!(
+        wait_for(path, secs),
+        "{} did not appear within {secs} s",
+        path.display()
+    );
+    start.elapsed()
+}
+
+/// Ledger lines of `source`, by status, in order.
+fn statuses(out: &Path, source: &str) -> Vec<String> {
+    ledger(out)
+        .remove(source)
+        .unwrap_or_default()
+        .into_iter()
+        .map(|(status, _)| status)
+        .collect()
+}
+
+fn chmod(path: &Path, mode: u32) {
+    use std::os::unix::fs::PermissionsExt;
+    fs::set_permissions(path, fs::Permissions::from_mode(mode)).unwrap();
+}
+
+/// Makes a folder's permissions bind the watcher `cmd` will start. These tests run as root (the
+/// project's CI runs in a root container), and root writes through a missing write permission;
+/// read-only bind mounts need privileges a container may lack. So as root the watcher runs as
+/// `nobody` (uid and gid 65534; std drops the supplementary groups when root sets a uid) and
+/// `root` (the test's folder) is given to it; a `chmod` then binds the watcher as it binds any
+/// user. As any other user the watcher runs as that user, whom `chmod` binds already. The binary
+/// and the repository's mapping must be readable by `nobody` (they are: 0755 and 0644).
+fn unprivileged(cmd: &mut Command, root: &Path) {
+    use std::os::unix::process::CommandExt;
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        return;
+    }
+    fn give(path: &Path) {
+        std::os::unix::fs::chown(path, Some(65534), Some(65534)).unwrap();
+        if path.is_dir() {
+            for entry in fs::read_dir(path).unwrap() {
+                give(&entry.unwrap().path());
+            }
+        }
+    }
+    give(root);
+    cmd.uid(65534).gid(65534);
+}
+
+/// A take whose output folder is read-only (`chmod 0555` on the subfolder its outputs go to,
+/// binding the watcher as described at [`unprivileged`]) fails for the environment's sake: the
+/// terminal says it is retried, with the error's kind, again and again (1 s, then 2 s, …) while
+/// the ledger records the failure once. Made writable again, the take converts at the next
+/// attempt, without a restart, exactly once, with all its outputs and no error report.
+#[test]
+fn a_read_only_output_folder_is_retried_until_writable_then_converts_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(inbox.join("day1")).unwrap();
+    fs::create_dir_all(out.join("day1")).unwrap();
+    fs::write(inbox.join("day1/walk.csv"), short_walk()).unwrap();
+    let mut cmd = walk_watch(&inbox, &out, &[]);
+    unprivileged(&mut cmd, dir.path());
+    chmod(&out.join("day1"), 0o555);
+    let mut child = cmd.spawn().expect("spawn imubake watch");
+    let stderr = Stderr::of(&mut child);
+
+    let retrying = ["retrying", r#"source="day1/walk.csv""#];
+    let lines = stderr.wait_lines(&retrying, 3, 30);
+    for (i, line) in lines.iter().take(3).enumerate() {
+        assert!(
+            line.contains(&format!("attempt={}", i + 1))
+                && line.contains(&format!("retry_in_s={}", 1 << i))
+                && line.contains("error_kind=PermissionDenied"),
+            "{line}"
+        );
+    }
+    assert!(visible(&out.join("day1")).is_empty(), "nothing written yet");
+    assert_eq!(
+        statuses(&out, "day1/walk.csv"),
+        ["failed"],
+        "one ledger line for the failure, however many attempts"
+    );
+
+    chmod(&out.join("day1"), 0o755);
+    let took = time_until(&out.join("day1/walk.imubake.json"), 30);
+    eprintln!("writable again → converted in {} ms", took.as_millis());
+    // The third failure waits 4 s before the next attempt; 30 s is only a bound for a slow host.
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the same watcher, still running"
+    );
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(interrupt(child), 0);
+
+    assert_eq!(
+        visible(&out.join("day1")),
+        ["walk.bvh", "walk.glb", "walk.imubake.json"]
+    );
+    assert_consistent(&out.join("day1"));
+    assert_eq!(statuses(&out, "day1/walk.csv"), ["failed", "converted"]);
+    let text = stderr.text();
+    let converted: Vec<TakeLine> = take_lines(&text)
+        .into_iter()
+        .filter(|l| l.status == "converted")
+        .collect();
+    assert_eq!(converted.len(), 1, "{text}");
+    assert_eq!(
+        stderr
+            .lines_with(&["written after retrying", "day1/walk.csv"])
+            .len(),
+        1,
+        "{text}"
+    );
+}
+
+/// Sets the file size limit of process `pid` (`RLIMIT_FSIZE`, soft; the hard one unlimited).
+fn set_file_size_limit(pid: Option<u32>, bytes: u64) {
+    let limit = libc::rlimit {
+        rlim_cur: bytes,
+        rlim_max: libc::RLIM_INFINITY,
+    };
+    // SAFETY: prlimit reads `limit` and writes nothing (a null old limit).
+    let rc = unsafe {
+        libc::prlimit(
+            pid.map_or(0, |p| p as libc::pid_t),
+            libc::RLIMIT_FSIZE,
+            &limit,
+            std::ptr::null_mut(),
+        )
+    };
+    assert_eq!(rc, 0, "prlimit: {}", std::io::Error::last_os_error());
+}
+
+/// A full disk, simulated by a file size limit: the watcher starts with `RLIMIT_FSIZE` at 16 KiB
+/// and `SIGXFSZ` ignored (set between fork and exec), so writing the take's 22 KB BVH or 46 KB
+/// GLB fails with `EFBIG` as a full disk fails with `ENOSPC` — both are the environment's. The
+/// terminal says the take is retried; the `.error.json` (small enough) and one ledger line record
+/// the failure. The limit is then lifted while the watcher runs (`prlimit` on its pid): the take
+/// converts at the next attempt, once, without a restart.
+#[test]
+fn a_full_disk_is_retried_until_there_is_room_then_converts_once() {
+    use std::os::unix::process::CommandExt;
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    fs::write(inbox.join("walk.csv"), short_walk()).unwrap();
+    let mut cmd = walk_watch(&inbox, &out, &[]);
+    // SAFETY: between fork and exec only async-signal-safe calls (signal, setrlimit).
+    unsafe {
+        cmd.pre_exec(|| {
+            libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+            let limit = libc::rlimit {
+                rlim_cur: 16 << 10,
+                rlim_max: libc::RLIM_INFINITY,
+            };
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &limit) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let mut child = cmd.spawn().expect("spawn imubake watch");
+    let stderr = Stderr::of(&mut child);
+
+    let lines = stderr.wait_lines(&["retrying", r#"source="walk.csv""#], 2, 30);
+    assert!(
+        lines[0].contains("attempt=1")
+            && lines[0].contains("error_kind=FileTooLarge")
+            && lines[1].contains("attempt=2"),
+        "{lines:?}"
+    );
+    let report: Value =
+        serde_json::from_str(&fs::read_to_string(out.join("walk.error.json")).unwrap()).unwrap();
+    assert!(
+        report["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("cannot write")),
+        "{report}"
+    );
+    assert_eq!(
+        visible(&out),
+        ["walk.error.json"],
+        "nothing partial beside it"
+    );
+    assert_eq!(statuses(&out, "walk.csv"), ["failed"]);
+
+    set_file_size_limit(Some(child.id()), libc::RLIM_INFINITY);
+    let took = time_until(&out.join("walk.imubake.json"), 30);
+    eprintln!("room again → converted in {} ms", took.as_millis());
+    assert!(child.try_wait().unwrap().is_none(), "no restart");
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(interrupt(child), 0);
+    assert_eq!(visible(&out), ["walk.bvh", "walk.glb", "walk.imubake.json"]);
+    assert_consistent(&out);
+    assert_eq!(statuses(&out, "walk.csv"), ["failed", "converted"]);
+}
+
+/// With the ledger not writable (`chmod 0444` on `ledger.jsonl`, binding the watcher as described
+/// at [`unprivileged`]), a take that converts cannot be recorded: its outputs are removed, its
+/// `.error.json` says why (the ledger named), the terminal says it is retried; once the ledger is
+/// writable again the take converts and is recorded once, and the error report goes.
+#[test]
+fn an_unwritable_ledger_is_told_in_the_error_report_and_retried() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    fs::create_dir_all(&out).unwrap();
+    fs::write(inbox.join("first.csv"), short_walk()).unwrap();
+    let mut cmd = walk_watch(&inbox, &out, &[]);
+    unprivileged(&mut cmd, dir.path());
+    let mut child = cmd.spawn().expect("spawn imubake watch");
+    let stderr = Stderr::of(&mut child);
+    // The backlog converted and recorded (the sidecar comes before the ledger line).
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while statuses(&out, "first.csv").is_empty() {
+        assert!(Instant::now() < deadline, "the backlog: {}", stderr.text());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+
+    let ledger_file = out.join(".imubake/ledger.jsonl");
+    chmod(&ledger_file, 0o444);
+    fs::write(inbox.join(".second.csv.tmp"), short_walk()).unwrap();
+    fs::rename(inbox.join(".second.csv.tmp"), inbox.join("second.csv")).unwrap();
+    let lines = stderr.wait_lines(&["retrying", r#"source="second.csv""#], 1, 30);
+    assert!(
+        lines[0].contains("error_kind=PermissionDenied") && lines[0].contains("ledger.jsonl"),
+        "{lines:?}"
+    );
+    let report: Value =
+        serde_json::from_str(&fs::read_to_string(out.join("second.error.json")).unwrap()).unwrap();
+    let reason = report["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("cannot record it in") && reason.contains("ledger.jsonl"),
+        "{reason}"
+    );
+    assert!(report["hint"].as_str().is_some(), "{report}");
+    for name in ["second.bvh", "second.glb", "second.imubake.json"] {
+        assert!(
+            !out.join(name).exists(),
+            "{name} stays without a ledger line"
+        );
+    }
+    assert!(statuses(&out, "second.csv").is_empty());
+
+    chmod(&ledger_file, 0o644);
+    let took = time_until(&out.join("second.imubake.json"), 30);
+    eprintln!(
+        "ledger writable again → converted in {} ms",
+        took.as_millis()
+    );
+    assert!(child.try_wait().unwrap().is_none(), "no restart");
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(interrupt(child), 0);
+    assert!(!out.join("second.error.json").exists());
+    assert_eq!(statuses(&out, "second.csv"), ["converted"]);
+    assert_eq!(statuses(&out, "first.csv"), ["converted"]);
+    for name in ["second.bvh", "second.glb", "second.imubake.json"] {
+        assert!(out.join(name).is_file(), "{name}");
+    }
+}
+
+/// The PID and inbox a lock file names.
+fn lock_holder(out: &Path) -> Option<(u32, PathBuf)> {
+    let text = fs::read_to_string(out.join(".imubake/watch.lock")).ok()?;
+    let v: Value = serde_json::from_str(text.trim()).ok()?;
+    Some((
+        u32::try_from(v["pid"].as_u64()?).ok()?,
+        PathBuf::from(v["inbox"].as_str()?),
+    ))
+}
+
+/// Waits up to `secs` for a child's exit code; kills it and panics past that.
+fn exit_within(child: &mut Child, secs: u64, what: &str) -> i32 {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status.code().unwrap_or(-1);
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("{what}: still running after {secs} s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The issue's two watchers: a second watcher on the same output folder (the same inbox, or
+/// another) exits at once, non-zero, naming the first's PID and inbox; the first alone converts
+/// 100 takes dropped at once, each exactly once (100 ledger lines, all converted) with its BVH,
+/// GLB and sidecar.
+#[test]
+fn a_second_watcher_on_one_output_exits_and_the_first_converts_each_take_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    let other_inbox = dir.path().join("other");
+    fs::create_dir_all(&inbox).unwrap();
+    fs::create_dir_all(&other_inbox).unwrap();
+    let mut first = walk_watch(&inbox, &out, &[]).spawn().unwrap();
+    let first_log = Stderr::of(&mut first);
+    first_log.wait_lines(&["watching"], 1, 30);
+    let canonical_inbox = inbox.canonicalize().unwrap();
+
+    for second_inbox in [&inbox, &other_inbox] {
+        let mut second = walk_watch(second_inbox, &out, &[]).spawn().unwrap();
+        let second_log = Stderr::of(&mut second);
+        let code = exit_within(&mut second, 10, "the second watcher");
+        assert_ne!(code, 0);
+        std::thread::sleep(Duration::from_millis(100));
+        let text = second_log.text();
+        assert!(
+            text.contains(&format!("pid {}", first.id()))
+                && text.contains(&format!("inbox {}", canonical_inbox.display())),
+            "{text}"
+        );
+        assert!(!text.contains("watching"), "{text}");
+    }
+    assert_eq!(
+        lock_holder(&out),
+        Some((first.id(), canonical_inbox.clone()))
+    );
+
+    let takes: Vec<String> = (0..100).map(|i| format!("t{i:03}")).collect();
+    for stem in &takes {
+        let tmp = inbox.join(format!(".{stem}.csv.tmp"));
+        fs::write(&tmp, short_walk()).unwrap();
+        fs::rename(&tmp, inbox.join(format!("{stem}.csv"))).unwrap();
+    }
+    let deadline = Instant::now() + Duration::from_secs(180);
+    for stem in &takes {
+        let left = deadline.saturating_duration_since(Instant::now());
+        assert!(
+            wait_for(
+                &out.join(format!("{stem}.imubake.json")),
+                left.as_secs().max(1)
+            ),
+            "{stem} within 180 s"
+        );
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(interrupt(first), 0);
+
+    let text = fs::read_to_string(out.join(".imubake/ledger.jsonl")).unwrap();
+    assert_eq!(text.lines().count(), 100, "one ledger line per take");
+    let ledger = ledger(&out);
+    assert_eq!(ledger.len(), 100);
+    for stem in &takes {
+        let lines = &ledger[&format!("{stem}.csv")];
+        assert_eq!(lines.len(), 1, "{stem}: {lines:?}");
+        assert_eq!(lines[0].0, "converted", "{stem}");
+        for ext in ["bvh", "glb", "imubake.json"] {
+            assert!(out.join(format!("{stem}.{ext}")).is_file(), "{stem}.{ext}");
+        }
+    }
+    assert_eq!(
+        visible(&out).len(),
+        300,
+        "nothing else: {:?}",
+        visible(&out)
+    );
+    assert_consistent(&out);
+}
+
+/// A watcher killed with SIGKILL leaves its lock file behind, naming it; the kernel released
+/// the lock with the process, so the next watcher on that output takes it (the file then names
+/// the new one) and converts.
+#[test]
+fn a_killed_watchers_lock_is_taken_by_the_next_watcher() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    let mut killed = walk_watch(&inbox, &out, &[]).spawn().unwrap();
+    Stderr::of(&mut killed).wait_lines(&["watching"], 1, 30);
+    let canonical_inbox = inbox.canonicalize().unwrap();
+    assert_eq!(
+        lock_holder(&out),
+        Some((killed.id(), canonical_inbox.clone()))
+    );
+    killed.kill().unwrap(); // SIGKILL
+    killed.wait().unwrap();
+    assert!(out.join(".imubake/watch.lock").is_file(), "left behind");
+
+    let mut next = walk_watch(&inbox, &out, &[]).spawn().unwrap();
+    let log = Stderr::of(&mut next);
+    log.wait_lines(&["watching"], 1, 30);
+    assert_eq!(lock_holder(&out), Some((next.id(), canonical_inbox)));
+    fs::write(inbox.join("walk.csv"), short_walk()).unwrap();
+    assert!(
+        wait_for(&out.join("walk.imubake.json"), 30),
+        "{}",
+        log.text()
+    );
+    assert_eq!(interrupt(next), 0);
+}
