@@ -1708,3 +1708,29 @@ fn a_killed_watchers_lock_is_taken_by_the_next_watcher() {
     );
     assert_eq!(interrupt(next), 0);
 }
+
+/// A file standing where a take's output folder goes (works as any user, root included) is the
+/// environment's failure too: retried, and converted once the file is moved away.
+#[test]
+fn a_file_in_place_of_the_output_folder_is_retried_until_moved() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(inbox.join("day3")).unwrap();
+    fs::create_dir_all(&out).unwrap();
+    fs::write(out.join("day3"), b"in the way").unwrap();
+    fs::write(inbox.join("day3/walk.csv"), short_walk()).unwrap();
+    let mut child = walk_watch(&inbox, &out, &[]).spawn().unwrap();
+    let stderr = Stderr::of(&mut child);
+    let lines = stderr.wait_lines(&["retrying", r#"source="day3/walk.csv""#], 1, 30);
+    assert!(lines[0].contains("error_kind=AlreadyExists"), "{lines:?}");
+    fs::remove_file(out.join("day3")).unwrap();
+    let took = time_until(&out.join("day3/walk.imubake.json"), 30);
+    eprintln!("moved away → converted in {} ms", took.as_millis());
+    assert!(child.try_wait().unwrap().is_none(), "no restart");
+    assert_eq!(interrupt(child), 0);
+    assert_eq!(
+        visible(&out.join("day3")),
+        ["walk.bvh", "walk.glb", "walk.imubake.json"]
+    );
+    assert_eq!(statuses(&out, "day3/walk.csv"), ["failed", "converted"]);
+}

@@ -127,7 +127,9 @@ fn process_take_untimed(take: &BatchTake, job: &TakeJob<'_>, retry: bool) -> Att
     let mut environment = None;
     let result = fs::create_dir_all(&out_dir)
         .map_err(|e| {
-            environment = environmental(&e).then(|| e.kind());
+            // `AlreadyExists`: a file stands where the take's folder goes.
+            let replaced = e.kind() == io::ErrorKind::AlreadyExists;
+            environment = (replaced || environmental(&e)).then(|| e.kind());
             format!("{}: cannot create: {e}", out_dir.display())
         })
         .and_then(|()| {
