@@ -1222,6 +1222,38 @@ fn a_take_that_converted_after_failing_counts_as_converted() {
 
 // ── Issue 44: the environment's failures retried, one watcher per output folder ─────────────────
 
+/// A watcher that is killed if the test fails before it is stopped (a panicking test would
+/// otherwise leave it running).
+struct Running(Option<Child>);
+
+impl Running {
+    fn spawn(cmd: &mut Command) -> Running {
+        Running(Some(cmd.spawn().expect("spawn imubake watch")))
+    }
+
+    fn child(&mut self) -> &mut Child {
+        self.0.as_mut().expect("still held")
+    }
+
+    fn id(&self) -> u32 {
+        self.0.as_ref().expect("still held").id()
+    }
+
+    /// The child, to stop it (`interrupt`): no longer killed on drop.
+    fn take(&mut self) -> Child {
+        self.0.take().expect("still held")
+    }
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        if let Some(mut child) = self.0.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
 /// The bundled walk's first second (16 sensors, 30 frames at 30 fps): a quick take whose BVH
 /// (22 KB) and GLB (46 KB) are both larger than 16 KiB.
 fn short_walk() -> Vec<u8> {
@@ -1378,8 +1410,8 @@ fn a_read_only_output_folder_is_retried_until_writable_then_converts_once() {
     let mut cmd = walk_watch(&inbox, &out, &[]);
     unprivileged(&mut cmd, dir.path());
     chmod(&out.join("day1"), 0o555);
-    let mut child = cmd.spawn().expect("spawn imubake watch");
-    let stderr = Stderr::of(&mut child);
+    let mut child = Running::spawn(&mut cmd);
+    let stderr = Stderr::of(child.child());
 
     let retrying = ["retrying", r#"source="day1/walk.csv""#];
     let lines = stderr.wait_lines(&retrying, 3, 30);
@@ -1403,11 +1435,11 @@ fn a_read_only_output_folder_is_retried_until_writable_then_converts_once() {
     eprintln!("writable again → converted in {} ms", took.as_millis());
     // The third failure waits 4 s before the next attempt; 30 s is only a bound for a slow host.
     assert!(
-        child.try_wait().unwrap().is_none(),
+        child.child().try_wait().unwrap().is_none(),
         "the same watcher, still running"
     );
     std::thread::sleep(Duration::from_millis(1500));
-    assert_eq!(interrupt(child), 0);
+    assert_eq!(interrupt(child.take()), 0);
 
     assert_eq!(
         visible(&out.join("day1")),
@@ -1476,8 +1508,8 @@ fn a_full_disk_is_retried_until_there_is_room_then_converts_once() {
             Ok(())
         });
     }
-    let mut child = cmd.spawn().expect("spawn imubake watch");
-    let stderr = Stderr::of(&mut child);
+    let mut child = Running::spawn(&mut cmd);
+    let stderr = Stderr::of(child.child());
 
     let lines = stderr.wait_lines(&["retrying", r#"source="walk.csv""#], 2, 30);
     assert!(
@@ -1504,9 +1536,9 @@ fn a_full_disk_is_retried_until_there_is_room_then_converts_once() {
     set_file_size_limit(Some(child.id()), libc::RLIM_INFINITY);
     let took = time_until(&out.join("walk.imubake.json"), 30);
     eprintln!("room again → converted in {} ms", took.as_millis());
-    assert!(child.try_wait().unwrap().is_none(), "no restart");
+    assert!(child.child().try_wait().unwrap().is_none(), "no restart");
     std::thread::sleep(Duration::from_millis(1500));
-    assert_eq!(interrupt(child), 0);
+    assert_eq!(interrupt(child.take()), 0);
     assert_eq!(visible(&out), ["walk.bvh", "walk.glb", "walk.imubake.json"]);
     assert_consistent(&out);
     assert_eq!(statuses(&out, "walk.csv"), ["failed", "converted"]);
@@ -1525,8 +1557,8 @@ fn an_unwritable_ledger_is_told_in_the_error_report_and_retried() {
     fs::write(inbox.join("first.csv"), short_walk()).unwrap();
     let mut cmd = walk_watch(&inbox, &out, &[]);
     unprivileged(&mut cmd, dir.path());
-    let mut child = cmd.spawn().expect("spawn imubake watch");
-    let stderr = Stderr::of(&mut child);
+    let mut child = Running::spawn(&mut cmd);
+    let stderr = Stderr::of(child.child());
     // The backlog converted and recorded (the sidecar comes before the ledger line).
     let deadline = Instant::now() + Duration::from_secs(30);
     while statuses(&out, "first.csv").is_empty() {
@@ -1565,9 +1597,9 @@ fn an_unwritable_ledger_is_told_in_the_error_report_and_retried() {
         "ledger writable again → converted in {} ms",
         took.as_millis()
     );
-    assert!(child.try_wait().unwrap().is_none(), "no restart");
+    assert!(child.child().try_wait().unwrap().is_none(), "no restart");
     std::thread::sleep(Duration::from_millis(1500));
-    assert_eq!(interrupt(child), 0);
+    assert_eq!(interrupt(child.take()), 0);
     assert!(!out.join("second.error.json").exists());
     assert_eq!(statuses(&out, "second.csv"), ["converted"]);
     assert_eq!(statuses(&out, "first.csv"), ["converted"]);
@@ -1612,15 +1644,15 @@ fn a_second_watcher_on_one_output_exits_and_the_first_converts_each_take_once() 
     let other_inbox = dir.path().join("other");
     fs::create_dir_all(&inbox).unwrap();
     fs::create_dir_all(&other_inbox).unwrap();
-    let mut first = walk_watch(&inbox, &out, &[]).spawn().unwrap();
-    let first_log = Stderr::of(&mut first);
+    let mut first = Running::spawn(&mut walk_watch(&inbox, &out, &[]));
+    let first_log = Stderr::of(first.child());
     first_log.wait_lines(&["watching"], 1, 30);
     let canonical_inbox = inbox.canonicalize().unwrap();
 
     for second_inbox in [&inbox, &other_inbox] {
-        let mut second = walk_watch(second_inbox, &out, &[]).spawn().unwrap();
-        let second_log = Stderr::of(&mut second);
-        let code = exit_within(&mut second, 10, "the second watcher");
+        let mut second = Running::spawn(&mut walk_watch(second_inbox, &out, &[]));
+        let second_log = Stderr::of(second.child());
+        let code = exit_within(second.child(), 10, "the second watcher");
         assert_ne!(code, 0);
         std::thread::sleep(Duration::from_millis(100));
         let text = second_log.text();
@@ -1654,7 +1686,7 @@ fn a_second_watcher_on_one_output_exits_and_the_first_converts_each_take_once() 
         );
     }
     std::thread::sleep(Duration::from_millis(1500));
-    assert_eq!(interrupt(first), 0);
+    assert_eq!(interrupt(first.take()), 0);
 
     let text = fs::read_to_string(out.join(".imubake/ledger.jsonl")).unwrap();
     assert_eq!(text.lines().count(), 100, "one ledger line per take");
@@ -1685,19 +1717,20 @@ fn a_killed_watchers_lock_is_taken_by_the_next_watcher() {
     let dir = tempfile::tempdir().unwrap();
     let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
     fs::create_dir_all(&inbox).unwrap();
-    let mut killed = walk_watch(&inbox, &out, &[]).spawn().unwrap();
-    Stderr::of(&mut killed).wait_lines(&["watching"], 1, 30);
+    let mut killed = Running::spawn(&mut walk_watch(&inbox, &out, &[]));
+    Stderr::of(killed.child()).wait_lines(&["watching"], 1, 30);
     let canonical_inbox = inbox.canonicalize().unwrap();
     assert_eq!(
         lock_holder(&out),
         Some((killed.id(), canonical_inbox.clone()))
     );
+    let mut killed = killed.take();
     killed.kill().unwrap(); // SIGKILL
     killed.wait().unwrap();
     assert!(out.join(".imubake/watch.lock").is_file(), "left behind");
 
-    let mut next = walk_watch(&inbox, &out, &[]).spawn().unwrap();
-    let log = Stderr::of(&mut next);
+    let mut next = Running::spawn(&mut walk_watch(&inbox, &out, &[]));
+    let log = Stderr::of(next.child());
     log.wait_lines(&["watching"], 1, 30);
     assert_eq!(lock_holder(&out), Some((next.id(), canonical_inbox)));
     fs::write(inbox.join("walk.csv"), short_walk()).unwrap();
@@ -1706,7 +1739,7 @@ fn a_killed_watchers_lock_is_taken_by_the_next_watcher() {
         "{}",
         log.text()
     );
-    assert_eq!(interrupt(next), 0);
+    assert_eq!(interrupt(next.take()), 0);
 }
 
 /// A file standing where a take's output folder goes (works as any user, root included) is the
@@ -1719,15 +1752,15 @@ fn a_file_in_place_of_the_output_folder_is_retried_until_moved() {
     fs::create_dir_all(&out).unwrap();
     fs::write(out.join("day3"), b"in the way").unwrap();
     fs::write(inbox.join("day3/walk.csv"), short_walk()).unwrap();
-    let mut child = walk_watch(&inbox, &out, &[]).spawn().unwrap();
-    let stderr = Stderr::of(&mut child);
+    let mut child = Running::spawn(&mut walk_watch(&inbox, &out, &[]));
+    let stderr = Stderr::of(child.child());
     let lines = stderr.wait_lines(&["retrying", r#"source="day3/walk.csv""#], 1, 30);
     assert!(lines[0].contains("error_kind=AlreadyExists"), "{lines:?}");
     fs::remove_file(out.join("day3")).unwrap();
     let took = time_until(&out.join("day3/walk.imubake.json"), 30);
     eprintln!("moved away → converted in {} ms", took.as_millis());
-    assert!(child.try_wait().unwrap().is_none(), "no restart");
-    assert_eq!(interrupt(child), 0);
+    assert!(child.child().try_wait().unwrap().is_none(), "no restart");
+    assert_eq!(interrupt(child.take()), 0);
     assert_eq!(
         visible(&out.join("day3")),
         ["walk.bvh", "walk.glb", "walk.imubake.json"]
