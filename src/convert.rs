@@ -559,10 +559,19 @@ fn bvh_conversion(
         input: input.to_path_buf(),
         reason,
     };
-    let bytes = std::fs::read(input).map_err(|e| fail(e.to_string()))?;
-    let sha256 = hex(&Sha256::digest(&bytes));
-    let bvh = crate::bvh::parse(&bytes).map_err(|e| fail(e.to_string()))?;
-    drop(bytes);
+    // Read as it comes and hashed on the way: the file is never held whole (its lines are held
+    // to the reader's limit), and the hash covers every byte, the reader's unread tail included.
+    let file = std::fs::File::open(input).map_err(|e| fail(e.to_string()))?;
+    let mut hasher = Sha256::new();
+    let mut observe = |bytes: &[u8]| hasher.update(bytes);
+    let mut source = crate::read::blocks::Observed {
+        inner: std::io::BufReader::with_capacity(1 << 16, file),
+        observe: &mut observe,
+    };
+    let bvh = crate::bvh::read(&mut source).map_err(|e| fail(e.to_string()))?;
+    io::copy(&mut source, &mut io::sink()).map_err(|e| fail(e.to_string()))?;
+    drop(source);
+    let sha256 = hex(&hasher.finalize());
     let source_fps = crate::fps::Fps::from_frame_time_s(bvh.frame_time_s()).ok_or_else(|| {
         fail(format!(
             "Frame Time {} is not a frame rate",
