@@ -180,3 +180,24 @@ fn batch_and_watch_take_bvh_files() {
         assert!(out.join("walk.bvh").is_file() && out.join("walk.glb").is_file());
     }
 }
+
+/// A BVH take is hashed as it is read (issue 43: never held whole): the sidecar's SHA-256 is
+/// coreutils' `sha256sum` of the file, trailing bytes after the last frame included.
+#[test]
+fn a_bvh_take_s_hash_is_the_whole_file_s() {
+    let Some(walk) = shared("bvh/pymo_walk.bvh") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("walk.bvh");
+    let mut bytes = std::fs::read(&walk).unwrap();
+    bytes.extend_from_slice(b"\n\n\n");
+    std::fs::write(&input, &bytes).unwrap();
+    let sidecar = convert(&input, &dir.path().join("out"), &[]);
+    let out = run(Command::new("sha256sum").arg(&input));
+    let expected = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(
+        sidecar["source"]["sha256"].as_str().unwrap(),
+        expected.split_whitespace().next().unwrap()
+    );
+}
