@@ -423,8 +423,8 @@ fn the_answers_are_plain_http() {
 }
 
 /// A client that sends nothing, and one that sends a header every half second and never ends
-/// its head, are both closed within the head's deadline (10 s, two seconds' slack; the slow one
-/// answered 408 if at all); meanwhile the page is served.
+/// its head, are both closed at the head's deadline (10 s, from 9 s to 20 s on a loaded machine;
+/// the slow one answered 408, the idle one 408 or nothing); meanwhile the page is served.
 #[test]
 fn a_slow_or_idle_connection_is_closed_at_the_heads_deadline() {
     let server = in_process("127.0.0.1:0", None);
@@ -464,22 +464,24 @@ fn a_slow_or_idle_connection_is_closed_at_the_heads_deadline() {
             "{what}: still open after {after:?}"
         );
         assert!(
-            after <= Duration::from_secs(12),
+            after <= Duration::from_secs(20),
             "{what}: closed after {after:?}"
         );
         assert!(
             after >= Duration::from_secs(9),
             "{what}: closed after {after:?}"
         );
-        assert!(
-            answer.is_empty() || status(&answer) == Some(408),
-            "{what}: {}",
-            String::from_utf8_lossy(&answer)
-        );
+        let expected = if what == "slow" {
+            status(&answer) == Some(408)
+        } else {
+            answer.is_empty() || status(&answer) == Some(408)
+        };
+        assert!(expected, "{what}: {}", String::from_utf8_lossy(&answer));
     }
 }
 
-/// 300 connections open and silent: the page and `take.json` are still served at once.
+/// 300 connections open and silent: the page and `take.json` are still served at once (within
+/// 10 s on a loaded machine).
 #[test]
 fn a_flood_of_idle_connections_leaves_the_page_served() {
     let server = in_process("127.0.0.1:0", None);
@@ -492,11 +494,101 @@ fn a_flood_of_idle_connections_leaves_the_page_served() {
     assert_eq!(get(host, "/"), Some(200));
     assert_eq!(get(host, "/take.json"), Some(200));
     assert!(
-        start.elapsed() < Duration::from_secs(2),
+        start.elapsed() < Duration::from_secs(10),
         "{:?}",
         start.elapsed()
     );
     drop(idle);
+}
+
+/// 64 clients that each ask for `take.json` or a chunk and never read the answer nor close:
+/// a new request for the page is still answered 200 (at once: it does not wait out their
+/// linger), within 15 s.
+#[test]
+fn clients_that_never_read_leave_the_page_served() {
+    let server = in_process("127.0.0.1:0", None);
+    let host = server.authority.as_str();
+    let stuck: Vec<TcpStream> = (0..64)
+        .map(|i| {
+            let mut s = TcpStream::connect(host).unwrap();
+            let target = if i % 2 == 0 {
+                "/take.json"
+            } else {
+                "/chunk/0.glb"
+            };
+            write!(s, "GET {target} HTTP/1.1\r\nHost: {host}\r\n\r\n").unwrap();
+            s
+        })
+        .collect();
+    // Their heads read and their answers written (the write side is never shut, nor read).
+    std::thread::sleep(Duration::from_millis(500));
+    let start = Instant::now();
+    assert_eq!(get(host, "/"), Some(200), "with 64 non-reading clients");
+    assert!(
+        start.elapsed() <= Duration::from_secs(15),
+        "{:?}",
+        start.elapsed()
+    );
+    drop(stuck);
+}
+
+/// A raw GET of `/` with `Host: host_header`, sent to `authority`: the status.
+fn get_as(authority: &str, host_header: &str) -> Option<u16> {
+    status(&exchange(
+        authority,
+        format!("GET / HTTP/1.1\r\nHost: {host_header}\r\nConnection: close\r\n\r\n").as_bytes(),
+    ))
+}
+
+/// Bound to every interface, only a `Host` that is an IP address or `localhost` with the
+/// server's port is served (DNS rebinding): `evil.com:PORT` (even with its own `Origin`), an
+/// IP with another port, and no port are 403; `127.0.0.1`, `192.168.1.20`, `[::1]` and
+/// `LocalHost` with the port are 200.
+#[test]
+fn bound_everywhere_only_an_ip_or_localhost_host_is_served() {
+    let server = in_process("0.0.0.0:0", None);
+    let authority = server.authority.as_str();
+    let port: u16 = authority.rsplit(':').next().unwrap().parse().unwrap();
+    let other = port.wrapping_add(1).max(1);
+    let evil = exchange(
+        authority,
+        format!(
+            "GET / HTTP/1.1\r\nHost: evil.com:{port}\r\nOrigin: http://evil.com:{port}\r\n\r\n"
+        )
+        .as_bytes(),
+    );
+    assert_eq!(status(&evil), Some(403));
+    for (host, code) in [
+        (format!("evil.com:{port}"), 403),
+        (format!("127.0.0.1.evil.com:{port}"), 403),
+        (format!("127.0.0.1:{other}"), 403),
+        ("127.0.0.1".to_string(), 403),
+        (format!("[::1]x:{port}"), 403),
+        (format!("127.0.0.1:{port}"), 200),
+        (format!("192.168.1.20:{port}"), 200),
+        (format!("[::1]:{port}"), 200),
+        (format!("LocalHost:{port}"), 200),
+    ] {
+        assert_eq!(get_as(authority, &host), Some(code), "Host: {host}");
+    }
+}
+
+/// Bound to loopback, `Host` names compare in any case, and the address bound (127.0.0.2
+/// here) is accepted as well as 127.0.0.1; another loopback address is not.
+#[test]
+fn bound_to_loopback_the_bound_address_and_any_case_are_served() {
+    let server = in_process("127.0.0.2:0", None);
+    let port = server.authority.rsplit(':').next().unwrap();
+    let authority = format!("127.0.0.2:{port}");
+    for (host, code) in [
+        (format!("127.0.0.2:{port}"), 200),
+        (format!("127.0.0.1:{port}"), 200),
+        (format!("LOCALHOST:{port}"), 200),
+        (format!("127.0.0.3:{port}"), 403),
+        (format!("evil.com:{port}"), 403),
+    ] {
+        assert_eq!(get_as(&authority, &host), Some(code), "Host: {host}");
+    }
 }
 
 /// A WebSocket upgrade of `/live` with `Host: host` and `origin`: the status and the stream
@@ -533,7 +625,7 @@ fn upgrade(authority: &str, host: &str, origin: Option<&str>) -> (u16, TcpStream
 
 /// A live preview with 64 `/live` upgrades from its own page: 16 are accepted (101) and kept,
 /// the others refused (503); the page and `take.json` are still served; the 16 receive the
-/// session's status; once they close, a new upgrade is accepted within 2 s.
+/// session's status; once they close, a new upgrade is accepted within 10 s.
 #[test]
 fn sixty_four_live_sockets_leave_the_page_served() {
     let preview = Preview::new(1.0);
@@ -570,7 +662,7 @@ fn sixty_four_live_sockets_leave_the_page_served() {
     loop {
         match upgrade(&host, &host, Some(&origin)).0 {
             101 => break,
-            503 if start.elapsed() < Duration::from_secs(2) => {
+            503 if start.elapsed() < Duration::from_secs(10) => {
                 std::thread::sleep(Duration::from_millis(50))
             }
             other => panic!("after the sockets closed: {other} at {:?}", start.elapsed()),

@@ -4,9 +4,12 @@
 //!
 //! Paths: the page's assets ([`super::assets`]), `/take.json`, `/chunk/<k>.glb` (`k` in
 //! decimal digits, below the take's chunk count) and, in a live session, `/live`. Anything else
-//! is 404: the server opens no file after it starts. Bound to loopback, it also refuses a
-//! request whose `Host` is not the loopback address it listens on (a web page cannot reach it
-//! through DNS rebinding). Only GET and HEAD; every answer closes its connection.
+//! is 404: the server opens no file after it starts. Against DNS rebinding (a web page reaching
+//! it under a name of its own), it refuses (403) a request whose `Host` is not, bound to
+//! loopback, `127.0.0.1`, `localhost`, `[::1]` or the address it listens on, and, bound
+//! elsewhere, an IP address (`[…]` for IPv6) or `localhost`; always with the server's port
+//! (omitted only on port 80), names in any case. Only GET and HEAD; every answer closes its
+//! connection.
 //!
 //! What a client can hold:
 //! - **Its head**, read as it comes and never held past its limits and one read
@@ -15,8 +18,12 @@
 //!   [`MAX_HEADER_BYTES`] together, line ends included (else 431); all of it within
 //!   [`HEAD_DEADLINE`] of the connection (else 408, or closed if nothing came).
 //! - **A thread**: at most [`MAX_CONNECTIONS`] page connections at once. One more closes the
-//!   oldest still sending its head (so idle or slow sockets never lock the page out); with
-//!   none such, it is answered 503.
+//!   oldest still sending its head or lingering after its answer (so idle, slow or non-reading
+//!   sockets never lock the page out); with none such, it is answered 503.
+//! - **An answer's write**: in pieces of at most [`WRITE_PIECE`] bytes, the whole of it within
+//!   [`WRITE_BASE`] plus a second for each [`WRITE_RATE`] bytes of it (10 s for the page's
+//!   assets and `take.json`), then a linger of at most [`LINGER`]: a client that never reads
+//!   holds its connection no longer.
 //! - **A `/live` socket**: at most [`MAX_LIVE`], counted apart from page connections (more are
 //!   503, and the page still loads), each upgraded only from the page's own origin: `Origin`
 //!   must be `http://` and the request's own `Host` (checked against loopback when bound there),
@@ -50,12 +57,17 @@ pub const MAX_LIVE: usize = 16;
 pub const READ_CHUNK: usize = 8 * 1024;
 /// A write that moves nothing for this long ends the connection.
 const WRITE_STALL: Duration = Duration::from_secs(30);
-/// An answer's body must be sent within this (a client reading slowly cannot hold a thread for
-/// ever).
-const WRITE_DEADLINE: Duration = Duration::from_secs(120);
+/// An answer is written in pieces of at most this, bytes, the deadline checked before each.
+pub const WRITE_PIECE: usize = 16 << 10;
+/// An answer must be written within this, plus a second for each [`WRITE_RATE`] bytes of it (a
+/// client reading slowly, or not at all, cannot hold a thread for ever).
+pub const WRITE_BASE: Duration = Duration::from_secs(10);
+/// The slowest reader an answer waits for past [`WRITE_BASE`], bytes a second.
+pub const WRITE_RATE: usize = 64 << 10;
 /// After an answer, what the client still sends is read and dropped for at most this, so that
 /// closing with unread bytes does not reset the connection before the client reads the answer.
-const LINGER: Duration = Duration::from_secs(2);
+/// A lingering connection is closed early to make room for a new one.
+pub const LINGER: Duration = Duration::from_secs(2);
 /// Chunks kept made (the page asks for the one it shows and the next).
 const KEEP_CHUNKS: usize = 4;
 
@@ -79,8 +91,11 @@ struct Shared {
     preview: Option<Arc<Preview>>,
     /// The last chunks made, newest last.
     chunks: Mutex<VecDeque<(usize, Arc<Vec<u8>>)>>,
-    /// `Host` values accepted (loopback only); `None`: any.
+    /// `Host` values accepted, lower case (bound to loopback); `None`: an IP address or
+    /// `localhost` with [`Shared::port`].
     hosts: Option<Vec<String>>,
+    /// The port listened on.
+    port: u16,
     /// Page connections open.
     connections: AtomicUsize,
     /// `/live` sockets open.
@@ -113,11 +128,24 @@ impl Server {
         listener.set_nonblocking(true).map_err(fail)?;
         let hosts = addr.ip().is_loopback().then(|| {
             let port = addr.port();
-            vec![
+            let mut hosts = vec![
                 format!("127.0.0.1:{port}"),
                 format!("localhost:{port}"),
                 format!("[::1]:{port}"),
-            ]
+            ];
+            // `SocketAddr` shows an IPv6 address bracketed, as a `Host` has it.
+            let bound = addr.to_string();
+            if !hosts.contains(&bound) {
+                hosts.push(bound);
+            }
+            if port == 80 {
+                let bare: Vec<String> = hosts
+                    .iter()
+                    .filter_map(|h| h.strip_suffix(":80").map(str::to_string))
+                    .collect();
+                hosts.extend(bare);
+            }
+            hosts
         });
         let take_json = serde_json::to_vec(&take.json()).map_err(|e| ViewError::Bind {
             addr: addr.to_string(),
@@ -132,6 +160,7 @@ impl Server {
                 preview,
                 chunks: Mutex::new(VecDeque::new()),
                 hosts,
+                port: addr.port(),
                 connections: AtomicUsize::new(0),
                 live: AtomicUsize::new(0),
                 waiting: Mutex::new(BTreeMap::new()),
@@ -275,13 +304,13 @@ fn connection(
         Ok(head) => head,
         Err(HeadError::Closed) => return,
         Err(HeadError::Refused(status)) => {
-            answer(stream, &Reply::refusal(status), true);
+            answer(shared, id, stream, &Reply::refusal(status), true);
             return;
         }
     };
     match route(shared, &head) {
-        Route::Reply(reply) => answer(stream, &reply, head.method != "HEAD"),
-        Route::Live(preview) => live(shared, preview, stream, head, stop, slot),
+        Route::Reply(reply) => answer(shared, id, stream, &reply, head.method != "HEAD"),
+        Route::Live(preview) => live(shared, id, preview, stream, head, stop, slot),
     }
 }
 
@@ -568,47 +597,70 @@ fn answer_bytes(reply: &Reply, with_body: bool) -> Vec<u8> {
     out
 }
 
-/// Sends `reply` (its body unless a HEAD asked) and closes the connection.
-fn answer(mut stream: TcpStream, reply: &Reply, with_body: bool) {
+/// Sends `reply` (its body unless a HEAD asked) and closes the connection (connection `id`).
+fn answer(shared: &Shared, id: u64, mut stream: TcpStream, reply: &Reply, with_body: bool) {
     if send(&mut stream, reply, with_body).is_ok() {
-        linger(stream);
+        linger(shared, id, stream);
     }
+}
+
+/// The time allowed to write an answer of `len` bytes.
+fn write_deadline(len: usize) -> Duration {
+    WRITE_BASE + Duration::from_secs((len / WRITE_RATE) as u64)
 }
 
 fn send(stream: &mut TcpStream, reply: &Reply, with_body: bool) -> io::Result<()> {
-    stream.set_write_timeout(Some(WRITE_STALL))?;
-    let deadline = Instant::now() + WRITE_DEADLINE;
     let body = if with_body { reply.body.bytes() } else { &[] };
-    // The head with the first piece of the body, in one write.
-    let first = body.len().min(64 << 10);
     let mut out = reply_head(reply).into_bytes();
+    let deadline = Instant::now() + write_deadline(out.len() + body.len());
+    // The head with the first piece of the body, in one write.
+    let first = body.len().min(WRITE_PIECE);
     out.extend_from_slice(&body[..first]);
-    stream.write_all(&out)?;
-    for piece in body[first..].chunks(256 << 10) {
-        if Instant::now() > deadline {
+    write_within(stream, &out, deadline)?;
+    write_within(stream, &body[first..], deadline)
+}
+
+/// Writes `bytes` in pieces of at most [`WRITE_PIECE`], each write waiting no later than
+/// `deadline` (nor longer than [`WRITE_STALL`]).
+fn write_within(stream: &mut TcpStream, mut bytes: &[u8], deadline: Instant) -> io::Result<()> {
+    while !bytes.is_empty() {
+        let left = deadline
+            .saturating_duration_since(Instant::now())
+            .min(WRITE_STALL);
+        if left.is_zero() {
             return Err(io::ErrorKind::TimedOut.into());
         }
-        stream.write_all(piece)?;
+        stream.set_write_timeout(Some(left))?;
+        match stream.write(&bytes[..bytes.len().min(WRITE_PIECE)]) {
+            Ok(0) => return Err(io::ErrorKind::WriteZero.into()),
+            Ok(n) => bytes = &bytes[n..],
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
     }
-    stream.flush()
+    Ok(())
 }
 
 /// Closes after an answer: the write side at once, then what the client still sends read and
-/// dropped until it closes too or [`LINGER`] passes.
-fn linger(mut stream: TcpStream) {
+/// dropped until it closes too or [`LINGER`] passes, or a new connection needs the room.
+fn linger(shared: &Shared, id: u64, mut stream: TcpStream) {
     let _ = stream.shutdown(Shutdown::Write);
+    if let Ok(handle) = stream.try_clone() {
+        lock(&shared.waiting).insert(id, handle);
+    }
     let deadline = Instant::now() + LINGER;
     let mut sink = [0u8; READ_CHUNK];
     loop {
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() || stream.set_read_timeout(Some(left)).is_err() {
-            return;
+            break;
         }
         match stream.read(&mut sink) {
-            Ok(0) | Err(_) => return,
+            Ok(0) | Err(_) => break,
             Ok(_) => {}
         }
     }
+    lock(&shared.waiting).remove(&id);
 }
 
 enum Route<'a> {
@@ -629,11 +681,7 @@ fn route<'a>(shared: &'a Shared, head: &Head) -> Route<'a> {
     if head.count("Host") > 1 {
         return Route::Reply(Reply::text(400, "more than one Host"));
     }
-    if let Some(hosts) = &shared.hosts
-        && !head
-            .header("Host")
-            .is_some_and(|h| hosts.iter().any(|a| a == h))
-    {
+    if !host_allowed(shared, head.header("Host")) {
         return Route::Reply(Reply::text(403, "forbidden: unexpected Host"));
     }
     if !matches!(head.method.as_str(), "GET" | "HEAD") {
@@ -692,6 +740,36 @@ fn chunk(shared: &Shared, k: usize) -> Option<Result<Arc<Vec<u8>>, ViewError>> {
     Some(Ok(glb))
 }
 
+/// Is `host` one the page may be asked under (see the module's documentation)?
+fn host_allowed(shared: &Shared, host: Option<&str>) -> bool {
+    let Some(host) = host else {
+        return false;
+    };
+    if let Some(hosts) = &shared.hosts {
+        return hosts.iter().any(|a| a.eq_ignore_ascii_case(host));
+    }
+    // `name:port`, or `name` alone on port 80; a bracketed IPv6 address has colons of its own.
+    let (name, port) = match host.rsplit_once(':') {
+        Some((name, port)) if !port.contains(']') => (name, Some(port)),
+        _ => (host, None),
+    };
+    let port_ok = match port {
+        Some(port) => {
+            !port.is_empty()
+                && port.bytes().all(|b| b.is_ascii_digit())
+                && port.parse::<u16>().ok() == Some(shared.port)
+        }
+        None => shared.port == 80,
+    };
+    let name_ok = match name.strip_prefix('[').and_then(|n| n.strip_suffix(']')) {
+        Some(v6) => v6.parse::<std::net::Ipv6Addr>().is_ok(),
+        None => {
+            name.parse::<std::net::Ipv4Addr>().is_ok() || name.eq_ignore_ascii_case("localhost")
+        }
+    };
+    port_ok && name_ok
+}
+
 /// Is `origin` the page's own, `http://` and `host`? (Hosts compare in any case.)
 fn same_origin(origin: Option<&str>, host: Option<&str>) -> bool {
     match (origin, host) {
@@ -715,6 +793,7 @@ impl Drop for LiveSlot<'_> {
 /// session stops.
 fn live(
     shared: &Shared,
+    id: u64,
     preview: &Preview,
     mut stream: TcpStream,
     head: Head,
@@ -726,11 +805,19 @@ fn live(
         .header("Upgrade")
         .is_some_and(|u| u.eq_ignore_ascii_case("websocket"));
     let Some(key) = head.header("Sec-WebSocket-Key").filter(|_| is_upgrade) else {
-        answer(stream, &Reply::text(426, "a WebSocket endpoint"), with_body);
+        answer(
+            shared,
+            id,
+            stream,
+            &Reply::text(426, "a WebSocket endpoint"),
+            with_body,
+        );
         return;
     };
     if !same_origin(head.header("Origin"), head.header("Host")) {
         answer(
+            shared,
+            id,
             stream,
             &Reply::text(403, "forbidden: an Origin other than the page's"),
             with_body,
@@ -740,6 +827,8 @@ fn live(
     if shared.live.fetch_add(1, Ordering::AcqRel) >= MAX_LIVE {
         shared.live.fetch_sub(1, Ordering::AcqRel);
         answer(
+            shared,
+            id,
             stream,
             &Reply::text(503, &format!("{MAX_LIVE} live connections already")),
             with_body,
