@@ -448,10 +448,26 @@ impl Ledger {
         }
         let file = guard.as_mut().expect("opened above");
         // A process abandoning an unfinished take records nothing of it.
-        crate::write::unless_abandoned(|| {
+        let written = crate::write::unless_abandoned(|| {
             file.write_all(&line)?;
             file.sync_data()
-        })
+        });
+        if written.is_err() {
+            // Part of the line may be written: the next append opens the file again, which
+            // ends that fragment with a newline (a torn line, ignored when read).
+            *guard = None;
+        }
+        written
+    }
+
+    /// Opens the file for appending (kept for the appends that follow) unless it is open
+    /// already: whether a line could be recorded, asked before work whose line it is.
+    pub fn ready_to_append(&self) -> io::Result<()> {
+        let mut guard = self.file.lock().unwrap_or_else(|e| e.into_inner());
+        if guard.is_none() {
+            *guard = Some(self.open_for_append()?);
+        }
+        Ok(())
     }
 
     fn open_for_append(&self) -> io::Result<File> {

@@ -729,6 +729,10 @@ impl Watch<'_> {
                 return;
             }
             let Ok(stat) = SourceStat::of(&take.path) else {
+                // Gone or unreadable for now: no retry stays due (nor a settle pending) for a
+                // take that cannot be looked at; the next scan that can sees it afresh.
+                self.retries.remove(&take.rel);
+                self.pending.remove(&take.rel);
                 continue;
             };
             // Written (an event) or changed since this watcher handled it: its hash decides.

@@ -1355,6 +1355,31 @@ fn time_until(path: &Path, secs: u64) -> Duration {
     start.elapsed()
 }
 
+/// Waits up to `secs` for the ledger statuses of `source` to be `expected` (the ledger line is
+/// written after the sidecar); panics with what they are past that.
+fn wait_statuses(out: &Path, source: &str, expected: &[&str], secs: u64) {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        // Complete lines only: one may be half written as it is read.
+        let text = fs::read_to_string(out.join(".imubake/ledger.jsonl")).unwrap_or_default();
+        let complete = text.rfind('\n').map_or("", |end| &text[..end]);
+        let now: Vec<String> = complete
+            .lines()
+            .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+            .filter(|v| v["source"].as_str() == Some(source))
+            .filter_map(|v| v["status"].as_str().map(str::to_string))
+            .collect();
+        if now == expected {
+            return;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "{source}: ledger statuses {now:?}, not {expected:?}, within {secs} s"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// Ledger lines of `source`, by status, in order.
 fn statuses(out: &Path, source: &str) -> Vec<String> {
     ledger(out)
@@ -1438,6 +1463,7 @@ fn a_read_only_output_folder_is_retried_until_writable_then_converts_once() {
         child.child().try_wait().unwrap().is_none(),
         "the same watcher, still running"
     );
+    wait_statuses(&out, "day1/walk.csv", &["failed", "converted"], 30);
     std::thread::sleep(Duration::from_millis(1500));
     assert_eq!(interrupt(child.take()), 0);
 
@@ -1537,6 +1563,7 @@ fn a_full_disk_is_retried_until_there_is_room_then_converts_once() {
     let took = time_until(&out.join("walk.imubake.json"), 30);
     eprintln!("room again → converted in {} ms", took.as_millis());
     assert!(child.child().try_wait().unwrap().is_none(), "no restart");
+    wait_statuses(&out, "walk.csv", &["failed", "converted"], 30);
     std::thread::sleep(Duration::from_millis(1500));
     assert_eq!(interrupt(child.take()), 0);
     assert_eq!(visible(&out), ["walk.bvh", "walk.glb", "walk.imubake.json"]);
@@ -1570,23 +1597,43 @@ fn an_unwritable_ledger_is_told_in_the_error_report_and_retried() {
     chmod(&ledger_file, 0o444);
     fs::write(inbox.join(".second.csv.tmp"), short_walk()).unwrap();
     fs::rename(inbox.join(".second.csv.tmp"), inbox.join("second.csv")).unwrap();
-    let lines = stderr.wait_lines(&["retrying", r#"source="second.csv""#], 1, 30);
+    // Not converted while the ledger is read-only: no output ever appears, over two attempts.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let retrying = ["retrying", r#"source="second.csv""#];
+    while stderr.lines_with(&retrying).len() < 2 {
+        for name in ["second.bvh", "second.glb", "second.imubake.json"] {
+            assert!(
+                !out.join(name).exists(),
+                "{name} appears without a ledger line"
+            );
+        }
+        assert!(Instant::now() < deadline, "two attempts: {}", stderr.text());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let lines = stderr.lines_with(&retrying);
     assert!(
-        lines[0].contains("error_kind=PermissionDenied") && lines[0].contains("ledger.jsonl"),
+        lines[0].contains("error_kind=PermissionDenied")
+            && lines[0].contains("ledger.jsonl")
+            && lines[0].contains("attempt=1")
+            && lines[1].contains("attempt=2"),
         "{lines:?}"
     );
+    // Each attempt writes the report again (removing the old one first): read it once it is there.
+    assert!(wait_for(&out.join("second.error.json"), 30));
     let report: Value =
         serde_json::from_str(&fs::read_to_string(out.join("second.error.json")).unwrap()).unwrap();
     let reason = report["reason"].as_str().unwrap();
     assert!(
-        reason.contains("cannot record it in") && reason.contains("ledger.jsonl"),
+        reason.contains("not converted")
+            && reason.contains("cannot record it in")
+            && reason.contains("ledger.jsonl"),
         "{reason}"
     );
     assert!(report["hint"].as_str().is_some(), "{report}");
     for name in ["second.bvh", "second.glb", "second.imubake.json"] {
         assert!(
             !out.join(name).exists(),
-            "{name} stays without a ledger line"
+            "{name} appears without a ledger line"
         );
     }
     assert!(statuses(&out, "second.csv").is_empty());
@@ -1598,6 +1645,7 @@ fn an_unwritable_ledger_is_told_in_the_error_report_and_retried() {
         took.as_millis()
     );
     assert!(child.child().try_wait().unwrap().is_none(), "no restart");
+    wait_statuses(&out, "second.csv", &["converted"], 30);
     std::thread::sleep(Duration::from_millis(1500));
     assert_eq!(interrupt(child.take()), 0);
     assert!(!out.join("second.error.json").exists());
@@ -1652,15 +1700,13 @@ fn a_second_watcher_on_one_output_exits_and_the_first_converts_each_take_once() 
     for second_inbox in [&inbox, &other_inbox] {
         let mut second = Running::spawn(&mut walk_watch(second_inbox, &out, &[]));
         let second_log = Stderr::of(second.child());
-        let code = exit_within(second.child(), 10, "the second watcher");
+        let code = exit_within(second.child(), 30, "the second watcher");
         assert_ne!(code, 0);
-        std::thread::sleep(Duration::from_millis(100));
+        // Its stderr is read on a thread: wait for the line rather than for a while.
+        let pid = format!("pid {}", first.id());
+        let inbox_named = format!("inbox {}", canonical_inbox.display());
+        second_log.wait_lines(&[&pid, &inbox_named], 1, 30);
         let text = second_log.text();
-        assert!(
-            text.contains(&format!("pid {}", first.id()))
-                && text.contains(&format!("inbox {}", canonical_inbox.display())),
-            "{text}"
-        );
         assert!(!text.contains("watching"), "{text}");
     }
     assert_eq!(
@@ -1684,6 +1730,9 @@ fn a_second_watcher_on_one_output_exits_and_the_first_converts_each_take_once() 
             ),
             "{stem} within 180 s"
         );
+    }
+    for stem in &takes {
+        wait_statuses(&out, &format!("{stem}.csv"), &["converted"], 60);
     }
     std::thread::sleep(Duration::from_millis(1500));
     assert_eq!(interrupt(first.take()), 0);
@@ -1739,6 +1788,8 @@ fn a_killed_watchers_lock_is_taken_by_the_next_watcher() {
         "{}",
         log.text()
     );
+    // The ledger line is written after the sidecar.
+    wait_statuses(&out, "walk.csv", &["converted"], 30);
     assert_eq!(interrupt(next.take()), 0);
 }
 
@@ -1760,6 +1811,7 @@ fn a_file_in_place_of_the_output_folder_is_retried_until_moved() {
     let took = time_until(&out.join("day3/walk.imubake.json"), 30);
     eprintln!("moved away → converted in {} ms", took.as_millis());
     assert!(child.child().try_wait().unwrap().is_none(), "no restart");
+    wait_statuses(&out, "day3/walk.csv", &["failed", "converted"], 30);
     assert_eq!(interrupt(child.take()), 0);
     assert_eq!(
         visible(&out.join("day3")),

@@ -123,6 +123,29 @@ fn process_take_untimed(take: &BatchTake, job: &TakeJob<'_>, retry: bool) -> Att
         }
     }
     let started = now_ns();
+    // A take whose ledger line cannot be written is not converted: its outputs would not stay.
+    if let Err(e) = ledger.ready_to_append() {
+        let report = ErrorReport {
+            hint: Some(LEDGER_HINT.to_string()),
+            ..ErrorReport::from_message(
+                &take.rel,
+                &format!(
+                    "{}: not converted: cannot record it in {}: {e}",
+                    take.rel,
+                    ledger.path().display()
+                ),
+            )
+        };
+        let failure = Failure {
+            report,
+            stat: stat.ok(),
+            started,
+            environment: environmental(&e).then(|| e.kind()),
+            record_in_ledger: false,
+            retry,
+        };
+        return fail(take, job, &out_dir, failure);
+    }
     // The environment's error, when it is what failed the conversion.
     let mut environment = None;
     let result = fs::create_dir_all(&out_dir)
@@ -230,11 +253,7 @@ fn process_take_untimed(take: &BatchTake, job: &TakeJob<'_>, retry: bool) -> Att
                 // Unrecorded, the take is not converted: its outputs go (a rerun converts it
                 // again) and the error report says why, since the ledger may not.
                 let report = ErrorReport {
-                    hint: Some(
-                        "check that the output folder and its .imubake/ledger.jsonl are \
-                         writable and the disk is not full"
-                            .to_string(),
-                    ),
+                    hint: Some(LEDGER_HINT.to_string()),
                     ..ErrorReport::from_message(
                         &take.rel,
                         &format!("{}: converted, but cannot {what}: {e}", take.rel),
@@ -248,6 +267,9 @@ fn process_take_untimed(take: &BatchTake, job: &TakeJob<'_>, retry: bool) -> Att
         Err(report) => failure(report, environment, true),
     }
 }
+
+/// The hint of a take whose ledger line cannot be written.
+const LEDGER_HINT: &str = "check that the output folder and its .imubake/ledger.jsonl are writable and the disk is not full";
 
 /// A result that is the take's own (not an environmental failure).
 fn take_own(result: TakeResult) -> Attempt {
