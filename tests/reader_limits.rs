@@ -50,6 +50,7 @@ impl Run {
 }
 
 /// `chunk` written `times` times.
+#[derive(Clone)]
 struct Segment {
     chunk: Vec<u8>,
     times: u64,
@@ -169,10 +170,10 @@ fn imubake() -> Command {
 
 // ------------------------------------------------------------------ piped input
 
-/// 300 MB of the byte `a` on stdin: no capture format starts like that, which the first few
-/// KiB tell. The child must answer from them, never holding the rest, and stop reading.
-#[test]
-fn an_unknown_format_on_stdin_is_refused_after_its_first_bytes() {
+/// `imubake <command> /dev/stdin` fed `segments`, for `inspect` and for `convert` (onto mixamo,
+/// into a scratch folder): each must exit 1 with `message` in its error, its peak RSS under
+/// [`PEAK_BOUND_KIB`], having taken less than `fed_below` bytes from the pipe.
+fn refused_on_stdin_by_both(segments: &[Segment], message: &str, fed_below: u64) {
     for command in ["inspect", "convert"] {
         let out = tempfile::tempdir().unwrap();
         let mut cmd = imubake();
@@ -180,18 +181,11 @@ fn an_unknown_format_on_stdin_is_refused_after_its_first_bytes() {
         if command == "convert" {
             cmd.args(["--rig", "mixamo", "--out"]).arg(out.path());
         }
-        let run = run_fed(
-            &mut cmd,
-            vec![Segment {
-                chunk: vec![b'a'; MIB as usize],
-                times: 300,
-            }],
-            Duration::from_secs(300),
-        );
+        let run = run_fed(&mut cmd, segments.to_vec(), Duration::from_secs(300));
         eprintln!("{command}: {}", run.describe());
         assert_eq!(run.code, Some(1), "{command}: {}", run.describe());
         assert!(
-            run.stderr.contains("unknown capture format"),
+            run.stderr.contains(message),
             "{command}: {}",
             run.describe()
         );
@@ -200,52 +194,38 @@ fn an_unknown_format_on_stdin_is_refused_after_its_first_bytes() {
             "{command}: {}",
             run.describe()
         );
-        // It read its prefix and left: the pipe took at most a few MiB before it closed.
-        assert!(run.fed < 16 * MIB, "{command}: {}", run.describe());
+        assert!(run.fed < fed_below, "{command}: {}", run.describe());
     }
+}
+
+/// 300 MB of the byte `a` on stdin: no capture format starts like that, which the first few
+/// KiB tell. The child must answer from them, never holding the rest, and stop reading: the
+/// pipe takes at most a few MiB before it closes.
+#[test]
+fn an_unknown_format_on_stdin_is_refused_after_its_first_bytes() {
+    let junk = Segment {
+        chunk: vec![b'a'; MIB as usize],
+        times: 300,
+    };
+    refused_on_stdin_by_both(&[junk], "unknown capture format", 16 * MIB);
 }
 
 /// An imubake CSV header, then one 300 MB line without a newline: the header decides the
 /// format, and the second line is refused once it passes the 1 MiB limit, by number.
 #[test]
 fn a_huge_line_after_a_csv_header_on_stdin_is_refused_at_the_limit() {
-    for command in ["inspect", "convert"] {
-        let out = tempfile::tempdir().unwrap();
-        let mut cmd = imubake();
-        cmd.args([command, "/dev/stdin"]);
-        if command == "convert" {
-            cmd.args(["--rig", "mixamo", "--out"]).arg(out.path());
-        }
-        let run = run_fed(
-            &mut cmd,
-            vec![
-                Segment {
-                    chunk: b"time_s,sensor,qw,qx,qy,qz\n".to_vec(),
-                    times: 1,
-                },
-                Segment {
-                    chunk: vec![b'1'; MIB as usize],
-                    times: 300,
-                },
-            ],
-            Duration::from_secs(300),
-        );
-        eprintln!("{command}: {}", run.describe());
-        assert_eq!(run.code, Some(1), "{command}: {}", run.describe());
-        assert!(
-            run.stderr.contains(&format!(
-                "line 2: the line is longer than {LINE_LIMIT} bytes"
-            )),
-            "{command}: {}",
-            run.describe()
-        );
-        assert!(
-            run.peak_kib < PEAK_BOUND_KIB,
-            "{command}: {}",
-            run.describe()
-        );
-        assert!(run.fed < 32 * MIB, "{command}: {}", run.describe());
-    }
+    let segments = [
+        Segment {
+            chunk: b"time_s,sensor,qw,qx,qy,qz\n".to_vec(),
+            times: 1,
+        },
+        Segment {
+            chunk: vec![b'1'; MIB as usize],
+            times: 300,
+        },
+    ];
+    let message = format!("line 2: the line is longer than {LINE_LIMIT} bytes");
+    refused_on_stdin_by_both(&segments, &message, 32 * MIB);
 }
 
 /// A valid take still reads from a pipe: 2000 rows of one sensor at 100 Hz, 40 bytes a row;
