@@ -639,7 +639,6 @@ pub fn run(
     drop(rx);
     // The end: what the reorder buffer and the smoothers hold comes out, the recording closes.
     let mut warnings = Vec::new();
-    let mut dropped = clock_dropped.clone();
     if let Some(run) = &mut running {
         let mut send = |pose: &Pose| {
             frames += 1;
@@ -651,10 +650,17 @@ pub fn run(
             warnings.push(e.to_string());
         }
         warnings.extend(run.poses.warnings().iter().cloned());
-        let mut parts = vec![&clock_dropped, run.lines.dropped_lines()];
-        parts.extend(run.lines.take().map(|t| t.dropped_lines()));
-        dropped = DroppedLines::merged(&parts);
     }
+    // Every stage's dropped lines, in line order: the source clocks', the line parsers', the
+    // stream's.
+    let dropped = match &running {
+        Some(run) => {
+            let mut parts = vec![&clock_dropped, run.lines.dropped_lines()];
+            parts.extend(run.lines.take().map(|t| t.dropped_lines()));
+            DroppedLines::merged(&parts)
+        }
+        None => clock_dropped,
+    };
     let recording = match recorder {
         Some(r) => Some(r.finish().map_err(|e| record_error(settings, e))?),
         None => None,

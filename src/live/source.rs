@@ -305,6 +305,16 @@ impl Link {
         self.stop.load(Ordering::Relaxed)
     }
 
+    /// Moves the splitter's count of over-long lines into the session's counters as they come
+    /// (the session's summary must not wait for the source's end).
+    fn count_too_long(&self, split: &mut LineSplitter) {
+        if split.too_long > 0 {
+            self.counters
+                .too_long
+                .fetch_add(std::mem::take(&mut split.too_long), Ordering::Relaxed);
+        }
+    }
+
     /// Sends lines, waiting when the session is behind (streams whose sender can wait).
     fn send(&self, lines: Vec<Vec<u8>>) -> bool {
         if lines.is_empty() {
@@ -441,12 +451,7 @@ impl Framing {
         match self {
             Framing::Lines(split) => {
                 split.push(bytes, out);
-                // Counted as they come: the session's summary must not wait for the end.
-                if split.too_long > 0 {
-                    link.counters
-                        .too_long
-                        .fetch_add(std::mem::take(&mut split.too_long), Ordering::Relaxed);
-                }
+                link.count_too_long(split);
             }
             Framing::WitMotion {
                 lines,
@@ -479,9 +484,7 @@ impl Framing {
         match self {
             Framing::Lines(split) => {
                 split.finish(out);
-                link.counters
-                    .too_long
-                    .fetch_add(std::mem::take(&mut split.too_long), Ordering::Relaxed);
+                link.count_too_long(split);
             }
             Framing::WitMotion { lines, started, .. } => {
                 lines.finish(started.elapsed().as_secs_f64(), out)
@@ -569,7 +572,7 @@ fn reopening<R: Read>(
 /// (at most [`MAX_LINE`] bytes, longer ones counted in `too_long`), never held whole.
 fn replay(mut reader: impl Read, speed: f64, link: &Link) {
     let mut clock = super::clock::SourceClock::new(super::clock::DEFAULT_HORIZON_S);
-    let mut split = LineSplitter::default();
+    let mut framing = Framing::new(false, "");
     let mut buf = vec![0u8; 64 * 1024];
     let mut lines = Vec::new();
     let mut judged = Vec::new();
@@ -581,11 +584,11 @@ fn replay(mut reader: impl Read, speed: f64, link: &Link) {
         }
         let n = match reader.read(&mut buf) {
             Ok(0) => {
-                split.finish(&mut lines);
+                framing.finish(&mut lines, link);
                 0
             }
             Ok(n) => {
-                split.push(&buf[..n], &mut lines);
+                framing.push(&buf[..n], &mut lines, link);
                 n
             }
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
@@ -594,11 +597,6 @@ fn replay(mut reader: impl Read, speed: f64, link: &Link) {
                 return;
             }
         };
-        if split.too_long > 0 {
-            link.counters
-                .too_long
-                .fetch_add(std::mem::take(&mut split.too_long), Ordering::Relaxed);
-        }
         for line in lines.drain(..) {
             clock.push(line, &mut judged);
         }

@@ -229,11 +229,6 @@ impl TakeStream {
         ));
     }
 
-    /// Reports a line dropped before it reached the stream (by the line parsers).
-    pub fn drop_line(&mut self, report: LineReport) {
-        self.dropped.push(report);
-    }
-
     /// The sensors' ids, by index.
     pub fn sensor_ids(&self) -> &[String] {
         &self.ids
