@@ -580,7 +580,7 @@ fn bvh_conversion(
     })?;
     let source = crate::retarget::SourceMotion::of_bvh(&bvh, source_fps);
     drop(bvh);
-    let (animation, pairs) =
+    let (animation, pairs, warnings) =
         retarget_onto_rig(&source, settings, subject, settings.bvh_reference, &fail)?;
     let source = SourceRecord {
         path: input.to_string_lossy().into_owned(),
@@ -596,7 +596,7 @@ fn bvh_conversion(
         orientation: "bvh",
         world: World::Rig,
         mode: "bvh-retarget",
-        warnings: Vec::new(),
+        warnings,
     };
     Ok((motion.conversion(input, settings)?, source))
 }
@@ -610,15 +610,16 @@ fn retarget_onto_rig(
     subject: Option<&Subject>,
     reference: crate::retarget::Reference,
     fail: &dyn Fn(String) -> ConvertError,
-) -> Result<(Animation, Vec<(String, String)>), ConvertError> {
+) -> Result<(Animation, Vec<(String, String)>, Vec<String>), ConvertError> {
     let rig = rig_for(settings, None, subject)?;
     let source_names: Vec<&str> = source.names.iter().map(String::as_str).collect();
     let target_names: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
     let pairs = match &settings.bone_map {
-        Some(path) => crate::retarget::load_bone_map(path, &source_names, &target_names),
-        None => crate::retarget::auto_pairs(&source_names, &rig),
+        Some(path) => crate::retarget::load_bone_map(path, &source_names, &rig),
+        None => crate::retarget::auto_pairs(source, &rig),
     }
     .map_err(|e| fail(e.to_string()))?;
+    let warnings = crate::retarget::coverage_warnings(source, &rig, &pairs, reference);
     let animation =
         crate::retarget::retarget(source, &rig, &pairs, reference, settings.pipeline.fps)
             .map_err(|e| fail(e.to_string()))?;
@@ -626,7 +627,7 @@ fn retarget_onto_rig(
         .iter()
         .map(|&(s, t)| (source_names[s].to_string(), target_names[t].to_string()))
         .collect();
-    Ok((animation, named))
+    Ok((animation, named, warnings))
 }
 
 /// A take whose motion is already on a skeleton (a BVH, Xsens's segments), as a conversion: its
@@ -731,13 +732,15 @@ fn mvnx_segments_conversion(
         .map_err(|e| fail(e.to_string()))?;
     let (animation, pairs) = if settings.rig.is_some() || settings.bone_map.is_some() {
         let source = crate::retarget::SourceMotion::of_animation(&mvn);
-        retarget_onto_rig(
+        let (animation, pairs, more) = retarget_onto_rig(
             &source,
             settings,
             subject,
             crate::retarget::Reference::Rest,
             &fail,
-        )?
+        )?;
+        warnings.extend(more);
+        (animation, pairs)
     } else {
         let pairs = mvn
             .rig()

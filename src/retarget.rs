@@ -2,8 +2,8 @@
 //! mocopi, CMU) on a game rig, and Xsens's own segments ([`mvnx_animation`]) as a skeleton of
 //! their own. A source is a [`SourceMotion`] (a BVH's forward kinematics, or an animation's).
 //!
-//! Each mapped source joint s drives one target bone j (same anatomical part,
-//! [`crate::rig::names`], or a bone map). With S_s(t) the source joint's world rotation (the
+//! Each mapped source joint s drives one target bone j (the same body part of both skeletons'
+//! [`crate::rig::anatomy`], chains paired by their place along them, or a bone map). With S_s(t) the source joint's world rotation (the
 //! BVH's forward kinematics, rig world: Y up) and R_s its world rotation in the reference pose
 //! (the BVH's rest — every channel zero — or frame N), the change since the reference is
 //!
@@ -28,6 +28,7 @@ use crate::anim::{Animation, AnimationError};
 use crate::bvh::Bvh;
 use crate::fps::Fps;
 use crate::rig::Rig;
+use crate::rig::anatomy::{self, Anatomy, Part, Skeleton};
 use crate::rotation::quat::slerp_shortest;
 use nalgebra::{UnitQuaternion, Vector3};
 use std::path::{Path, PathBuf};
@@ -90,8 +91,13 @@ pub enum RetargetError {
 pub fn load_bone_map(
     path: &Path,
     source: &[&str],
-    target: &[&str],
+    target_rig: &Rig,
 ) -> Result<Vec<(usize, usize)>, RetargetError> {
+    let target: Vec<&str> = target_rig
+        .joints()
+        .iter()
+        .map(|j| j.name.as_str())
+        .collect();
     let fail = |reason: String| RetargetError::BoneMap {
         path: path.to_path_buf(),
         reason,
@@ -103,7 +109,7 @@ pub fn load_bone_map(
     let bones = bones
         .as_object()
         .ok_or_else(|| fail(r#"expected {"bones": {"source joint": "target bone", …}}"#.into()))?;
-    let parts = crate::rig::names::match_joints(target.iter().copied());
+    let parts = Anatomy::of(target_rig).mixamo_slots();
     let mut pairs = Vec::with_capacity(bones.len());
     for (s, t) in bones {
         let t = t
@@ -118,7 +124,7 @@ pub fn load_bone_map(
         let ti = target
             .iter()
             .position(|n| *n == t)
-            .or_else(|| parts.iter().find(|(p, _)| *p == t).map(|(_, i)| *i))
+            .or_else(|| parts.iter().find(|(p, _)| p == t).map(|(_, i)| *i))
             .ok_or_else(|| fail(format!("target bone `{t}` is not in the rig")))?;
         if pairs.iter().any(|&(_, other)| other == ti) {
             return Err(fail(format!("two source joints drive `{}`", target[ti])));
@@ -134,6 +140,11 @@ pub fn load_bone_map(
 #[derive(Debug, Clone)]
 pub struct SourceMotion {
     pub names: Vec<String>,
+    /// Each joint's parent (before it).
+    pub parents: Vec<Option<usize>>,
+    /// Each joint's rest position and End Site (source units, rig world axes).
+    pub rest: Vec<Vector3<f64>>,
+    pub end_sites: Vec<Option<Vector3<f64>>>,
     pub fps: Fps,
     /// `world[frame][joint]`: q_world_joint.
     pub world: Vec<Vec<UnitQuaternion<f64>>>,
@@ -146,6 +157,7 @@ impl SourceMotion {
     /// A BVH file's motion (its forward kinematics), at `fps` (its `Frame Time`'s rate).
     pub fn of_bvh(bvh: &Bvh, fps: Fps) -> SourceMotion {
         let (rest, lowest) = rest_heights(bvh);
+        let root_y = rest.first().map_or(0.0, |r| r.y);
         let mut world = Vec::with_capacity(bvh.frame_count());
         let mut roots = Vec::with_capacity(bvh.frame_count());
         for n in 0..bvh.frame_count() {
@@ -158,10 +170,13 @@ impl SourceMotion {
         }
         SourceMotion {
             names: bvh.joints().iter().map(|j| j.name.clone()).collect(),
+            parents: bvh.joints().iter().map(|j| j.parent).collect(),
+            rest,
+            end_sites: bvh.joints().iter().map(|j| j.end_site).collect(),
             fps,
             world,
             roots,
-            hip_height: rest.first().map_or(0.0, |r| r.y) - lowest,
+            hip_height: root_y - lowest,
         }
     }
 
@@ -170,6 +185,9 @@ impl SourceMotion {
         let rig = anim.rig();
         SourceMotion {
             names: rig.joints().iter().map(|j| j.name.clone()).collect(),
+            parents: rig.joints().iter().map(|j| j.parent).collect(),
+            rest: rig.rest_positions(),
+            end_sites: rig.joints().iter().map(|j| j.end_site).collect(),
             fps: anim.fps(),
             world: (0..anim.frames())
                 .map(|n| rig.world_rotations(&anim.pose_at(n)))
@@ -180,19 +198,131 @@ impl SourceMotion {
     }
 }
 
-/// The pairs by anatomical part ([`crate::rig::names::auto_map`]); an error when there are none.
-pub fn auto_pairs(source: &[&str], target: &Rig) -> Result<Vec<(usize, usize)>, RetargetError> {
-    let pairs = crate::rig::names::auto_map(
-        source.iter().copied(),
-        target.joints().iter().map(|j| j.name.as_str()),
-    );
+impl SourceMotion {
+    /// The source skeleton's anatomy.
+    pub fn anatomy(&self) -> Anatomy {
+        Anatomy::resolve(&Skeleton {
+            name: "the source",
+            names: self.names.iter().map(String::as_str).collect(),
+            parents: self.parents.clone(),
+            rest: self.rest.clone(),
+            end_sites: self.end_sites.clone(),
+            declared: Default::default(),
+        })
+    }
+
+    /// Each joint's largest turn from the reference relative to its parent over the take,
+    /// degrees (how much it moves of its own).
+    fn own_turn_deg(&self, reference: Reference) -> Vec<f64> {
+        let n = self.names.len();
+        let reference = match reference {
+            Reference::Frame(f) if f < self.world.len() => self.world[f].clone(),
+            _ => vec![UnitQuaternion::identity(); n],
+        };
+        let local = |w: &[UnitQuaternion<f64>], j: usize| match self.parents[j] {
+            Some(p) => w[p].inverse() * w[j],
+            None => w[j],
+        };
+        let base: Vec<UnitQuaternion<f64>> = (0..n).map(|j| local(&reference, j)).collect();
+        let mut most = vec![0.0f64; n];
+        for w in &self.world {
+            for j in 0..n {
+                most[j] = most[j].max(base[j].angle_to(&local(w, j)).to_degrees());
+            }
+        }
+        most
+    }
+}
+
+/// A joint turning less than this (degrees, relative to its parent) over a take does not move.
+pub const MOVES_DEG: f64 = 1.0;
+
+/// The pairs by body part ([`anatomy::pairs`]); an error when there are none.
+pub fn auto_pairs(
+    source: &SourceMotion,
+    target: &Rig,
+) -> Result<Vec<(usize, usize)>, RetargetError> {
+    let pairs = anatomy::pairs(&source.anatomy(), &Anatomy::of(target));
     if pairs.is_empty() {
         return Err(RetargetError::NothingMapped {
             rig: target.name().to_string(),
-            joints: source.join(", "),
+            joints: source.names.join(", "),
         });
     }
     Ok(pairs)
+}
+
+/// What the pairs leave out, as warnings naming both sides: a source joint that moves (more than
+/// [`MOVES_DEG`] relative to its parent) and is no body part — not a part, not a joint between
+/// parts (the world turns of the parts below carry it), not below a hand, a foot or the head
+/// (fingers, toes' tips, eyes) —, and a target part left undriven though the source has it.
+pub fn coverage_warnings(
+    source: &SourceMotion,
+    target: &Rig,
+    pairs: &[(usize, usize)],
+    reference: Reference,
+) -> Vec<String> {
+    let src = source.anatomy();
+    let tgt = Anatomy::of(target);
+    let mut warnings = Vec::new();
+    let driven_src: Vec<usize> = pairs.iter().map(|&(s, _)| s).collect();
+    let driven_tgt: Vec<usize> = pairs.iter().map(|&(_, t)| t).collect();
+    let part_joints: Vec<usize> = Part::all()
+        .into_iter()
+        .flat_map(|p| src.joints(p))
+        .collect();
+    let ends: Vec<usize> = [Part::Head]
+        .into_iter()
+        .chain(crate::rig::anatomy::Side::BOTH.into_iter().flat_map(|s| {
+            [
+                Part::Limb(s, anatomy::Limb::Hand),
+                Part::Limb(s, anatomy::Limb::Foot),
+            ]
+        }))
+        .flat_map(|p| src.joints(p))
+        .collect();
+    let turn = source.own_turn_deg(reference);
+    for (j, name) in source.names.iter().enumerate() {
+        if driven_src.contains(&j) || part_joints.contains(&j) || turn[j] <= MOVES_DEG {
+            continue;
+        }
+        // Between parts: a part hangs below it. Below an end: a detail of it.
+        let carried = part_joints.iter().any(|&p| src.is_below(p, j));
+        let detail = ends.iter().any(|&e| src.is_below(j, e));
+        if carried || detail {
+            continue;
+        }
+        let near = (0..j)
+            .rev()
+            .filter(|&a| src.is_below(j, a))
+            .find_map(|a| src.part_of(a))
+            .map_or(String::new(), |p| format!(" (below the {})", p.label()));
+        warnings.push(format!(
+            "source joint `{name}`{near} turns up to {:.0}° but is no body part: no bone of `{}` follows it",
+            turn[j],
+            target.name()
+        ));
+    }
+    for part in Part::all() {
+        let t = tgt.joints(part);
+        let s = src.joints(part);
+        if t.is_empty() || s.is_empty() || t.iter().any(|j| driven_tgt.contains(j)) {
+            continue;
+        }
+        let tn: Vec<&str> = t
+            .iter()
+            .map(|&j| target.joints()[j].name.as_str())
+            .collect();
+        let sn: Vec<&str> = s.iter().map(|&j| source.names[j].as_str()).collect();
+        warnings.push(format!(
+            "the {} of `{}` ({}) is not driven, though the source has it ({})",
+            part.label(),
+            target.name(),
+            tn.join(", "),
+            sn.join(", ")
+        ));
+    }
+    warnings
 }
 
 /// Each joint's rest position (every channel zero; the root at its OFFSET), file units, and the

@@ -22,7 +22,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The built-in rigs: name and file text.
-const BUILTIN: [(&str, &str); 2] = [
+/// The built-in rigs: name, rig file text.
+pub const BUILTIN: [(&str, &str); 2] = [
     ("mixamo", include_str!("../../rigs/mixamo.yaml")),
     ("sou12", include_str!("../../rigs/sou12.yaml")),
 ];

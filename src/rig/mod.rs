@@ -5,6 +5,7 @@
 //! the local rotation of each joint. Rig files are YAML or JSON (schema in README, "Rigs"); any
 //! BVH file's hierarchy serves as a rig too.
 
+pub mod anatomy;
 pub mod file;
 pub mod names;
 pub mod subject;
@@ -82,6 +83,8 @@ pub enum RigError {
     VmcJoint(String),
     #[error("segments: `{landmark}` names `{joint}`, which is not a joint of the rig")]
     SegmentJoint { landmark: String, joint: String },
+    #[error("segments: `{landmark}` is no body part; the parts are {known}")]
+    UnknownLandmark { landmark: String, known: String },
 }
 
 /// A validated joint hierarchy: joint 0 is the root, every parent comes before its children,
@@ -218,9 +221,16 @@ impl Rig {
 
     /// Makes the frames of a BVH rig's motion available as poses `frame:N`; each entry holds
     /// every joint's local rotation.
-    /// Names the joint of an anatomical landmark (`left_upper_arm: LeftArm`, ...; the landmarks
-    /// are those of `imubake angles`): the rig file's `segments:`.
+    /// Declares the joint of a body part (`left_upper_arm: LeftArm`, ...; the keys are
+    /// [`anatomy::declarable_keys`]): the rig file's `segments:`.
     pub fn set_segment(&mut self, landmark: &str, joint: &str) -> Result<(), RigError> {
+        let known = anatomy::declarable_keys();
+        if !known.iter().any(|k| k == landmark) {
+            return Err(RigError::UnknownLandmark {
+                landmark: landmark.to_string(),
+                known: known.join(", "),
+            });
+        }
         let j = self
             .joint_index(joint)
             .ok_or_else(|| RigError::SegmentJoint {
