@@ -27,17 +27,11 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum AnalysisError {
     #[error(
-        "rig `{rig}`: no anatomical segments found (neither its joint names nor a `segments:` key in its rig file name a pelvis, thighs or upper arms)"
+        "rig `{rig}`: no anatomical segments found (no pelvis, thighs or upper arms among its joints by name or shape; `imubake inspect <rig>` shows what was found; a rig file's `segments:` can name them)"
     )]
     NoSegments { rig: String },
     #[error("rig `{rig}`: cannot tell left from right (no left and right thighs or upper arms)")]
     NoSides { rig: String },
-    #[error("rig `{rig}`: `segments:` has `{landmark}`, which is no landmark; known: {known}")]
-    UnknownLandmark {
-        rig: String,
-        landmark: String,
-        known: String,
-    },
     #[error(
         "rig `{rig}`: `segments:` `{landmark}` (`{joint}`) is not below `{above}` (`{above_joint}`)"
     )]
@@ -88,7 +82,6 @@ impl crate::diagnostic::Diagnostic for AnalysisError {
         match self {
             AnalysisError::NoSegments { .. }
             | AnalysisError::NoSides { .. }
-            | AnalysisError::UnknownLandmark { .. }
             | AnalysisError::NotBelow { .. } => {
                 Some("name the landmarks in the rig file's `segments:` (docs: angles)")
             }

@@ -3,26 +3,19 @@
 //! and each segment's anatomical frame at rest.
 //!
 //! # Landmarks
-//! A rig file's `segments:` names them (`left_upper_arm: LeftArm`, ...); otherwise the first of
-//! these joint names the rig has (any `namespace:` prefix ignored; `S` is `Left` or `Right`, and
-//! sou12's nodes are listed too: `N2_*`/`N4_*` left arm/leg, `N1_*`/`N3_*` right):
+//! The segments are the rig's body parts ([`crate::rig::anatomy`]: a rig file's `segments:`,
+//! else the joints' names in any of the common schemes, else the skeleton's shape): the pelvis,
+//! the thorax (the spine's top, where the arms meet; the pelvis when there is no spine between),
+//! each side's upper arm, forearm, hand, thigh, shank and foot; and points:
 //!
-//! | landmark | names |
+//! | point | where |
 //! |---|---|
-//! | `upper_arm` | `SArm`, `SUpArm`, `SUpperArm`, `SShoulder` (mocapbank style), `N2_0`/`N1_0` |
-//! | `forearm` | `SForeArm`, `SLowArm`, `SLowerArm`, `SElbow`, `N2_1`/`N1_1` |
-//! | `hand` | `SHand`, `SWrist` |
-//! | `hand_end` (a point) | `SHandMiddle1`, `SFingerBase`, `SHand_End`, `SHandEnd` |
-//! | `thigh` | `SUpLeg`, `SThigh`, `SUpperLeg`, `SHip`, `N4_0`/`N3_0` |
-//! | `shank` | `SLeg`, `SKnee`, `SShin`, `SLowerLeg`, `SLowLeg`, `N4_1`/`N3_1` |
-//! | `foot` | `SFoot`, `SAnkle` |
-//! | `toe` (a point) | `SToeBase`, `SToe`, `SToes` |
-//! | `neck` (a point) | `Neck`, `N5_0`, `Head` |
-//! | `pelvis` | the lowest common ancestor of the two thighs |
-//! | `thorax` | the lowest common ancestor of the two upper arms |
+//! | `neck` | the neck's first joint, else the head |
+//! | `hand_end` | a rig file's `left_hand_end`/`right_hand_end`, else the first of `SHandMiddle1`, `SFingerBase`, `SHand_End`, `SHandEnd` (`S` is `Left` or `Right`) |
+//! | `toe` | the toes joint |
 //!
-//! Each limb landmark must lie below the one before it (forearm below upper arm, ...), else it
-//! is missing. A point is its joint's position, unless that coincides with the segment's own joint
+//! A joint a rig file declares must lie below the part before it (forearm below upper arm, ...),
+//! else it is an error. A point is its joint's position, unless that coincides with the segment's own joint
 //! at rest (CMU's `LeftFingerBase` sits on `LeftHand`): then the joint's first child, again, or at
 //! the end of the chain its End Site. Without a `hand_end` or `toe` joint, the walk starts at the
 //! hand or foot itself. Without a hand (sou12) the wrist point is the forearm's End Site, the
@@ -44,41 +37,10 @@
 
 use super::AnalysisError;
 use crate::rig::Rig;
+use crate::rig::anatomy::{Anatomy, Limb, Part};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
-/// Left or right; `Left` is index 0.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Side {
-    Left,
-    Right,
-}
-
-impl Side {
-    pub const BOTH: [Side; 2] = [Side::Left, Side::Right];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Side::Left => "left",
-            Side::Right => "right",
-        }
-    }
-
-    fn prefix(self) -> &'static str {
-        match self {
-            Side::Left => "Left",
-            Side::Right => "Right",
-        }
-    }
-
-    fn sou12(self, arm: bool) -> &'static str {
-        match (self, arm) {
-            (Side::Left, true) => "N2",
-            (Side::Left, false) => "N4",
-            (Side::Right, true) => "N1",
-            (Side::Right, false) => "N3",
-        }
-    }
-}
+pub use crate::rig::anatomy::Side;
 
 /// A point of the body: a joint's position, or its End Site's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -135,24 +97,9 @@ pub struct Segments {
     pub palm: [Vector3<f64>; 2],
 }
 
-/// The landmarks a rig file's `segments:` may name.
+/// The landmarks a rig file's `segments:` may name ([`crate::rig::anatomy::declarable_keys`]).
 pub fn landmark_names() -> Vec<String> {
-    let mut names = vec!["pelvis".to_string(), "thorax".into(), "neck".into()];
-    for side in Side::BOTH {
-        for l in [
-            "upper_arm",
-            "forearm",
-            "hand",
-            "hand_end",
-            "thigh",
-            "shank",
-            "foot",
-            "toe",
-        ] {
-            names.push(format!("{}_{l}", side.name()));
-        }
-    }
-    names
+    crate::rig::anatomy::declarable_keys()
 }
 
 fn bare(name: &str) -> &str {
@@ -170,31 +117,14 @@ fn is_below(rig: &Rig, joint: usize, ancestor: usize) -> bool {
     false
 }
 
-fn ancestors(rig: &Rig, joint: usize) -> Vec<usize> {
-    let mut out = vec![joint];
-    let mut j = rig.joints()[joint].parent;
-    while let Some(p) = j {
-        out.push(p);
-        j = rig.joints()[p].parent;
-    }
-    out
-}
-
-fn common_ancestor(rig: &Rig, a: usize, b: usize) -> usize {
-    let up_a = ancestors(rig, a);
-    ancestors(rig, b)
-        .into_iter()
-        .find(|j| up_a.contains(j))
-        .unwrap_or(0)
-}
-
 struct Finder<'a> {
     rig: &'a Rig,
     rest: Vec<Vector3<f64>>,
 }
 
 impl Finder<'_> {
-    /// The landmark's joint: the rig file's, else the first of `names` the rig has.
+    /// The first of `names` the rig has (any `namespace:` prefix ignored), unless the rig file
+    /// declares `landmark`.
     fn joint(&self, landmark: &str, names: &[String]) -> Option<usize> {
         if let Some(&j) = self.rig.segments().get(landmark) {
             return Some(j);
@@ -207,30 +137,33 @@ impl Finder<'_> {
         })
     }
 
-    /// A limb landmark that must lie below `above`: missing when it does not (an error when the
-    /// rig file named it).
-    fn below(
+    /// A part's joint; one the rig file declares must lie below the part `above` (an error
+    /// naming both when it does not).
+    fn part(
         &self,
-        landmark: &str,
-        names: &[String],
+        anatomy: &Anatomy,
+        side: Side,
+        limb: Limb,
         above: Option<(usize, &str)>,
     ) -> Result<Option<usize>, AnalysisError> {
-        let Some(j) = self.joint(landmark, names) else {
+        let Some(j) = anatomy.limb(side, limb) else {
             return Ok(None);
         };
+        let key = Part::Limb(side, limb).key();
         match above {
-            None => Ok(Some(j)),
-            Some((a, _)) if is_below(self.rig, j, a) => Ok(Some(j)),
-            Some((a, above_name)) if self.rig.segments().contains_key(landmark) => {
+            Some((a, above_name))
+                if self.rig.segments().contains_key(&key) && !is_below(self.rig, j, a) =>
+            {
                 Err(AnalysisError::NotBelow {
                     rig: self.rig.name().to_string(),
-                    landmark: landmark.to_string(),
+                    landmark: key,
                     joint: self.rig.joints()[j].name.clone(),
                     above: above_name.to_string(),
                     above_joint: self.rig.joints()[a].name.clone(),
                 })
             }
-            Some(_) => Ok(None),
+            Some((a, _)) if !is_below(self.rig, j, a) => Ok(None),
+            _ => Ok(Some(j)),
         }
     }
 
@@ -255,47 +188,16 @@ impl Finder<'_> {
     }
 }
 
-fn names(side: Side, stems: &[&str], sou12: Option<&str>) -> Vec<String> {
-    let mut out: Vec<String> = stems
-        .iter()
-        .map(|s| format!("{}{s}", side.prefix()))
-        .collect();
-    out.extend(sou12.map(String::from));
-    out
-}
-
-fn limbs(f: &Finder, side: Side) -> Result<Limbs, AnalysisError> {
+fn limbs(f: &Finder, anatomy: &Anatomy, side: Side) -> Result<Limbs, AnalysisError> {
     let s = side.name();
-    let key = |l: &str| format!("{s}_{l}");
-    let arm = side.sou12(true);
-    let leg = side.sou12(false);
-    let upper_arm = f.below(
-        &key("upper_arm"),
-        &names(
-            side,
-            &["Arm", "UpArm", "UpperArm", "Shoulder"],
-            Some(&format!("{arm}_0")),
-        ),
-        None,
-    )?;
+    let prefix = side.prefix();
+    let upper_arm = f.part(anatomy, side, Limb::UpperArm, None)?;
     let forearm = match upper_arm {
-        Some(u) => f.below(
-            &key("forearm"),
-            &names(
-                side,
-                &["ForeArm", "LowArm", "LowerArm", "Elbow"],
-                Some(&format!("{arm}_1")),
-            ),
-            Some((u, "upper_arm")),
-        )?,
+        Some(u) => f.part(anatomy, side, Limb::Forearm, Some((u, "upper_arm")))?,
         None => None,
     };
     let hand = match forearm {
-        Some(fa) => f.below(
-            &key("hand"),
-            &names(side, &["Hand", "Wrist"], None),
-            Some((fa, "forearm")),
-        )?,
+        Some(fa) => f.part(anatomy, side, Limb::Hand, Some((fa, "forearm")))?,
         None => None,
     };
     let wrist = match (hand, forearm) {
@@ -304,43 +206,20 @@ fn limbs(f: &Finder, side: Side) -> Result<Limbs, AnalysisError> {
         _ => None,
     };
     let hand_end = hand.and_then(|h| {
-        let start = f.joint(
-            &key("hand_end"),
-            &names(
-                side,
-                &["HandMiddle1", "FingerBase", "Hand_End", "HandEnd"],
-                None,
-            ),
-        );
+        let names: Vec<String> = ["HandMiddle1", "FingerBase", "Hand_End", "HandEnd"]
+            .iter()
+            .map(|n| format!("{prefix}{n}"))
+            .collect();
+        let start = f.joint(&format!("{s}_hand_end"), &names);
         f.end_point(h, start)
     });
-    let thigh = f.below(
-        &key("thigh"),
-        &names(
-            side,
-            &["UpLeg", "Thigh", "UpperLeg", "Hip"],
-            Some(&format!("{leg}_0")),
-        ),
-        None,
-    )?;
+    let thigh = f.part(anatomy, side, Limb::Thigh, None)?;
     let shank = match thigh {
-        Some(t) => f.below(
-            &key("shank"),
-            &names(
-                side,
-                &["Leg", "Knee", "Shin", "LowerLeg", "LowLeg"],
-                Some(&format!("{leg}_1")),
-            ),
-            Some((t, "thigh")),
-        )?,
+        Some(t) => f.part(anatomy, side, Limb::Shank, Some((t, "thigh")))?,
         None => None,
     };
     let foot = match shank {
-        Some(sh) => f.below(
-            &key("foot"),
-            &names(side, &["Foot", "Ankle"], None),
-            Some((sh, "shank")),
-        )?,
+        Some(sh) => f.part(anatomy, side, Limb::Foot, Some((sh, "shank")))?,
         None => None,
     };
     let ankle = match (foot, shank) {
@@ -348,10 +227,7 @@ fn limbs(f: &Finder, side: Side) -> Result<Limbs, AnalysisError> {
         (None, Some(sh)) => f.rig.joints()[sh].end_site.map(|_| Point::EndSite(sh)),
         _ => None,
     };
-    let toe = foot.and_then(|ft| {
-        let start = f.joint(&key("toe"), &names(side, &["ToeBase", "Toe", "Toes"], None));
-        f.end_point(ft, start)
-    });
+    let toe = foot.and_then(|ft| f.end_point(ft, anatomy.limb(side, Limb::Toes)));
     Ok(Limbs {
         upper_arm,
         forearm,
@@ -369,34 +245,32 @@ fn limbs(f: &Finder, side: Side) -> Result<Limbs, AnalysisError> {
 impl Segments {
     /// The rig's segments (see the module's docs).
     pub fn of(rig: &Rig) -> Result<Segments, AnalysisError> {
-        let known = landmark_names();
-        if let Some(bad) = rig.segments().keys().find(|k| !known.contains(k)) {
-            return Err(AnalysisError::UnknownLandmark {
-                rig: rig.name().to_string(),
-                landmark: bad.clone(),
-                known: known.join(", "),
-            });
-        }
+        let anatomy = Anatomy::of(rig);
         let f = Finder {
             rig,
             rest: rig.rest_positions(),
         };
-        let sides = [limbs(&f, Side::Left)?, limbs(&f, Side::Right)?];
+        let sides = [
+            limbs(&f, &anatomy, Side::Left)?,
+            limbs(&f, &anatomy, Side::Right)?,
+        ];
         let [l, r] = &sides;
         let pair = |a: Option<usize>, b: Option<usize>| a.zip(b);
-        let pelvis = f
-            .joint("pelvis", &[])
-            .or_else(|| pair(l.thigh, r.thigh).map(|(a, b)| common_ancestor(rig, a, b)));
-        let thorax = f
-            .joint("thorax", &[])
-            .or_else(|| pair(l.upper_arm, r.upper_arm).map(|(a, b)| common_ancestor(rig, a, b)));
+        let pelvis = anatomy.pelvis();
+        let arms = pair(l.upper_arm, r.upper_arm).is_some();
+        let thorax = anatomy
+            .thorax()
+            .or_else(|| pelvis.filter(|_| arms || rig.segments().contains_key("thorax")));
         if pelvis.is_none() && thorax.is_none() {
             return Err(AnalysisError::NoSegments {
                 rig: rig.name().to_string(),
             });
         }
-        let neck = f
-            .joint("neck", &["Neck".into(), "N5_0".into(), "Head".into()])
+        let neck = anatomy
+            .neck()
+            .first()
+            .copied()
+            .or(anatomy.head())
             .map(Point::Joint);
         let (left, right) = pair(l.thigh, r.thigh)
             .or_else(|| pair(l.upper_arm, r.upper_arm))
@@ -510,8 +384,9 @@ mod tests {
             "{e}"
         );
         let bad = text.replace("left_thigh", "left_thighs");
-        let rig = crate::rig::file::parse_rig(&bad, std::path::Path::new("odd.yaml")).unwrap();
-        let e = Segments::of(&rig).unwrap_err().to_string();
-        assert!(e.contains("`left_thighs`, which is no landmark"), "{e}");
+        let e = crate::rig::file::parse_rig(&bad, std::path::Path::new("odd.yaml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`left_thighs` is no body part"), "{e}");
     }
 }

@@ -3,9 +3,9 @@
 //! receivers.
 //!
 //! Each frame's bundle holds `/VMC/Ext/Root/Pos "root"` (at the origin, unrotated), one
-//! `/VMC/Ext/Bone/Pos <name> px py pz qx qy qz qw` per named bone — its local position (metres;
-//! the hips' is their position in the world, so the body moves) and local rotation, with Unity's
-//! humanoid bone names — then `/VMC/Ext/T <time>` (the frame's time on the take's clock,
+//! `/VMC/Ext/Bone/Pos <name> px py pz qx qy qz qw` per named bone — its position (metres) and
+//! rotation relative to the nearest sent bone above it (the hips': in the world, so the body
+//! moves), with Unity's humanoid bone names — then `/VMC/Ext/T <time>` (the frame's time on the take's clock,
 //! seconds). `/VMC/Ext/OK 1 <calibration state> 0` goes out once a second.
 //!
 //! # Axes
@@ -15,50 +15,21 @@
 //! `(w, x, y, z)` (the rotation `R` becomes `M R M`, `M = diag(−1, 1, 1)`) becomes
 //! `(w, x, −y, −z)`. At the rest pose every joint frame is parallel to the world, as a VRM's
 //! normalised bones are, so the local rotations apply to a VRM avatar as they are.
+//!
+//! # Names
+//! The bones are the rig's body parts ([`crate::rig::anatomy`], whatever the joints' names) under
+//! Unity's names: `Hips`; the spine's first joint `Spine`, its middle `Chest` and its top
+//! `UpperChest` (two joints: `Spine`, `Chest`); the neck's first joint `Neck`; `Head`; per side
+//! `Shoulder` (the clavicle), `UpperArm`, `LowerArm`, `Hand`, `UpperLeg`, `LowerLeg`, `Foot`,
+//! `Toes`. A rig file's `vmc_names:` adds to or overrides them. A joint between two sent bones
+//! (a spine of seven joints, CMU's `LHipJoint`) is not sent: its turn is in the next bone's,
+//! W_parent⁻¹ ⊗ W_bone with W the joints' world rotations.
 
 use crate::anim::Pose;
 use crate::rig::Rig;
+use crate::rig::anatomy::Anatomy;
 use nalgebra::{UnitQuaternion, Vector3};
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
-
-/// Unity humanoid bone names for the built-in rigs' joints (Mixamo names, which many BVH
-/// skeletons share, and sou12's nodes). A rig file's `vmc_names:` adds to or overrides them.
-pub const BONE_NAMES: [(&str, &str); 34] = [
-    ("Hips", "Hips"),
-    ("Spine", "Spine"),
-    ("Spine1", "Chest"),
-    ("Spine2", "UpperChest"),
-    ("Neck", "Neck"),
-    ("Head", "Head"),
-    ("LeftShoulder", "LeftShoulder"),
-    ("LeftArm", "LeftUpperArm"),
-    ("LeftForeArm", "LeftLowerArm"),
-    ("LeftHand", "LeftHand"),
-    ("RightShoulder", "RightShoulder"),
-    ("RightArm", "RightUpperArm"),
-    ("RightForeArm", "RightLowerArm"),
-    ("RightHand", "RightHand"),
-    ("LeftUpLeg", "LeftUpperLeg"),
-    ("LeftLeg", "LeftLowerLeg"),
-    ("LeftFoot", "LeftFoot"),
-    ("LeftToeBase", "LeftToes"),
-    ("RightUpLeg", "RightUpperLeg"),
-    ("RightLeg", "RightLowerLeg"),
-    ("RightFoot", "RightFoot"),
-    ("RightToeBase", "RightToes"),
-    ("N0_0", "Hips"),
-    ("N0_1", "Spine"),
-    ("N1_0", "RightUpperArm"),
-    ("N1_1", "RightLowerArm"),
-    ("N2_0", "LeftUpperArm"),
-    ("N2_1", "LeftLowerArm"),
-    ("N3_0", "RightUpperLeg"),
-    ("N3_1", "RightLowerLeg"),
-    ("N4_0", "LeftUpperLeg"),
-    ("N4_1", "LeftLowerLeg"),
-    ("N5_0", "Neck"),
-    ("N5_1", "Head"),
-];
 
 /// A position in the rig world → Unity's axes.
 pub fn to_unity_position(p: Vector3<f64>) -> [f32; 3] {
@@ -84,38 +55,65 @@ pub enum CalibrationState {
 #[derive(Debug, Clone)]
 pub struct VmcSkeleton {
     bones: Vec<(usize, String)>,
-    /// Each bone's offset from its parent, metres, rig world.
+    /// Each sent bone's nearest sent bone above it (`None` for the top one, the hips).
+    above: Vec<Option<usize>>,
+    /// Each sent bone's rest offset from the bone above it (metres, rig world).
     offsets: Vec<Vector3<f64>>,
+    /// Whether every sent bone's parent joint is the bone above it (no joint in between): then
+    /// the joints' local rotations are sent as they are.
+    direct: bool,
     metres_per_unit: f64,
 }
 
 impl VmcSkeleton {
-    /// The bones of `rig` with a Unity name (its rig file's `vmc_names`, else [`BONE_NAMES`]).
-    /// `None` when the rig has no hips to send.
+    /// The bones of `rig` with a Unity name (its body parts', see the module's docs; its rig
+    /// file's `vmc_names` added or overriding). `None` when the rig has no hips to send.
     pub fn new(rig: &Rig) -> Option<VmcSkeleton> {
         let m = rig.units().metres_per_unit();
-        let mut bones = Vec::new();
-        for (j, joint) in rig.joints().iter().enumerate() {
-            let bare = joint.name.rsplit(':').next().unwrap_or(&joint.name);
-            let name = rig.vmc_names().get(&joint.name).cloned().or_else(|| {
-                BONE_NAMES
-                    .iter()
-                    .find(|(ours, _)| *ours == bare)
-                    .map(|(_, unity)| unity.to_string())
-            });
-            if let Some(name) = name
-                && !bones.iter().any(|(_, n)| *n == name)
-            {
-                bones.push((j, name));
+        let mut named: Vec<Option<String>> = vec![None; rig.len()];
+        for (unity, j) in Anatomy::of(rig).unity_bones() {
+            named[j] = Some(unity);
+        }
+        for (joint, unity) in rig.vmc_names() {
+            if let Some(j) = rig.joint_index(joint) {
+                named.iter_mut().for_each(|n| {
+                    if n.as_deref() == Some(unity.as_str()) {
+                        *n = None;
+                    }
+                });
+                named[j] = Some(unity.clone());
             }
         }
+        let bones: Vec<(usize, String)> = named
+            .into_iter()
+            .enumerate()
+            .filter_map(|(j, n)| n.map(|n| (j, n)))
+            .collect();
         if !bones.iter().any(|(_, n)| n == "Hips") {
             return None;
         }
-        let offsets = rig.joints().iter().map(|j| j.offset * m).collect();
+        let rest = rig.rest_positions();
+        let sent = |j: usize| bones.iter().position(|&(b, _)| b == j);
+        let mut above = Vec::with_capacity(bones.len());
+        let mut offsets = Vec::with_capacity(bones.len());
+        let mut direct = true;
+        for &(j, _) in &bones {
+            let mut p = rig.joints()[j].parent;
+            while let Some(k) = p {
+                if sent(k).is_some() {
+                    break;
+                }
+                p = rig.joints()[k].parent;
+            }
+            direct &= p == rig.joints()[j].parent;
+            above.push(p);
+            offsets.push(p.map_or(Vector3::zeros(), |p| (rest[j] - rest[p]) * m));
+        }
         Some(VmcSkeleton {
             bones,
+            above,
             offsets,
+            direct,
             metres_per_unit: m,
         })
     }
@@ -134,16 +132,34 @@ impl VmcSkeleton {
             addr: "/VMC/Ext/Root/Pos".into(),
             args: root_args,
         }));
-        for (j, name) in &self.bones {
-            // The hips (the root joint) carry the body's place; other bones their rig offset.
-            let position = if rig.joints()[*j].parent.is_none() {
-                pose.root * self.metres_per_unit
-            } else {
-                self.offsets[*j]
+        // World rotations and positions only when a joint lies between two sent bones or a top
+        // bone is not the root: otherwise each bone's rotation is the joint's own local one.
+        let roots_only = self
+            .bones
+            .iter()
+            .zip(&self.above)
+            .all(|(&(j, _), a)| a.is_some() || j == 0);
+        let world = (!self.direct || !roots_only).then(|| rig.world_rotations(&pose.local));
+        let positions = (!roots_only).then(|| rig.world_positions(&pose.local, pose.root));
+        for (i, (j, name)) in self.bones.iter().enumerate() {
+            let (position, rotation) = match self.above[i] {
+                // The top bone carries the body's place in the world.
+                None => {
+                    let p = positions.as_ref().map_or(pose.root, |p| p[*j]);
+                    let q = world.as_ref().map_or(pose.local[*j], |w| w[*j]);
+                    (p * self.metres_per_unit, q)
+                }
+                Some(a) => {
+                    let q = match &world {
+                        Some(w) => w[a].inverse() * w[*j],
+                        None => pose.local[*j],
+                    };
+                    (self.offsets[i], q)
+                }
             };
             let mut args = vec![OscType::String(name.clone())];
             args.extend(floats(&to_unity_position(position)));
-            args.extend(floats(&to_unity_rotation(&pose.local[*j])));
+            args.extend(floats(&to_unity_rotation(&rotation)));
             content.push(OscPacket::Message(OscMessage {
                 addr: "/VMC/Ext/Bone/Pos".into(),
                 args,

@@ -480,9 +480,9 @@ pub const MOVED_DURING_CALIBRATION_DEG: f64 = 5.0;
 /// How long after the calibration window the walk is read for the heading from travel.
 pub const TRAVEL_WINDOW_S: f64 = 4.0;
 
-/// A joint whose own offset and whose child (or end site) both point down at rest: a knee-like
-/// joint (the thigh → shank link of a leg), for the heading from travel.
-fn is_shank(rig: &Rig, joint: usize) -> bool {
+/// A joint whose own offset and whose child (or end site) both point down at rest: a shank
+/// standing at rest, as the heading from travel's knee hinge needs.
+fn stands_down(rig: &Rig, joint: usize) -> bool {
     let down = |v: &nalgebra::Vector3<f64>| v.norm() > 0.0 && -v.y > 0.8 * v.norm();
     let j = &rig.joints()[joint];
     let below = rig
@@ -505,14 +505,22 @@ fn knee_samples(
     let start = window.end_s();
     let end = start + TRAVEL_WINDOW_S;
     let mut legs = Vec::new();
+    let anatomy = crate::rig::anatomy::Anatomy::of(rig);
     for (s, shank) in sensors.iter().enumerate() {
-        let Some(parent) = rig.joints()[shank.bone].parent else {
+        // The rig's shanks and thighs are its anatomy's; the leg must stand at rest.
+        let Some(side) = crate::rig::anatomy::Side::BOTH
+            .into_iter()
+            .find(|&side| anatomy.limb(side, crate::rig::anatomy::Limb::Shank) == Some(shank.bone))
+        else {
             continue;
         };
-        let Some(t) = sensors.iter().position(|o| o.bone == parent) else {
+        let Some(thigh) = anatomy.limb(side, crate::rig::anatomy::Limb::Thigh) else {
             continue;
         };
-        if !is_shank(rig, shank.bone) || shank.own_heading || sensors[t].own_heading {
+        let Some(t) = sensors.iter().position(|o| o.bone == thigh) else {
+            continue;
+        };
+        if !stands_down(rig, shank.bone) || shank.own_heading || sensors[t].own_heading {
             continue;
         }
         let leg = tracks[s]

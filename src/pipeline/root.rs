@@ -33,6 +33,7 @@
 //! contacts out, for a whole take and a stream alike.
 
 use crate::rig::Rig;
+use crate::rig::anatomy::{Anatomy, Limb, Side};
 use nalgebra::{UnitQuaternion, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -109,32 +110,16 @@ struct Foot {
     joints: Vec<usize>,
 }
 
-/// The foot joints of a rig, found by name: `LeftFoot`/`RightFoot` (any prefix such as
-/// `mixamorig:`), `l_foot`, `LeftAnkle`, `lFoot`, … Returns `[left, right]`.
+/// The foot joints of a rig, its body parts' ([`crate::rig::anatomy`]: declared, named in any
+/// common scheme — `LeftFoot`, `l_foot`, `LeftAnkle`, `lFoot`, `Foot_L` … — or by shape).
+/// Returns `[left, right]`.
 pub fn foot_joints(rig: &Rig) -> Option<[usize; 2]> {
-    foot_names(rig.joints().iter().map(|j| j.name.as_str()))
+    Anatomy::of(rig).feet()
 }
 
-/// [`foot_joints`] among joint names in order (a skeleton that is not a rig: a GLB's skin).
+/// [`foot_joints`] among joint names alone (a skeleton that is not a rig: a GLB's skin).
 pub fn foot_names<'a>(names: impl Iterator<Item = &'a str> + Clone) -> Option<[usize; 2]> {
-    let find = |side: char| {
-        names.clone().position(|j| {
-            let name = j.rsplit(':').next().unwrap_or(j).to_ascii_lowercase();
-            let name = name.replace(['_', ' ', '.'], "");
-            let sided = match side {
-                'l' => name
-                    .strip_prefix("left")
-                    .or_else(|| name.strip_prefix('l'))
-                    .or_else(|| name.strip_suffix('l')),
-                _ => name
-                    .strip_prefix("right")
-                    .or_else(|| name.strip_prefix('r'))
-                    .or_else(|| name.strip_suffix('r')),
-            };
-            matches!(sided, Some("foot" | "ankle"))
-        })
-    };
-    Some([find('l')?, find('r')?])
+    Anatomy::of_names(names).feet()
 }
 
 /// The mode `auto` resolves to for `rig` when the joints `animated` carry sensors.
@@ -142,16 +127,17 @@ pub fn resolve(mode: RootMode, rig: &Rig, animated: &[bool]) -> RootMode {
     if mode != RootMode::Auto {
         return mode;
     }
-    let Some(feet) = foot_joints(rig) else {
+    let anatomy = Anatomy::of(rig);
+    if anatomy.feet().is_none() {
         return RootMode::Fixed;
-    };
-    let parent = |j: usize| rig.joints()[j].parent;
-    let sensed = |j: Option<usize>| j.is_some_and(|j| animated[j]);
-    let shank = |f: usize| parent(f);
-    let thigh = |f: usize| parent(f).and_then(parent);
-    if feet.iter().all(|&f| sensed(shank(f)) && sensed(thigh(f))) {
+    }
+    let sensed = |side: Side, limb: Limb| anatomy.limb(side, limb).is_some_and(|j| animated[j]);
+    if Side::BOTH
+        .iter()
+        .all(|&s| sensed(s, Limb::Shank) && sensed(s, Limb::Thigh))
+    {
         RootMode::Feet
-    } else if feet.iter().all(|&f| sensed(thigh(f))) {
+    } else if Side::BOTH.iter().all(|&s| sensed(s, Limb::Thigh)) {
         RootMode::Ground
     } else {
         RootMode::Fixed

@@ -1,11 +1,12 @@
 //! A subject's body measurements (paper 000 scales its model to them): `height_m` and/or segment
-//! lengths by bone name, in metres, from a YAML file.
+//! lengths by bone name or by body part (`left_thigh`, `right_forearm`: the rig's
+//! [`super::anatomy`], so one file fits every rig), in metres, from a YAML file.
 //!
 //! ```yaml
 //! height_m: 1.68
 //! segments:          # a bone's segment: from the joint to its one child (or its End Site)
 //!   LeftUpLeg: 0.42
-//!   RightUpLeg: 0.42
+//!   right_thigh: 0.42  # a body part: whichever joint the rig's right thigh is
 //! ```
 //!
 //! `height_m` scales every offset and End Site by `height_m / h_rig`, `h_rig` the rig's rest
@@ -34,6 +35,24 @@ pub struct Subject {
 pub struct SubjectError {
     pub path: PathBuf,
     pub message: String,
+}
+
+/// The joint of a body part named by its key (`left_thigh`; [`super::anatomy::Part::key`]), for
+/// the one-joint parts.
+fn part_joint(rig: &Rig, key: &str) -> Option<usize> {
+    let part = super::anatomy::Part::all().into_iter().find(|p| {
+        p.key() == key
+            && matches!(
+                p,
+                super::anatomy::Part::Limb(..)
+                    | super::anatomy::Part::Pelvis
+                    | super::anatomy::Part::Head
+            )
+    })?;
+    super::anatomy::Anatomy::of(rig)
+        .joints(part)
+        .first()
+        .copied()
 }
 
 impl Subject {
@@ -78,12 +97,17 @@ impl Subject {
             if !(length.is_finite() && length > 0.0) {
                 return Err(err(format!("{key}: {length} is not a length above 0 m")));
             }
-            let j = rig.joint_index(bone).ok_or_else(|| {
-                err(format!(
-                    "{key}: the rig `{}` has no bone `{bone}`",
-                    rig.name()
-                ))
-            })?;
+            let j = rig
+                .joint_index(bone)
+                .or_else(|| part_joint(rig, bone))
+                .ok_or_else(|| {
+                    err(format!(
+                        "{key}: the rig `{}` has no bone `{bone}`, and it is no body part found in \
+                     it (`imubake inspect {}` lists them)",
+                        rig.name(),
+                        rig.name()
+                    ))
+                })?;
             let children: Vec<usize> = rig.children(j).collect();
             let own = match children.as_slice() {
                 [c] => offsets[*c].norm() * metres,
@@ -121,6 +145,26 @@ impl Subject {
 mod tests {
     use super::*;
     use crate::rig::load_rig;
+
+    #[test]
+    fn a_body_part_key_fits_rigs_of_any_naming() {
+        // The same file on Mixamo's names and on Poser's: the left thigh is 0.5 m on both.
+        let s = Subject {
+            height_m: None,
+            segments: [("left_thigh".to_string(), 0.5)].into(),
+        };
+        let mixamo = load_rig("mixamo").unwrap();
+        let scaled = s.apply(&mixamo, Path::new("s.yaml")).unwrap();
+        let knee = scaled.joint_index("LeftLeg").unwrap();
+        assert!((scaled.joints()[knee].offset.norm() - 0.5).abs() < 1e-12);
+        let poser = "name: poser\njoints:\n  - {name: hip, offset: [0, 1, 0]}\n  - {name: lThigh, parent: hip, offset: [0.1, 0, 0]}\n  - {name: lShin, parent: lThigh, offset: [0, -0.4, 0]}\n  - {name: lFoot, parent: lShin, offset: [0, -0.4, 0], end_site: [0, 0, 0.1]}\n  - {name: rThigh, parent: hip, offset: [-0.1, 0, 0]}\n  - {name: rShin, parent: rThigh, offset: [0, -0.4, 0]}\n  - {name: rFoot, parent: rShin, offset: [0, -0.4, 0], end_site: [0, 0, 0.1]}\n";
+        let rig = crate::rig::file::parse_rig(poser, Path::new("poser.yaml")).unwrap();
+        let scaled = s.apply(&rig, Path::new("s.yaml")).unwrap();
+        let knee = scaled.joint_index("lShin").unwrap();
+        assert!((scaled.joints()[knee].offset.norm() - 0.5).abs() < 1e-12);
+        let other = scaled.joint_index("rShin").unwrap();
+        assert!((scaled.joints()[other].offset.norm() - 0.4).abs() < 1e-12);
+    }
 
     #[test]
     fn height_scales_everything_and_segments_set_their_length() {
