@@ -547,3 +547,71 @@ pub fn mvnx_animation(
     let animation = Animation::new(rig, fps, local, animated, roots)?;
     Ok((animation, warnings))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Mixamo's rig as a source whose `Spine1` turns 30° after the first frame (a part: no
+    /// warning), then with a leaf `Tail` that is no part and turns 30° too (a warning naming it);
+    /// a bone map leaving the left thigh out leaves the target's undriven (a warning naming both).
+    #[test]
+    fn moving_joints_that_are_no_part_and_undriven_parts_are_warned_of() {
+        let rig = crate::rig::load_rig("mixamo").unwrap();
+        let mut source = SourceMotion {
+            names: rig.joints().iter().map(|j| j.name.clone()).collect(),
+            parents: rig.joints().iter().map(|j| j.parent).collect(),
+            rest: rig.rest_positions(),
+            end_sites: rig.joints().iter().map(|j| j.end_site).collect(),
+            fps: Fps::new(30, 1).unwrap(),
+            world: Vec::new(),
+            roots: Vec::new(),
+            hip_height: 1.0,
+        };
+        let spine1 = rig.joint_index("Spine1").unwrap();
+        let spine2 = rig.joint_index("Spine2").unwrap();
+        let turn = UnitQuaternion::from_euler_angles(30f64.to_radians(), 0.0, 0.0);
+        for f in 0..3 {
+            let mut local = vec![UnitQuaternion::identity(); rig.len()];
+            if f > 0 {
+                local[spine1] = turn;
+            }
+            source.world.push(rig.world_rotations(&local));
+            source.roots.push(Vector3::zeros());
+        }
+        // Named as a part, Spine1 is on the spine: no warning.
+        let pairs = auto_pairs(&source, &rig).unwrap();
+        assert!(coverage_warnings(&source, &rig, &pairs, Reference::Rest).is_empty());
+        // A leaf that is no part and moves: the head's sibling `Tail` below the spine's top.
+        source.names.push("Tail".into());
+        source.parents.push(Some(spine2));
+        source
+            .rest
+            .push(source.rest[spine2] + Vector3::new(0.0, 0.0, -0.2));
+        source.end_sites.push(None);
+        for (f, w) in source.world.iter_mut().enumerate() {
+            let t = if f > 0 {
+                turn
+            } else {
+                UnitQuaternion::identity()
+            };
+            w.push(w[spine2] * t);
+        }
+        let pairs = auto_pairs(&source, &rig).unwrap();
+        let w = coverage_warnings(&source, &rig, &pairs, Reference::Rest);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].contains("`Tail` (below the spine) turns up to 30°"),
+            "{w:?}"
+        );
+        // A bone map that leaves the left thigh out.
+        let thigh = rig.joint_index("LeftUpLeg").unwrap();
+        let pairs: Vec<(usize, usize)> = pairs.into_iter().filter(|&(_, t)| t != thigh).collect();
+        let w = coverage_warnings(&source, &rig, &pairs, Reference::Rest);
+        assert!(
+            w.iter().any(|m| m
+                == "the left thigh of `mixamo` (LeftUpLeg) is not driven, though the source has it (LeftUpLeg)"),
+            "{w:?}"
+        );
+    }
+}

@@ -30,8 +30,10 @@ pub enum AnalysisError {
         "rig `{rig}`: no anatomical segments found (no pelvis, thighs or upper arms among its joints by name or shape; `imubake inspect <rig>` shows what was found; a rig file's `segments:` can name them)"
     )]
     NoSegments { rig: String },
-    #[error("rig `{rig}`: cannot tell left from right (no left and right thighs or upper arms)")]
-    NoSides { rig: String },
+    #[error(
+        "rig `{rig}`: cannot tell left from right (no left and right thighs or upper arms; closest by name: {closest}; `imubake inspect <rig>` shows what was found)"
+    )]
+    NoSides { rig: String, closest: String },
     #[error(
         "rig `{rig}`: `segments:` `{landmark}` (`{joint}`) is not below `{above}` (`{above_joint}`)"
     )]

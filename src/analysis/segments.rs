@@ -242,6 +242,26 @@ fn limbs(f: &Finder, anatomy: &Anatomy, side: Side) -> Result<Limbs, AnalysisErr
     })
 }
 
+/// Left and right are not told apart: the joints whose names come closest to a thigh or an
+/// upper arm.
+fn no_sides(rig: &Rig, anatomy: &Anatomy) -> AnalysisError {
+    let mut closest = Vec::new();
+    for side in Side::BOTH {
+        for limb in [Limb::Thigh, Limb::UpperArm] {
+            let part = Part::Limb(side, limb);
+            closest.push(format!(
+                "{}: {}",
+                part.label(),
+                anatomy.closest(part, 2).join(", ")
+            ));
+        }
+    }
+    AnalysisError::NoSides {
+        rig: rig.name().to_string(),
+        closest: closest.join("; "),
+    }
+}
+
 impl Segments {
     /// The rig's segments (see the module's docs).
     pub fn of(rig: &Rig) -> Result<Segments, AnalysisError> {
@@ -274,16 +294,12 @@ impl Segments {
             .map(Point::Joint);
         let (left, right) = pair(l.thigh, r.thigh)
             .or_else(|| pair(l.upper_arm, r.upper_arm))
-            .ok_or_else(|| AnalysisError::NoSides {
-                rig: rig.name().to_string(),
-            })?;
+            .ok_or_else(|| no_sides(rig, &anatomy))?;
         let up = Vector3::y();
         let across = f.rest[right] - f.rest[left];
         let right_dir = across - up * up.dot(&across);
         if right_dir.norm() < 1e-9 * (1.0 + across.norm()) {
-            return Err(AnalysisError::NoSides {
-                rig: rig.name().to_string(),
-            });
+            return Err(no_sides(rig, &anatomy));
         }
         let right_dir = right_dir.normalize();
         let forward = up.cross(&right_dir);

@@ -159,6 +159,8 @@ pub struct Converted {
 pub enum PipelineError {
     #[error(transparent)]
     Mapping(#[from] MappingError),
+    #[error(transparent)]
+    MissingPart(#[from] crate::rig::anatomy::MissingPart),
     #[error(
         "none of the mapped sensors ({mapped}) has orientation or raw readings in the take (sensors in the take: {present}); check the mapping's sensor ids"
     )]
@@ -307,6 +309,7 @@ fn run_on(
     mapping_file: &Path,
     options: &PipelineOptions,
 ) -> Result<Converted, PipelineError> {
+    root::require_parts(options.root, rig)?;
     if options.causal {
         return run_causal(input.take(), rig, mapping, mapping_file, options);
     }

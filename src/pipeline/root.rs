@@ -122,6 +122,21 @@ pub fn foot_names<'a>(names: impl Iterator<Item = &'a str> + Clone) -> Option<[u
     Anatomy::of_names(names).feet()
 }
 
+/// What a root mode needs of the rig: `feet` asked for by name needs both feet (an error naming
+/// the part and the joints that came closest); `auto` takes what the rig has.
+pub fn require_parts(mode: RootMode, rig: &Rig) -> Result<(), crate::rig::anatomy::MissingPart> {
+    if mode != RootMode::Feet {
+        return Ok(());
+    }
+    Anatomy::of(rig).require(
+        &[
+            crate::rig::anatomy::Part::Limb(Side::Left, Limb::Foot),
+            crate::rig::anatomy::Part::Limb(Side::Right, Limb::Foot),
+        ],
+        "--root feet",
+    )
+}
+
 /// The mode `auto` resolves to for `rig` when the joints `animated` carry sensors.
 pub fn resolve(mode: RootMode, rig: &Rig, animated: &[bool]) -> RootMode {
     if mode != RootMode::Auto {

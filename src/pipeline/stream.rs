@@ -105,6 +105,7 @@ impl PoseStream {
         options: &PipelineOptions,
         mapping_file: &str,
     ) -> Result<PoseStream, PipelineError> {
+        super::root::require_parts(options.root, rig)?;
         let mut smoothers = Vec::with_capacity(sensors.len());
         for s in &sensors {
             let bone = &rig.joints()[s.bone].name;

@@ -1067,6 +1067,46 @@ mod tests {
         assert_eq!(a.limb(Side::Left, Limb::Foot), None);
     }
 
+    /// With every name replaced by `j0`, `j1`, … only the shape decides, and it finds Mixamo's
+    /// parts where its names put them.
+    #[test]
+    fn the_shape_alone_finds_the_parts_names_find() {
+        let rig = load_rig("mixamo").unwrap();
+        let named = Anatomy::of(&rig);
+        let mut sk = Skeleton::of_rig(&rig);
+        let stripped: Vec<String> = (0..rig.len()).map(|i| format!("j{i}")).collect();
+        sk.names = stripped.iter().map(String::as_str).collect();
+        let shape = Anatomy::resolve(&sk);
+        for part in Part::all() {
+            assert_eq!(shape.joints(part), named.joints(part), "{}", part.label());
+        }
+        assert_eq!(
+            shape.found(Part::Limb(Side::Left, Limb::Thigh)),
+            Some(Found::Shape)
+        );
+    }
+
+    #[test]
+    fn a_missing_part_names_itself_and_the_closest_joints() {
+        let sou = load_rig("sou12").unwrap();
+        let e = Anatomy::of(&sou)
+            .require(&[Part::Limb(Side::Left, Limb::Foot)], "--root feet")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("--root feet needs the left foot, and no joint of `sou12` is one"),
+            "{e}"
+        );
+        assert!(e.contains("`segments: {left_foot: <joint>}`"), "{e}");
+        let text = "name: odd\njoints:\n  - {name: Hips, offset: [0, 1, 0]}\n  - {name: LeftFootIK, parent: Hips, offset: [0.1, -0.9, 0]}\n";
+        let rig = crate::rig::file::parse_rig(text, std::path::Path::new("odd.yaml")).unwrap();
+        let e = Anatomy::of(&rig)
+            .require(&[Part::Limb(Side::Left, Limb::Foot)], "--root feet")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("closest by name: LeftFootIK, Hips"), "{e}");
+    }
+
     #[test]
     fn chains_pair_by_their_place_along_them() {
         let mk = |spine: usize| {
