@@ -64,6 +64,29 @@ def _rot(m):
     return m.to_3x3().normalized()
 
 
+def skeleton(arm):
+    """The armature as `names` resolves it (as imubake does a rig): bones parents first, their
+    parents, rest heads in imubake's rig world (Blender's Z up becomes Y up, facing −Y becomes
+    facing +Z, +X stays the body's left; the object's rotation included) and the tails of leaf
+    bones as End Sites."""
+    bones = arm.data.bones
+    order = _order(arm)
+    rot = _rot(arm.matrix_world)
+
+    def rig(v):
+        w = rot @ v
+        return (w.x, w.z, -w.y)
+
+    return names.Skeleton(
+        order,
+        parents=[bones[n].parent.name if bones[n].parent else None for n in order],
+        rest=[rig(bones[n].head_local) for n in order],
+        end_sites=[None if bones[n].children else rig(bones[n].tail_local - bones[n].head_local)
+                   for n in order],
+        name=arm.name,
+    )
+
+
 def _hip_height(arm, hips):
     bones = arm.data.bones
     lowest = min(min(b.head_local.z, b.tail_local.z) for b in bones)
@@ -155,24 +178,24 @@ def retarget(context, source, target, *, bone_map=None, reference="AUTO", action
              frame_start=None, frame_end=None):
     """Bakes `source`'s animation (an imported take) onto armature `target`; returns Retargeted.
 
-    bone_map   {source bone: target bone}; automatic through `names` when None
+    bone_map   {source bone: target bone}; automatic through `names` (the armatures' parts,
+               resolved from names, hierarchy and rest shape) when None
     reference  "AUTO", "CURRENT" or "REST" (see the module's doc)
     """
     if target.type != "ARMATURE":
         raise RetargetError("%s is not an armature" % target.name)
     if reference not in REFERENCES:
         raise RetargetError("reference must be one of %s" % ", ".join(REFERENCES))
-    src_names = [b.name for b in source.data.bones]
-    tgt_names = [b.name for b in target.data.bones]
+    src_skeleton, tgt_skeleton = skeleton(source), skeleton(target)
     if bone_map is None:
-        bone_map = names.auto_bone_map(src_names, tgt_names)
+        bone_map = names.auto_bone_map(src_skeleton, tgt_skeleton)
     bone_map = {s: t for s, t in bone_map.items() if s in source.pose.bones and t in target.pose.bones}
     if not bone_map:
         raise RetargetError(
             "no bone of %s matches a bone of %s; choose a bone map (JSON)" % (source.name, target.name))
-    # Each pair's body part, from either side's names (a take on the sou12 rig has none).
-    part_of = {b: p for p, b in names.match_armature(tgt_names).items()}
-    part_of_source = {b: p for p, b in names.match_armature(src_names).items()}
+    # Each pair's body part, from either side's anatomy (names, hierarchy, rest shape).
+    part_of = {b: p for p, b in names.match_armature(tgt_skeleton).items()}
+    part_of_source = {b: p for p, b in names.match_armature(src_skeleton).items()}
     part_of_pair = {s: part_of_source.get(s) or part_of.get(t) for s, t in bone_map.items()}
 
     scene = context.scene
@@ -352,7 +375,7 @@ def bake_imported(context, imported, target, *, bone_map_path=None, reference="A
             bone_map = names.load_bone_map(
                 bone_map_path,
                 [b.name for b in imported.armature.data.bones],
-                [b.name for b in target.data.bones],
+                skeleton(target),
             )
         result = retarget(context, imported.armature, target, bone_map=bone_map, reference=reference,
                           action_name=imported.name)

@@ -1,4 +1,5 @@
-"""Automatic bone matching (names.py, no bpy) on naming schemes written out by hand."""
+"""Automatic bone matching (names.py, no bpy) on naming schemes written out by hand, names only
+(no hierarchy: the flat lists a caller without an armature passes)."""
 
 import unittest
 
@@ -40,8 +41,9 @@ class AutomaticMap(unittest.TestCase):
             "mixamorig:LeftForeArm": "LeftLowerArm", "mixamorig:LeftHand": "LeftHand",
             "mixamorig:LeftUpLeg": "LeftUpperLeg", "mixamorig:LeftLeg": "LeftLowerLeg",
             "mixamorig:LeftFoot": "LeftFoot", "mixamorig:LeftToeBase": "LeftToes"})
+        # A one-joint spine takes the source spine's top (chains pair by their place along them).
         self.assertEqual(m(MIXAMO, DOT_L), {
-            "mixamorig:Hips": "Pelvis", "mixamorig:Spine": "Spine", "mixamorig:Neck": "Neck",
+            "mixamorig:Hips": "Pelvis", "mixamorig:Spine2": "Spine", "mixamorig:Neck": "Neck",
             "mixamorig:Head": "Head", "mixamorig:LeftShoulder": "Shoulder.L", "mixamorig:LeftArm": "UpperArm.L",
             "mixamorig:LeftForeArm": "Forearm.L", "mixamorig:LeftHand": "Hand.L", "mixamorig:LeftUpLeg": "Thigh.L",
             "mixamorig:LeftLeg": "Shin.L", "mixamorig:LeftFoot": "Foot.L", "mixamorig:LeftToeBase": "Toe.L"})
