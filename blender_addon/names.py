@@ -302,6 +302,13 @@ class _Tree:
         e = self.end_sites[j]
         return _norm(e) if e is not None else 0.0
 
+    def highest(self, j):
+        """The highest rest point (joints and End Sites) of `j`'s subtree."""
+        y = max(self.tip(j)[1], self.rest[j][1])
+        for c in self.children[j]:
+            y = max(y, self.highest(c))
+        return y
+
     def tip(self, j):
         r, e = self.rest[j], self.end_sites[j]
         if e is None:
@@ -470,10 +477,11 @@ def resolve(names, parents=None, rest=None, end_sites=None, declared=None, skele
         up = upper[0] if upper else None
         forearm = pick("forearm", t.named(side, FOREARM), up)
         hand = pick("hand", t.named(side, HAND), forearm[0] if forearm else up)
-        # Legs: a sided `Hip` is a hip joint when a thigh is below it.
+        # Legs: a sided `Hip` is a hip joint when a thigh or another hip is below it.
         thigh_words = t.named(side, THIGH)
-        thighs = thigh_words + [j for j in t.named(side, HIP)
-                                if flat or not any(t.below(th, j) for th in thigh_words)]
+        hips = t.named(side, HIP)
+        thighs = thigh_words + [j for j in hips
+                                if flat or not any(t.below(th, j) for th in thigh_words + hips)]
         thigh = pick("thigh", thighs, None)
         shank = pick("shank", t.named(side, SHANK), thigh[0] if thigh else None)
         above_foot = shank or thigh
@@ -597,10 +605,11 @@ def resolve(names, parents=None, rest=None, end_sites=None, declared=None, skele
         if flat or not t.has_shape() or top is None:
             return None
         j = _max_last([c for c in t.children[top] if not on_arm(c) and not is_leg_root(c)],
-                      key=lambda c: t.rest[c][1])
-        if j is None or t.rest[j][1] <= t.rest[top][1]:
+                      key=t.highest)
+        if j is None or t.highest(j) <= t.rest[top][1]:
             return None
-        while t.children[j]:
+        # Up the chain to where it ends or branches (eyes, a head-top marker).
+        while len(t.children[j]) == 1:
             j = t.children[j][0]
         return j, "shape"
 
@@ -704,13 +713,27 @@ def _shape_limbs(t, limbs, found):
 
 def _assign_chain(t, chain, side, parts, arm, limbs, found):
     """A limb's parts along `chain`: the upper arm (thigh) starts the two longest consecutive
-    bones; the joint before it is the clavicle (arms only); the rest follow."""
+    bones, or in an arm that branches into fingers the second joint with a bone of its own above
+    the hand; the joint before it is the clavicle (arms only); the rest follow."""
     if len(chain) < 2:
         return
     bones = [t.bone(j, chain[i + 1] if i + 1 < len(chain) else None) for i, j in enumerate(chain)]
-    start = _max_last(range(len(chain) - 1), key=lambda a: bones[a] + bones[a + 1])
-    if start is None:
-        start = 0
+    longest = _max_last(range(len(chain) - 1), key=lambda a: bones[a] + bones[a + 1])
+    if longest is None:
+        longest = 0
+    start = longest
+    # An arm that branches into fingers: the hand is where it branches (or the joint it sits
+    # on), the forearm and upper arm the two joints with a bone of their own above it.
+    if arm:
+        b = next((i for i, j in enumerate(chain) if len(t.children[j]) > 1), None)
+        if b is not None:
+            r = t.rest[chain[b]]
+            eps = 1e-9 * (1.0 + _norm(r))
+            sits = b > 0 and _norm(_sub(r, t.rest[chain[b - 1]])) <= eps
+            hand = b - 1 if sits else b
+            long = [i for i in range(hand - 1, -1, -1) if bones[i] > 1e-9][:2]
+            if len(long) == 2:
+                start = long[1]
 
     def put(limb, j):
         limbs[side][limb] = j

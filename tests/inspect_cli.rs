@@ -220,3 +220,65 @@ fn exit_codes_and_messages() {
     );
     assert_eq!(run(&["frobnicate"]).status.code(), Some(2));
 }
+
+/// The shared BVH skeletons (CMU, Mixamo, Poser-named CMU, pymo) with every joint renamed `j1`,
+/// `j2`, …: `inspect` finds the same body parts by shape alone as by their names.
+#[test]
+fn a_skeleton_stripped_of_names_resolves_by_shape_as_by_names() {
+    let dir = tempfile::tempdir().unwrap();
+    for file in [
+        "bvh/cmu_01_01.bvh",
+        "bvh/mixamo_rig_freebvh.bvh",
+        "bvh/cmu_03_02_uneven_terrain.bvh",
+        "bvh/pymo_walk.bvh",
+    ] {
+        let Some(path) = common::shared(file) else {
+            return;
+        };
+        let text = std::fs::read_to_string(&path).unwrap();
+        let (mut names, mut stripped, mut n) = (Vec::new(), String::new(), 0);
+        for line in text.split_inclusive('\n') {
+            let t = line.trim_start();
+            match t.split_whitespace().collect::<Vec<_>>()[..] {
+                [kw @ ("ROOT" | "JOINT"), name] => {
+                    n += 1;
+                    names.push(name.to_string());
+                    let indent = &line[..line.len() - t.len()];
+                    stripped.push_str(&format!("{indent}{kw} j{n}\n"));
+                }
+                _ => stripped.push_str(line),
+            }
+        }
+        let renamed = dir.path().join(path.file_name().unwrap());
+        std::fs::write(&renamed, stripped).unwrap();
+        let parts = |p: &std::path::Path| -> serde_json::Value {
+            let out = std::process::Command::new(common::imubake_bin())
+                .args(["inspect", "--json"])
+                .arg(p)
+                .output()
+                .unwrap();
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["parts"].clone()
+        };
+        let (named, shaped) = (parts(&path), parts(&renamed));
+        for (part, v) in named.as_object().unwrap() {
+            let by_name: Vec<&str> = v["joints"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|j| j.as_str().unwrap())
+                .collect();
+            let by_shape: Vec<&str> = shaped[part]["joints"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|j| names[j.as_str().unwrap()[1..].parse::<usize>().unwrap() - 1].as_str())
+                .collect();
+            assert_eq!(by_shape, by_name, "{file}: {part}");
+        }
+    }
+}

@@ -323,7 +323,9 @@ fn bad_inputs_are_clear_errors() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        !out.status.success() && err.contains("no anatomical segments found"),
+        !out.status.success()
+            && err.contains("cannot tell left from right")
+            && err.contains("closest by name: left thigh: a, b"),
         "{err}"
     );
 }

@@ -3,7 +3,7 @@
 //! arm, forearm, hand, thigh, shank, foot and toes. Every feature takes its parts from here:
 //! retargeting, `angles`/`compare`, VMC's bone names, root motion's feet, calibration's legs,
 //! subject scaling, the viewer, and the Blender add-on (`names.py`, checked against this in
-//! `tests/anatomy.rs`).
+//! `tests/addon_anatomy.rs`).
 //!
 //! # Resolution, in order
 //! 1. **Declared**: a rig file's `segments:` (`pelvis`, `thorax`, `neck`, `head`,
@@ -366,6 +366,15 @@ impl Tree<'_, '_> {
         }
     }
 
+    /// The highest rest point (joints and End Sites) of `j`'s subtree.
+    fn highest(&self, j: usize) -> f64 {
+        let mut y = self.tip(j).y.max(self.sk.rest[j].y);
+        for &c in &self.children[j] {
+            y = y.max(self.highest(c));
+        }
+        y
+    }
+
     fn tip(&self, j: usize) -> Vector3<f64> {
         self.sk.rest[j] + self.sk.end_sites[j].unwrap_or_default()
     }
@@ -461,10 +470,11 @@ impl Anatomy {
             // Legs: a sided `Hip` is a hip joint when a thigh is below it.
             let thigh_words = t.named(s, Word::Thigh);
             let mut thighs = thigh_words.clone();
+            let hips = t.named(s, Word::Hip);
             thighs.extend(
-                t.named(s, Word::Hip)
-                    .into_iter()
-                    .filter(|&j| flat || !thigh_words.iter().any(|&th| t.below(th, j))),
+                hips.iter().copied().filter(|&j| {
+                    flat || !thigh_words.iter().chain(&hips).any(|&th| t.below(th, j))
+                }),
             );
             let thigh = pick(Limb::Thigh, &thighs, None);
             let shank = pick(Limb::Shank, &t.named(s, Word::Shank), thigh.map(|(j, _)| j));
@@ -613,11 +623,12 @@ impl Anatomy {
                     .iter()
                     .copied()
                     .filter(|&c| !on_arm(c) && !is_leg_root(&t, &limbs, c))
-                    .max_by(|&a, &b| t.sk.rest[a].y.total_cmp(&t.sk.rest[b].y))?;
-                if t.sk.rest[j].y <= t.sk.rest[top].y {
+                    .max_by(|&a, &b| t.highest(a).total_cmp(&t.highest(b)))?;
+                if t.highest(j) <= t.sk.rest[top].y {
                     return None;
                 }
-                while let Some(&c) = t.children[j].first() {
+                // Up the chain to where it ends or branches (eyes, a head-top marker).
+                while let [c] = t.children[j][..] {
                     j = c;
                 }
                 Some((j, Found::Shape))
@@ -964,7 +975,9 @@ fn shape_limbs(t: &Tree, limbs: &mut [[Option<usize>; 8]; 2], found: &mut BTreeM
 }
 
 /// A limb's parts along `chain` (from the body out): the upper arm (thigh) starts the two
-/// longest consecutive bones; the joint before it is the clavicle (arms only); the rest follow.
+/// longest consecutive bones — or, in an arm that branches into fingers, the second joint with a
+/// bone of its own above the hand —; the joint before it is the clavicle (arms only); the rest
+/// follow.
 fn assign_chain(
     t: &Tree,
     chain: &[usize],
@@ -982,9 +995,31 @@ fn assign_chain(
         .enumerate()
         .map(|(i, &j)| t.bone(j, chain.get(i + 1).copied()))
         .collect();
-    let start = (0..chain.len() - 1)
+    let longest = (0..chain.len() - 1)
         .max_by(|&a, &b| (bones[a] + bones[a + 1]).total_cmp(&(bones[b] + bones[b + 1])))
         .unwrap_or(0);
+    // An arm that branches into fingers: the hand is where it branches (or the joint it sits on,
+    // CMU's `LeftFingerBase` on `LeftHand`), and the forearm and upper arm the two joints with a
+    // bone of their own above it — a clavicle can be as long as a forearm (CMU's), lengths alone
+    // do not tell.
+    let hand = arm
+        .then(|| {
+            let b = chain.iter().position(|&j| t.children[j].len() > 1)?;
+            let eps = 1e-9 * (1.0 + t.sk.rest[chain[b]].norm());
+            let sits = b > 0 && (t.sk.rest[chain[b]] - t.sk.rest[chain[b - 1]]).norm() <= eps;
+            Some(if sits { b - 1 } else { b })
+        })
+        .flatten();
+    let start = match hand {
+        Some(h) => {
+            let long: Vec<usize> = (0..h).rev().filter(|&i| bones[i] > 1e-9).take(2).collect();
+            match long.as_slice() {
+                [_, upper] => *upper,
+                _ => longest,
+            }
+        }
+        None => longest,
+    };
     let (first, rest): (Option<Limb>, &[Limb]) = if arm {
         (Some(parts[0]), &parts[1..])
     } else {

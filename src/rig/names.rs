@@ -19,7 +19,7 @@
 //!
 //! Two words mean different bones in different schemes, and only the skeleton tells which:
 //! `Shoulder` is the clavicle when an upper arm hangs below it (Mixamo), else the upper arm
-//! (MVN's BVH); a sided `Hip` is a hip joint when a thigh hangs below it (CMU's `LHipJoint`,
+//! (MVN's BVH); a sided `Hip` is a hip joint when a thigh or another hip hangs below it (CMU's `LHipJoint`,
 //! Poser's `rButtock`), else the thigh (MVN, SlimeVR). [`Word::Shoulder`] and [`Word::Hip`] say
 //! so; [`super::anatomy`] decides.
 
