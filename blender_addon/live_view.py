@@ -60,7 +60,7 @@ class LiveView:
             raise retarget.RetargetError("%s is not an armature" % target.name)
         self.target = target
         self.tgt = retarget._Target(target)
-        parts = names.match_armature([b.name for b in target.data.bones])
+        parts = names.match_armature(retarget.skeleton(target))
         self.bone_of = {}
         for unity in PARENT:
             part = names.canonical(unity)
