@@ -486,7 +486,10 @@ def resolve(names, parents=None, rest=None, end_sites=None, declared=None, skele
         shank = pick("shank", t.named(side, SHANK), thigh[0] if thigh else None)
         above_foot = shank or thigh
         foot = pick("foot", t.named(side, FOOT), above_foot[0] if above_foot else None)
-        toes = pick("toe", t.named(side, TOES), foot[0] if foot else None)
+        # SlimeVR names the joint below the ankle `Foot`: a foot below the foot is the toes.
+        toe_words = t.named(side, TOES) + [j for j in t.named(side, FOOT)
+                                            if not flat and foot and t.below(j, foot[0])]
+        toes = pick("toe", toe_words, foot[0] if foot else None)
         for limb, got in (("clavicle", clavicle), ("upper_arm", upper), ("forearm", forearm),
                           ("hand", hand), ("thigh", thigh), ("shank", shank), ("foot", foot),
                           ("toe", toes)):

@@ -483,7 +483,14 @@ impl Anatomy {
                 &t.named(s, Word::Foot),
                 shank.or(thigh).map(|(j, _)| j),
             );
-            let toes = pick(Limb::Toes, &t.named(s, Word::Toes), foot.map(|(j, _)| j));
+            // SlimeVR names the joint below the ankle `Foot`: a foot below the foot is the toes.
+            let mut toe_words = t.named(s, Word::Toes);
+            toe_words.extend(
+                t.named(s, Word::Foot)
+                    .into_iter()
+                    .filter(|&j| !flat && foot.is_some_and(|(f, _)| t.below(j, f))),
+            );
+            let toes = pick(Limb::Toes, &toe_words, foot.map(|(j, _)| j));
             for (limb, j) in [
                 (Limb::Clavicle, clavicle),
                 (Limb::UpperArm, upper),
@@ -1140,6 +1147,20 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("closest by name: LeftFootIK, Hips"), "{e}");
+    }
+
+    /// SlimeVR's legs: `Left-Hip` the thigh, `Left-Knee` the shank, `Left-Ankle` the foot and
+    /// `Left-Foot`, below it, the toes; CMU's `LHipJoint` above `LeftUpLeg` stays a hip joint.
+    #[test]
+    fn ambiguous_words_are_decided_down_the_leg() {
+        let text = "name: legs\njoints:\n  - {name: Hip, offset: [0, 1, 0]}\n  - {name: LHipJoint, parent: Hip, offset: [0, 0, 0]}\n  - {name: Left-Hip, parent: LHipJoint, offset: [0.1, -0.05, 0]}\n  - {name: Left-Knee, parent: Left-Hip, offset: [0, -0.45, 0]}\n  - {name: Left-Ankle, parent: Left-Knee, offset: [0, -0.45, 0]}\n  - {name: Left-Foot, parent: Left-Ankle, offset: [0, -0.05, 0.12], end_site: [0, 0, 0.05]}\n";
+        let rig = crate::rig::file::parse_rig(text, std::path::Path::new("legs.yaml")).unwrap();
+        let a = Anatomy::of(&rig);
+        let part = |l: Limb| named(&a, a.limb(Side::Left, l));
+        assert_eq!(part(Limb::Thigh), Some("Left-Hip"));
+        assert_eq!(part(Limb::Shank), Some("Left-Knee"));
+        assert_eq!(part(Limb::Foot), Some("Left-Ankle"));
+        assert_eq!(part(Limb::Toes), Some("Left-Foot"));
     }
 
     #[test]

@@ -11,7 +11,7 @@
 //! | game assets, Blender, Unreal | `UpperLeg_L`, `upper_arm.L`, `thigh_l`, `calf_r`, `clavicle_l`, `spine_01`, `ball_r` |
 //! | CMU, Axis / Perception Neuron | `LowerBack`, `LHipJoint`, `Neck1`, `LeftFingerBase`, `Spine3` |
 //! | Poser / DAZ | `hip`, `abdomen`, `chest`, `lCollar`, `lShldr` (the upper arm), `lForeArm`, `rButtock`, `lThigh`, `lShin` |
-//! | SlimeVR | `Hip` (the pelvis), `Waist`, `Left-Hip` (the thigh), `Left-Knee`, `Left-Ankle` |
+//! | SlimeVR | `Hip` (the pelvis), `Waist`, `Left-Hip` (the thigh), `Left-Knee`, `Left-Ankle`, `Left-Foot` (the toes, below the ankle) |
 //! | Xsens MVN (BVH: joints named by the joint) | `Chest2`, `LeftCollar`, `LeftShoulder` (the upper arm), `LeftElbow`, `LeftWrist`, `LeftHip` (the thigh), `LeftKnee`, `LeftAnkle` |
 //! | Xsens MVN segments | `Pelvis`, `L5`, `L3`, `T12`, `T8`, `LeftUpperArm`, `LeftToe` |
 //! | Sony mocopi | `root`, `torso_1` … `torso_7`, `neck_1`, `l_shoulder`, `l_up_arm`, `l_low_arm`, `l_up_leg`, `l_low_leg`, `l_toes` |
@@ -323,6 +323,7 @@ mod tests {
             ("Waist", c(Spine)),
             ("Left-Hip", l(Hip)),
             ("Right-Knee", r(Shank)),
+            ("Left-Foot", l(Foot)),
             // Xsens MVN: BVH (joint-named) and segments.
             ("Chest4", c(Spine)),
             ("LeftCollar", l(Clavicle)),
