@@ -580,8 +580,11 @@ fn bvh_conversion(
     })?;
     let source = crate::retarget::SourceMotion::of_bvh(&bvh, source_fps);
     drop(bvh);
-    let (animation, pairs, warnings) =
-        retarget_onto_rig(&source, settings, subject, settings.bvh_reference, &fail)?;
+    let Retargeted {
+        animation,
+        pairs,
+        warnings,
+    } = retarget_onto_rig(&source, settings, subject, settings.bvh_reference, &fail)?;
     let source = SourceRecord {
         path: input.to_string_lossy().into_owned(),
         sha256,
@@ -610,7 +613,7 @@ fn retarget_onto_rig(
     subject: Option<&Subject>,
     reference: crate::retarget::Reference,
     fail: &dyn Fn(String) -> ConvertError,
-) -> Result<(Animation, Vec<(String, String)>, Vec<String>), ConvertError> {
+) -> Result<Retargeted, ConvertError> {
     let rig = rig_for(settings, None, subject)?;
     let source_names: Vec<&str> = source.names.iter().map(String::as_str).collect();
     let target_names: Vec<&str> = rig.joints().iter().map(|j| j.name.as_str()).collect();
@@ -627,7 +630,19 @@ fn retarget_onto_rig(
         .iter()
         .map(|&(s, t)| (source_names[s].to_string(), target_names[t].to_string()))
         .collect();
-    Ok((animation, named, warnings))
+    Ok(Retargeted {
+        animation,
+        pairs: named,
+        warnings,
+    })
+}
+
+/// A motion retargeted onto the rig: the animation, each (source joint, bone) pair by name, and
+/// what the pairing left out ([`crate::retarget::coverage_warnings`]).
+struct Retargeted {
+    animation: Animation,
+    pairs: Vec<(String, String)>,
+    warnings: Vec<String>,
 }
 
 /// A take whose motion is already on a skeleton (a BVH, Xsens's segments), as a conversion: its
@@ -732,7 +747,11 @@ fn mvnx_segments_conversion(
         .map_err(|e| fail(e.to_string()))?;
     let (animation, pairs) = if settings.rig.is_some() || settings.bone_map.is_some() {
         let source = crate::retarget::SourceMotion::of_animation(&mvn);
-        let (animation, pairs, more) = retarget_onto_rig(
+        let Retargeted {
+            animation,
+            pairs,
+            warnings: more,
+        } = retarget_onto_rig(
             &source,
             settings,
             subject,

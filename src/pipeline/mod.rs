@@ -159,8 +159,9 @@ pub struct Converted {
 pub enum PipelineError {
     #[error(transparent)]
     Mapping(#[from] MappingError),
+    /// Boxed: five strings would make every `Result` of the pipeline large.
     #[error(transparent)]
-    MissingPart(#[from] crate::rig::anatomy::MissingPart),
+    MissingPart(Box<crate::rig::anatomy::MissingPart>),
     #[error(
         "none of the mapped sensors ({mapped}) has orientation or raw readings in the take (sensors in the take: {present}); check the mapping's sensor ids"
     )]
@@ -309,7 +310,7 @@ fn run_on(
     mapping_file: &Path,
     options: &PipelineOptions,
 ) -> Result<Converted, PipelineError> {
-    root::require_parts(options.root, rig)?;
+    root::require_parts(options.root, rig).map_err(|e| PipelineError::MissingPart(Box::new(e)))?;
     if options.causal {
         return run_causal(input.take(), rig, mapping, mapping_file, options);
     }

@@ -105,7 +105,8 @@ impl PoseStream {
         options: &PipelineOptions,
         mapping_file: &str,
     ) -> Result<PoseStream, PipelineError> {
-        super::root::require_parts(options.root, rig)?;
+        super::root::require_parts(options.root, rig)
+            .map_err(|e| PipelineError::MissingPart(Box::new(e)))?;
         let mut smoothers = Vec::with_capacity(sensors.len());
         for s in &sensors {
             let bone = &rig.joints()[s.bone].name;
