@@ -294,22 +294,6 @@ fn scheme_name(scheme: &str, part: &str, i: usize, n: usize) -> String {
 
 const SCHEMES: [&str; 6] = ["unity", "game", "poser", "mvn", "mocopi", "slimevr"];
 
-fn inspect(bvh: &Path) -> Value {
-    let out = common::run(
-        Command::new(common::imubake_bin())
-            .arg("inspect")
-            .arg(bvh)
-            .arg("--json"),
-    );
-    assert!(
-        out.status.success(),
-        "imubake inspect {}: {}",
-        bvh.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
 #[test]
 fn the_addon_resolves_every_skeleton_as_imubake_does() {
     let Some(python) = common::python() else {
@@ -347,11 +331,11 @@ fn the_addon_resolves_every_skeleton_as_imubake_does() {
         ));
         std::fs::write(&bvh, rig_to_bvh(rig)).unwrap();
         // The written hierarchy resolves as the rig itself.
-        let from_rig = inspect(rig);
+        let from_rig = common::inspect_json(rig);
         let written = rewrite(&std::fs::read_to_string(&bvh).unwrap(), &|_, _| None);
         std::fs::write(&bvh, written).unwrap();
         assert_eq!(
-            inspect(&bvh)["parts"],
+            common::inspect_json(&bvh)["parts"],
             from_rig["parts"],
             "{label}: its BVH resolves otherwise"
         );
@@ -361,7 +345,7 @@ fn the_addon_resolves_every_skeleton_as_imubake_does() {
     // The variants: the resolved parts renamed into each scheme, and every name stripped.
     let mut cases: Vec<Case> = Vec::new();
     for (n, case) in originals.into_iter().enumerate() {
-        let parts = inspect(&case.bvh)["parts"].clone();
+        let parts = common::inspect_json(&case.bvh)["parts"].clone();
         let text = std::fs::read_to_string(&case.bvh).unwrap();
         let mut part_of: BTreeMap<String, (String, usize, usize)> = BTreeMap::new();
         for (part, v) in parts.as_object().unwrap() {
@@ -410,7 +394,7 @@ fn the_addon_resolves_every_skeleton_as_imubake_does() {
     let mut differ = Vec::new();
     let mut found_by = BTreeMap::new();
     for (case, py) in cases.iter().zip(&python_parts) {
-        let rust = inspect(&case.bvh);
+        let rust = common::inspect_json(&case.bvh);
         if rust["parts"] != py["parts"] {
             let mut lines = vec![format!("{} ({}):", case.label, case.bvh.display())];
             for (part, r) in rust["parts"].as_object().unwrap() {

@@ -3,25 +3,11 @@
 
 mod common;
 
-use common::{fixture, imubake_bin, python, shared};
+use common::{fixture, imubake_bin, inspect_json, python, shared};
 use serde_json::Value;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-fn inspect_json(path: &Path) -> Value {
-    let out = Command::new(imubake_bin())
-        .args(["inspect", "--json"])
-        .arg(path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
 
 fn python_summary(format: &str, path: &Path) -> Option<Value> {
     let py = python()?;
@@ -251,19 +237,7 @@ fn a_skeleton_stripped_of_names_resolves_by_shape_as_by_names() {
         }
         let renamed = dir.path().join(path.file_name().unwrap());
         std::fs::write(&renamed, stripped).unwrap();
-        let parts = |p: &std::path::Path| -> serde_json::Value {
-            let out = std::process::Command::new(common::imubake_bin())
-                .args(["inspect", "--json"])
-                .arg(p)
-                .output()
-                .unwrap();
-            assert!(
-                out.status.success(),
-                "{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-            serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["parts"].clone()
-        };
+        let parts = |p: &Path| inspect_json(p)["parts"].clone();
         let (named, shaped) = (parts(&path), parts(&renamed));
         for (part, v) in named.as_object().unwrap() {
             let by_name: Vec<&str> = v["joints"]

@@ -108,19 +108,11 @@ fn fetched(repo: &str, commit: &str, path: &str) -> Option<Vec<u8>> {
     Some(out.stdout)
 }
 
-fn inspect_json(path: &std::path::Path, into: &std::path::Path) -> serde_json::Value {
-    let out = Command::new(common::imubake_bin())
-        .args(["inspect", "--json"])
-        .arg(path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    std::fs::write(into, &out.stdout).unwrap();
-    serde_json::from_slice(&out.stdout).unwrap()
+/// The body parts of `path`, also written to `into` for the Python check.
+fn parts_into(path: &std::path::Path, into: &std::path::Path) -> serde_json::Value {
+    let parts = common::inspect_json(path);
+    std::fs::write(into, serde_json::to_vec(&parts).unwrap()).unwrap();
+    parts
 }
 
 #[test]
@@ -155,8 +147,8 @@ fn real_exports_retarget_onto_mixamo_part_by_part_within_2_degrees() {
             !stderr.contains("not driven") && !stderr.contains("is no body part"),
             "{what}: a part left out: {stderr}"
         );
-        let source_parts = inspect_json(&src, &dir.path().join(format!("s{i}.json")));
-        inspect_json(
+        let source_parts = parts_into(&src, &dir.path().join(format!("s{i}.json")));
+        parts_into(
             &common::repo_file("rigs/mixamo.yaml"),
             &dir.path().join("mixamo.json"),
         );

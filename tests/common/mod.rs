@@ -92,6 +92,23 @@ pub fn imubake_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_imubake"))
 }
 
+/// `imubake inspect --json <path>` (a capture's summary, or a rig's body parts), which must
+/// succeed.
+pub fn inspect_json(path: &Path) -> serde_json::Value {
+    let out = Command::new(imubake_bin())
+        .args(["inspect", "--json"])
+        .arg(path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "imubake inspect {}: {}",
+        path.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 /// A file of this crate (scripts, test scripts), by its path in the repository.
 pub fn repo_file(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
