@@ -116,13 +116,18 @@ def _central_word(n):
         d = n[len(stem):]
         return n.startswith(stem) and _is_digits(d) and 1 <= int(d) <= top and not n[1:].startswith("0")
 
-    if vertebra("l", 5) or vertebra("t", 12) or vertebra("c", 7):
+    if vertebra("c", 7):
+        return NECK
+    if vertebra("l", 5) or vertebra("t", 12):
         return SPINE
     return None
 
 
 def _sided_word(bare):
     n = _normalise(bare)
+    # DAZ Genesis splits a limb into its bend joint (the part) and a twist helper.
+    if n.endswith("bend") and len(n) > 4:
+        n = n[:-4]
     for word, aliases in _SIDED:
         if n in aliases:
             return word
@@ -232,6 +237,7 @@ class _Tree:
                 self.depth[j] = self.depth[p] + 1
                 self.children[p].append(j)
         self.words = [classify(x) for x in names]
+        self._highest = None
 
     def parent(self, j):
         p = self.parents[j]
@@ -281,8 +287,6 @@ class _Tree:
                 if j == m:
                     break
                 out.append(j)
-        if m != a and m != b:
-            out.append(m)
         down = self.path(m, b)
         out.extend(down[:-1])
         return out
@@ -304,10 +308,15 @@ class _Tree:
 
     def highest(self, j):
         """The highest rest point (joints and End Sites) of `j`'s subtree."""
-        y = max(self.tip(j)[1], self.rest[j][1])
-        for c in self.children[j]:
-            y = max(y, self.highest(c))
-        return y
+        if self._highest is None:
+            # One pass up from the leaves (children come after their parents): no recursion.
+            h = [max(self.tip(k)[1], self.rest[k][1]) for k in range(len(self.rest))]
+            for k in range(len(h) - 1, -1, -1):
+                p = self.parent(k)
+                if p is not None:
+                    h[p] = max(h[p], h[k])
+            self._highest = h
+        return self._highest[j]
 
     def tip(self, j):
         r, e = self.rest[j], self.end_sites[j]
@@ -534,7 +543,12 @@ def resolve(names, parents=None, rest=None, end_sites=None, declared=None, skele
     if pelvis is None and not flat and n > 0:
         pelvis = 0, "shape"
     if pelvis is not None:
-        found["pelvis"] = pelvis[1]
+        how = pelvis[1]
+        # Found where the thighs meet, and named so too: named.
+        w = t.words[pelvis[0]]
+        if how == "shape" and w is not None and w[0] is None and w[1] in (PELVIS, ROOT):
+            how = "named"
+        found["pelvis"] = how
         pelvis = pelvis[0]
     a.pelvis = pelvis
 
@@ -579,7 +593,12 @@ def resolve(names, parents=None, rest=None, end_sites=None, declared=None, skele
     else:
         spine = []
     if spine:
-        found["spine"] = "declared" if "thorax" in decl else "shape"
+        if "thorax" in decl:
+            found["spine"] = "declared"
+        elif all(t.words[j] == (None, SPINE) for j in spine):
+            found["spine"] = "named"
+        else:
+            found["spine"] = "shape"
     a.spine = spine
     top = spine[-1] if spine else pelvis
 

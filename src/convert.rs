@@ -622,7 +622,7 @@ fn retarget_onto_rig(
         None => crate::retarget::auto_pairs(source, &rig),
     }
     .map_err(|e| fail(e.to_string()))?;
-    let warnings = crate::retarget::coverage_warnings(source, &rig, &pairs, reference);
+    let warnings = crate::retarget::coverage_warnings(source, &rig, &pairs);
     let animation =
         crate::retarget::retarget(source, &rig, &pairs, reference, settings.pipeline.fps)
             .map_err(|e| fail(e.to_string()))?;

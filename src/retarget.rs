@@ -211,19 +211,18 @@ impl SourceMotion {
         })
     }
 
-    /// Each joint's largest turn from the reference relative to its parent over the take,
-    /// degrees (how much it moves of its own).
-    fn own_turn_deg(&self, reference: Reference) -> Vec<f64> {
+    /// Each joint's largest turn relative to its parent away from its first frame's, degrees:
+    /// how much it moves of its own (a joint held at one angle does not move).
+    fn own_turn_deg(&self) -> Vec<f64> {
         let n = self.names.len();
-        let reference = match reference {
-            Reference::Frame(f) if f < self.world.len() => self.world[f].clone(),
-            _ => vec![UnitQuaternion::identity(); n],
-        };
         let local = |w: &[UnitQuaternion<f64>], j: usize| match self.parents[j] {
             Some(p) => w[p].inverse() * w[j],
             None => w[j],
         };
-        let base: Vec<UnitQuaternion<f64>> = (0..n).map(|j| local(&reference, j)).collect();
+        let Some(first) = self.world.first() else {
+            return vec![0.0; n];
+        };
+        let base: Vec<UnitQuaternion<f64>> = (0..n).map(|j| local(first, j)).collect();
         let mut most = vec![0.0f64; n];
         for w in &self.world {
             for j in 0..n {
@@ -233,6 +232,9 @@ impl SourceMotion {
         most
     }
 }
+
+/// Moving joints that are no body part named one by one in the warnings; the rest are counted.
+pub const MAX_JOINT_WARNINGS: usize = 20;
 
 /// A joint turning less than this (degrees, relative to its parent) over a take does not move.
 pub const MOVES_DEG: f64 = 1.0;
@@ -252,50 +254,84 @@ pub fn auto_pairs(
     Ok(pairs)
 }
 
-/// What the pairs leave out, as warnings naming both sides: a source joint that moves (more than
-/// [`MOVES_DEG`] relative to its parent) and is no body part — not a part, not a joint between
-/// parts (the world turns of the parts below carry it), not below a hand, a foot or the head
-/// (fingers, toes' tips, eyes) —, and a target part left undriven though the source has it.
+/// What the pairs leave out, as warnings naming both sides: a source joint that moves (turns
+/// more than [`MOVES_DEG`] relative to its parent over the take) and is no body part — not a
+/// part, not a joint between parts (the world turns of the parts below carry it), not below a
+/// hand, a foot or the head (fingers, toes' tips, eyes), not a rig's helper (`ik_*`, twist, roll,
+/// pole, corrective) —, and a target part left undriven though the source has it.
 pub fn coverage_warnings(
     source: &SourceMotion,
     target: &Rig,
     pairs: &[(usize, usize)],
-    reference: Reference,
 ) -> Vec<String> {
     let src = source.anatomy();
     let tgt = Anatomy::of(target);
+    let n = source.names.len();
     let mut warnings = Vec::new();
-    let driven_src: Vec<usize> = pairs.iter().map(|&(s, _)| s).collect();
-    let driven_tgt: Vec<usize> = pairs.iter().map(|&(_, t)| t).collect();
-    let part_joints: Vec<usize> = Part::all()
+    let mut is_part = vec![false; n];
+    for part in Part::all() {
+        for j in src.joints(part) {
+            is_part[j] = true;
+        }
+    }
+    for &(s, _) in pairs {
+        is_part[s] = true;
+    }
+    let mut is_end = vec![false; n];
+    let ends = [Part::Head]
         .into_iter()
-        .flat_map(|p| src.joints(p))
-        .collect();
-    let ends: Vec<usize> = [Part::Head]
-        .into_iter()
-        .chain(crate::rig::anatomy::Side::BOTH.into_iter().flat_map(|s| {
+        .chain(anatomy::Side::BOTH.into_iter().flat_map(|s| {
             [
                 Part::Limb(s, anatomy::Limb::Hand),
                 Part::Limb(s, anatomy::Limb::Foot),
             ]
-        }))
-        .flat_map(|p| src.joints(p))
-        .collect();
-    let turn = source.own_turn_deg(reference);
+        }));
+    for part in ends {
+        for j in src.joints(part) {
+            is_end[j] = true;
+        }
+    }
+    // One pass up (a part below: carried) and one down (below an end: a detail; the nearest
+    // part above), so a skeleton of any size costs two walks.
+    let mut part_below = vec![false; n];
+    for j in (0..n).rev() {
+        if let Some(p) = src.parent(j) {
+            part_below[p] |= is_part[j] || part_below[j];
+        }
+    }
+    let mut detail = vec![false; n];
+    let mut near: Vec<Option<usize>> = vec![None; n];
+    for j in 0..n {
+        if let Some(p) = src.parent(j) {
+            detail[j] = detail[p] || is_end[p];
+            near[j] = if is_part[p] { Some(p) } else { near[p] };
+        }
+    }
+    let helper = |name: &str| {
+        let bare = name
+            .rsplit([':', '|'])
+            .next()
+            .unwrap_or(name)
+            .to_ascii_lowercase();
+        let words: Vec<&str> = bare.split(['_', '.', '-', ' ']).collect();
+        words.first().is_some_and(|w| *w == "ik")
+            || ["twist", "roll", "pole", "corrective", "helper"]
+                .iter()
+                .any(|h| bare.contains(h))
+    };
+    let turn = source.own_turn_deg();
+    let mut unnamed = 0;
     for (j, name) in source.names.iter().enumerate() {
-        if driven_src.contains(&j) || part_joints.contains(&j) || turn[j] <= MOVES_DEG {
+        if is_part[j] || part_below[j] || detail[j] || turn[j] <= MOVES_DEG || helper(name) {
             continue;
         }
-        // Between parts: a part hangs below it. Below an end: a detail of it.
-        let carried = part_joints.iter().any(|&p| src.is_below(p, j));
-        let detail = ends.iter().any(|&e| src.is_below(j, e));
-        if carried || detail {
+        // A skeleton of thousands of such joints gets a line for each of the first few.
+        unnamed += 1;
+        if unnamed > MAX_JOINT_WARNINGS {
             continue;
         }
-        let near = (0..j)
-            .rev()
-            .filter(|&a| src.is_below(j, a))
-            .find_map(|a| src.part_of(a))
+        let near = near[j]
+            .and_then(|a| src.part_of(a))
             .map_or(String::new(), |p| format!(" (below the {})", p.label()));
         warnings.push(format!(
             "source joint `{name}`{near} turns up to {:.0}° but is no body part: no bone of `{}` follows it",
@@ -303,10 +339,23 @@ pub fn coverage_warnings(
             target.name()
         ));
     }
+    if unnamed > MAX_JOINT_WARNINGS {
+        warnings.push(format!(
+            "… and {} more source joints that move and are no body part",
+            unnamed - MAX_JOINT_WARNINGS
+        ));
+    }
+    let driven_tgt: Vec<bool> = {
+        let mut d = vec![false; target.len()];
+        for &(_, t) in pairs {
+            d[t] = true;
+        }
+        d
+    };
     for part in Part::all() {
         let t = tgt.joints(part);
         let s = src.joints(part);
-        if t.is_empty() || s.is_empty() || t.iter().any(|j| driven_tgt.contains(j)) {
+        if t.is_empty() || s.is_empty() || t.iter().any(|&j| driven_tgt[j]) {
             continue;
         }
         let tn: Vec<&str> = t
@@ -581,7 +630,7 @@ mod tests {
         }
         // Named as a part, Spine1 is on the spine: no warning.
         let pairs = auto_pairs(&source, &rig).unwrap();
-        assert!(coverage_warnings(&source, &rig, &pairs, Reference::Rest).is_empty());
+        assert!(coverage_warnings(&source, &rig, &pairs).is_empty());
         // A leaf that is no part and moves: the head's sibling `Tail` below the spine's top.
         source.names.push("Tail".into());
         source.parents.push(Some(spine2));
@@ -598,7 +647,7 @@ mod tests {
             w.push(w[spine2] * t);
         }
         let pairs = auto_pairs(&source, &rig).unwrap();
-        let w = coverage_warnings(&source, &rig, &pairs, Reference::Rest);
+        let w = coverage_warnings(&source, &rig, &pairs);
         assert_eq!(w.len(), 1, "{w:?}");
         assert!(
             w[0].contains("`Tail` (below the spine) turns up to 30°"),
@@ -607,7 +656,7 @@ mod tests {
         // A bone map that leaves the left thigh out.
         let thigh = rig.joint_index("LeftUpLeg").unwrap();
         let pairs: Vec<(usize, usize)> = pairs.into_iter().filter(|&(_, t)| t != thigh).collect();
-        let w = coverage_warnings(&source, &rig, &pairs, Reference::Rest);
+        let w = coverage_warnings(&source, &rig, &pairs);
         assert!(
             w.iter().any(|m| m
                 == "the left thigh of `mixamo` (LeftUpLeg) is not driven, though the source has it (LeftUpLeg)"),

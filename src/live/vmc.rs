@@ -21,15 +21,65 @@
 //! Unity's names: `Hips`; the spine's first joint `Spine`, its middle `Chest` and its top
 //! `UpperChest` (two joints: `Spine`, `Chest`); the neck's first joint `Neck`; `Head`; per side
 //! `Shoulder` (the clavicle), `UpperArm`, `LowerArm`, `Hand`, `UpperLeg`, `LowerLeg`, `Foot`,
-//! `Toes`. A rig file's `vmc_names:` adds to or overrides them. A joint between two sent bones
-//! (a spine of seven joints, CMU's `LHipJoint`) is not sent: its turn is in the next bone's,
-//! W_parent⁻¹ ⊗ W_bone with W the joints' world rotations.
+//! `Toes`. A rig file's `vmc_names:` adds to or overrides them. Each bone's rotation is relative
+//! to its parent in Unity's humanoid hierarchy (the nearest one sent: `Chest` without
+//! `UpperChest` for the neck), W_parent⁻¹ ⊗ W_bone with W the joints' world rotations, and its
+//! position the rest offset from it; the hips' are their world rotation and place. So a joint
+//! between two sent bones (a spine of seven, CMU's `LHipJoint`) has its turn in the next bone's,
+//! and a rig whose hierarchy is not Unity's (a centre of gravity above the hips and the spine)
+//! still sends Unity's.
 
 use crate::anim::Pose;
 use crate::rig::Rig;
 use crate::rig::anatomy::Anatomy;
 use nalgebra::{UnitQuaternion, Vector3};
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
+
+/// Unity's humanoid parent of a `HumanBodyBones` name: `Some(None)` for the hips (the top),
+/// `None` for a name that is not one of the body's.
+fn humanoid_parent(name: &str) -> Option<Option<&'static str>> {
+    let side = |rest: &str| {
+        let (side, bone) = name
+            .strip_prefix("Left")
+            .map(|b| ("Left", b))
+            .or_else(|| name.strip_prefix("Right").map(|b| ("Right", b)))?;
+        (bone == rest).then_some(side)
+    };
+    let sided = |bone: &str, parent: &'static str| -> Option<Option<&'static str>> {
+        let s = side(bone)?;
+        Some(Some(match (s, parent) {
+            (_, "UpperChest" | "Hips") => parent,
+            ("Left", "Shoulder") => "LeftShoulder",
+            ("Left", "UpperArm") => "LeftUpperArm",
+            ("Left", "LowerArm") => "LeftLowerArm",
+            ("Left", "UpperLeg") => "LeftUpperLeg",
+            ("Left", "LowerLeg") => "LeftLowerLeg",
+            ("Left", "Foot") => "LeftFoot",
+            ("Right", "Shoulder") => "RightShoulder",
+            ("Right", "UpperArm") => "RightUpperArm",
+            ("Right", "LowerArm") => "RightLowerArm",
+            ("Right", "UpperLeg") => "RightUpperLeg",
+            ("Right", "LowerLeg") => "RightLowerLeg",
+            _ => "RightFoot",
+        }))
+    };
+    match name {
+        "Hips" => Some(None),
+        "Spine" => Some(Some("Hips")),
+        "Chest" => Some(Some("Spine")),
+        "UpperChest" => Some(Some("Chest")),
+        "Neck" => Some(Some("UpperChest")),
+        "Head" => Some(Some("Neck")),
+        _ => sided("Shoulder", "UpperChest")
+            .or_else(|| sided("UpperArm", "Shoulder"))
+            .or_else(|| sided("LowerArm", "UpperArm"))
+            .or_else(|| sided("Hand", "LowerArm"))
+            .or_else(|| sided("UpperLeg", "Hips"))
+            .or_else(|| sided("LowerLeg", "UpperLeg"))
+            .or_else(|| sided("Foot", "LowerLeg"))
+            .or_else(|| sided("Toes", "Foot")),
+    }
+}
 
 /// A position in the rig world → Unity's axes.
 pub fn to_unity_position(p: Vector3<f64>) -> [f32; 3] {
@@ -55,7 +105,9 @@ pub enum CalibrationState {
 #[derive(Debug, Clone)]
 pub struct VmcSkeleton {
     bones: Vec<(usize, String)>,
-    /// Each sent bone's nearest sent bone above it (`None` for the top one, the hips).
+    /// Each sent bone's parent among the sent: its nearest sent humanoid parent in Unity's
+    /// hierarchy (the hips: none), or for a name of a rig file's own the nearest sent joint
+    /// above it.
     above: Vec<Option<usize>>,
     /// Each sent bone's rest offset from the bone above it (metres, rig world).
     offsets: Vec<Vector3<f64>>,
@@ -93,18 +145,35 @@ impl VmcSkeleton {
             return None;
         }
         let rest = rig.rest_positions();
-        let sent = |j: usize| bones.iter().position(|&(b, _)| b == j);
+        let sent = |name: &str| bones.iter().find(|(_, n)| n == name).map(|&(j, _)| j);
         let mut above = Vec::with_capacity(bones.len());
         let mut offsets = Vec::with_capacity(bones.len());
         let mut direct = true;
-        for &(j, _) in &bones {
-            let mut p = rig.joints()[j].parent;
-            while let Some(k) = p {
-                if sent(k).is_some() {
-                    break;
+        for (j, name) in &bones {
+            let j = *j;
+            // Unity's humanoid parent, the nearest one sent (the hips have none); a name that is
+            // not Unity's: the nearest sent joint above it in the rig.
+            let p = match humanoid_parent(name) {
+                Some(mut up) => loop {
+                    match up {
+                        None => break None,
+                        Some(u) => match sent(u) {
+                            Some(k) => break Some(k),
+                            None => up = humanoid_parent(u).flatten(),
+                        },
+                    }
+                },
+                None => {
+                    let mut p = rig.joints()[j].parent;
+                    while let Some(k) = p {
+                        if bones.iter().any(|&(b, _)| b == k) {
+                            break;
+                        }
+                        p = rig.joints()[k].parent;
+                    }
+                    p
                 }
-                p = rig.joints()[k].parent;
-            }
+            };
             direct &= p == rig.joints()[j].parent;
             above.push(p);
             offsets.push(p.map_or(Vector3::zeros(), |p| (rest[j] - rest[p]) * m));
@@ -231,6 +300,69 @@ mod tests {
         for i in 0..3 {
             assert!((rotated[i] as f64 - mirrored_then_rotated[i]).abs() < 1e-6);
         }
+    }
+
+    /// A rig whose root is a centre of gravity above the hips and the spine (not Unity's
+    /// hierarchy): the hips go out with their world rotation and place, the spine relative to
+    /// the hips, whatever the rig's own parents.
+    #[test]
+    fn a_rig_not_shaped_like_unity_sends_unity_relations() {
+        let text = "name: cog\njoints:\n  - {name: COG, offset: [0, 1, 0]}\n  - {name: Hips, parent: COG, offset: [0, -0.05, 0]}\n  - {name: LeftUpLeg, parent: Hips, offset: [0.1, 0, 0]}\n  - {name: LeftLeg, parent: LeftUpLeg, offset: [0, -0.45, 0]}\n  - {name: RightUpLeg, parent: Hips, offset: [-0.1, 0, 0]}\n  - {name: RightLeg, parent: RightUpLeg, offset: [0, -0.45, 0]}\n  - {name: Spine, parent: COG, offset: [0, 0.1, 0]}\n  - {name: LeftArm, parent: Spine, offset: [0.2, 0.3, 0]}\n  - {name: RightArm, parent: Spine, offset: [-0.2, 0.3, 0]}\n";
+        let rig = crate::rig::file::parse_rig(text, std::path::Path::new("cog.yaml")).unwrap();
+        let s = VmcSkeleton::new(&rig).unwrap();
+        let names: Vec<&str> = s.names().collect();
+        assert_eq!(names[0], "Hips", "{names:?}");
+        assert!(
+            names.contains(&"Spine") && !names.contains(&"COG"),
+            "{names:?}"
+        );
+        // The centre of gravity turns 90° about Y; nothing else turns.
+        let mut local = vec![UnitQuaternion::identity(); rig.len()];
+        local[0] = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2);
+        let pose = Pose {
+            frame: 0,
+            time_s: 0.0,
+            local,
+            root: Vector3::new(0.0, 1.0, 0.0),
+            contact: [false; 2],
+            airborne: false,
+        };
+        let bundle = s.frame(&pose, &rig);
+        let Ok((_, OscPacket::Bundle(b))) = rosc::decoder::decode_udp(&bundle) else {
+            panic!("not a bundle");
+        };
+        let bone = |name: &str| -> Vec<f32> {
+            b.content
+                .iter()
+                .find_map(|p| match p {
+                    OscPacket::Message(m)
+                        if m.addr == "/VMC/Ext/Bone/Pos"
+                            && m.args[0] == OscType::String(name.into()) =>
+                    {
+                        Some(
+                            m.args[1..]
+                                .iter()
+                                .map(|a| a.clone().float().unwrap())
+                                .collect(),
+                        )
+                    }
+                    _ => None,
+                })
+                .unwrap()
+        };
+        let hips = bone("Hips");
+        // World rotation 90° about Y: (x, y, z, w) = (0, sin 45°, 0, cos 45°), Unity's y negated.
+        let h = std::f32::consts::FRAC_1_SQRT_2;
+        assert!(
+            (hips[4] + h).abs() < 1e-6 && (hips[6] - h).abs() < 1e-6,
+            "{hips:?}"
+        );
+        // Its place: the COG's at (0, 1, 0) and the hips 5 cm below it.
+        assert!((hips[1] - 0.95).abs() < 1e-6, "{hips:?}");
+        // The spine does not turn relative to the hips; its offset is from them (15 cm up).
+        let spine = bone("Spine");
+        assert!((spine[6].abs() - 1.0).abs() < 1e-6, "{spine:?}");
+        assert!((spine[1] - 0.15).abs() < 1e-6, "{spine:?}");
     }
 
     #[test]

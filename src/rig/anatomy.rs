@@ -232,6 +232,9 @@ pub struct Anatomy {
     skeleton: String,
     names: Vec<String>,
     parents: Vec<Option<usize>>,
+    /// Depth-first places and subtree sizes ([`depth_first`]).
+    order: Vec<usize>,
+    size: Vec<usize>,
     pelvis: Option<usize>,
     /// From the pelvis up; the last is the thorax.
     spine: Vec<usize>,
@@ -249,6 +252,42 @@ struct Tree<'s, 'a> {
     depth: Vec<usize>,
     children: Vec<Vec<usize>>,
     words: Vec<Option<(Option<Side>, Word)>>,
+    /// Each joint's place in a depth-first order and its subtree's size (itself included), so
+    /// that "below" is two comparisons: a skeleton of any size and depth costs no walk.
+    order: Vec<usize>,
+    size: Vec<usize>,
+    /// The highest rest point (joints and End Sites) of each joint's subtree; empty without rest
+    /// positions.
+    highest: Vec<f64>,
+}
+
+/// Each joint's depth-first place and subtree size, from parents that come before their
+/// children (others are ignored: the joint is a root).
+fn depth_first(parents: &[Option<usize>]) -> (Vec<usize>, Vec<usize>) {
+    let n = parents.len();
+    let parent = |j: usize| parents[j].filter(|&p| p < j);
+    let mut size = vec![1; n];
+    for j in (0..n).rev() {
+        if let Some(p) = parent(j) {
+            size[p] += size[j];
+        }
+    }
+    let mut order = vec![0; n];
+    let mut next_root = 0;
+    let mut next_child: Vec<usize> = vec![0; n];
+    for j in 0..n {
+        match parent(j) {
+            None => {
+                order[j] = next_root;
+                next_root += size[j];
+            }
+            Some(p) => {
+                order[j] = order[p] + 1 + next_child[p];
+                next_child[p] += size[j];
+            }
+        }
+    }
+    (order, size)
 }
 
 impl Tree<'_, '_> {
@@ -262,11 +301,29 @@ impl Tree<'_, '_> {
                 children[p].push(j);
             }
         }
+        let (order, size) = depth_first(&sk.parents);
+        let mut highest = Vec::new();
+        if sk.rest.len() == n && sk.end_sites.len() == n {
+            highest = (0..n)
+                .map(|j| {
+                    let tip = sk.rest[j] + sk.end_sites[j].unwrap_or_default();
+                    tip.y.max(sk.rest[j].y)
+                })
+                .collect();
+            for j in (0..n).rev() {
+                if let Some(p) = sk.parents[j].filter(|&p| p < j) {
+                    highest[p] = highest[p].max(highest[j]);
+                }
+            }
+        }
         Tree {
             sk,
             depth,
             children,
             words: sk.names.iter().map(|n| classify(n)).collect(),
+            order,
+            size,
+            highest,
         }
     }
 
@@ -276,14 +333,7 @@ impl Tree<'_, '_> {
 
     /// Whether `j` lies strictly below `a`.
     fn below(&self, j: usize, a: usize) -> bool {
-        let mut k = self.parent(j);
-        while let Some(p) = k {
-            if p == a {
-                return true;
-            }
-            k = self.parent(p);
-        }
-        false
+        self.order[a] < self.order[j] && self.order[j] < self.order[a] + self.size[a]
     }
 
     fn ancestors_or_self(&self, j: usize) -> Vec<usize> {
@@ -297,10 +347,9 @@ impl Tree<'_, '_> {
     }
 
     fn common_ancestor(&self, a: usize, b: usize) -> Option<usize> {
-        let up = self.ancestors_or_self(a);
         self.ancestors_or_self(b)
             .into_iter()
-            .find(|j| up.contains(j))
+            .find(|&j| j == a || self.below(a, j))
     }
 
     /// The joints from `top` (exclusive) down to `bottom` (inclusive), top first; empty when
@@ -320,8 +369,9 @@ impl Tree<'_, '_> {
 
     /// The joints on the way from `a` to `b` through the hierarchy (both excluded), in order:
     /// up from `a` to where they meet, then down to `b`. A pelvis below its spine (SlimeVR's
-    /// recordings hang the body from the head) is walked up; where they meet is included when it
-    /// is neither.
+    /// recordings hang the body from the head) is walked up; where they meet, when it is
+    /// neither, is left out (a centre of gravity above both the hips and the spine is no
+    /// vertebra).
     fn way(&self, a: usize, b: usize) -> Vec<usize> {
         let Some(m) = self.common_ancestor(a, b) else {
             return Vec::new();
@@ -335,9 +385,6 @@ impl Tree<'_, '_> {
                 .take_while(|&j| j != m)
                 .collect()
         };
-        if m != a && m != b {
-            out.push(m);
-        }
         let mut down = self.path(m, b);
         down.pop();
         out.extend(down);
@@ -368,11 +415,7 @@ impl Tree<'_, '_> {
 
     /// The highest rest point (joints and End Sites) of `j`'s subtree.
     fn highest(&self, j: usize) -> f64 {
-        let mut y = self.tip(j).y.max(self.sk.rest[j].y);
-        for &c in &self.children[j] {
-            y = y.max(self.highest(c));
-        }
-        y
+        self.highest[j]
     }
 
     fn tip(&self, j: usize) -> Vector3<f64> {
@@ -547,7 +590,14 @@ impl Anatomy {
                 named.first().or(roots.first()).map(|&j| (j, Found::Named))
             })
             .or_else(|| (!flat && !sk.names.is_empty()).then_some((0, Found::Shape)));
-        if let Some((_, how)) = pelvis {
+        if let Some((j, how)) = pelvis {
+            // Found where the thighs meet, and named so too: named.
+            let named = matches!(t.words[j], Some((None, Word::Pelvis | Word::Root)));
+            let how = if how == Found::Shape && named {
+                Found::Named
+            } else {
+                how
+            };
             found.insert(Part::Pelvis, how);
         }
         let pelvis = pelvis.map(|(j, _)| j);
@@ -600,6 +650,11 @@ impl Anatomy {
         if !spine.is_empty() {
             let how = if declared(Part::Spine).is_some() {
                 Found::Declared
+            } else if spine
+                .iter()
+                .all(|&j| matches!(t.words[j], Some((None, Word::Spine))))
+            {
+                Found::Named
             } else {
                 Found::Shape
             };
@@ -634,7 +689,8 @@ impl Anatomy {
                 if t.highest(j) <= t.sk.rest[top].y {
                     return None;
                 }
-                // Up the chain to where it ends or branches (eyes, a head-top marker).
+                // Up the chain to where it ends or branches (the eyes, or a head-top marker beside
+                // them).
                 while let [c] = t.children[j][..] {
                     j = c;
                 }
@@ -672,6 +728,8 @@ impl Anatomy {
             skeleton: sk.name.to_string(),
             names: sk.names.iter().map(|s| s.to_string()).collect(),
             parents: sk.parents.clone(),
+            order: t.order.clone(),
+            size: t.size.clone(),
             pelvis,
             spine,
             neck,
@@ -746,14 +804,19 @@ impl Anatomy {
 
     /// Whether `joint` lies strictly below `ancestor`.
     pub fn is_below(&self, joint: usize, ancestor: usize) -> bool {
-        let mut k = self.parents.get(joint).copied().flatten();
-        while let Some(p) = k {
-            if p == ancestor {
-                return true;
-            }
-            k = self.parents.get(p).copied().flatten();
+        match (self.order.get(joint), self.order.get(ancestor)) {
+            (Some(&j), Some(&a)) => a < j && j < a + self.size[ancestor],
+            _ => false,
         }
-        false
+    }
+
+    /// A joint's parent (one that comes before it).
+    pub fn parent(&self, joint: usize) -> Option<usize> {
+        self.parents
+            .get(joint)
+            .copied()
+            .flatten()
+            .filter(|&p| p < joint)
     }
 
     /// The spine's three slots of Mixamo's and Unity's skeletons (`Spine`, `Spine1`/`Chest`,
@@ -1161,6 +1224,40 @@ mod tests {
         assert_eq!(part(Limb::Shank), Some("Left-Knee"));
         assert_eq!(part(Limb::Foot), Some("Left-Ankle"));
         assert_eq!(part(Limb::Toes), Some("Left-Foot"));
+    }
+
+    /// A chain of 200 000 joints (no name says anything, so the shape is read down all of it)
+    /// and 3 000 sided `Hip` joints in a row resolve without recursion or a walk per pair.
+    #[test]
+    fn deep_and_hostile_skeletons_resolve() {
+        let n: usize = 200_000;
+        let names: Vec<String> = (0..n).map(|i| format!("j{i}")).collect();
+        let sk = Skeleton {
+            name: "deep",
+            names: names.iter().map(String::as_str).collect(),
+            parents: (0..n).map(|i| i.checked_sub(1)).collect(),
+            rest: (0..n).map(|i| Vector3::new(0.0, i as f64, 0.0)).collect(),
+            end_sites: vec![None; n],
+            declared: BTreeMap::new(),
+        };
+        let a = Anatomy::resolve(&sk);
+        assert!(a.limb(Side::Left, Limb::Thigh).is_none());
+        let n: usize = 3_000;
+        let mut names = vec!["Hips".to_string()];
+        names.extend((1..n).map(|i| format!("ns{i}:LeftHip")));
+        let sk = Skeleton {
+            name: "hips",
+            names: names.iter().map(String::as_str).collect(),
+            parents: (0..n).map(|i| i.checked_sub(1)).collect(),
+            rest: (0..n)
+                .map(|i| Vector3::new(0.1, -(i as f64), 0.0))
+                .collect(),
+            end_sites: vec![None; n],
+            declared: BTreeMap::new(),
+        };
+        let a = Anatomy::resolve(&sk);
+        // The deepest Hip, with no Hip below it, is the thigh.
+        assert_eq!(a.limb(Side::Left, Limb::Thigh), Some(n - 1));
     }
 
     #[test]

@@ -10,7 +10,7 @@
 //! | Unity / VRM humanoid | `Chest`, `UpperChest`, `LeftUpperArm`, `LeftLowerArm`, `LeftUpperLeg`, `LeftLowerLeg`, `LeftToes` |
 //! | game assets, Blender, Unreal | `UpperLeg_L`, `upper_arm.L`, `thigh_l`, `calf_r`, `clavicle_l`, `spine_01`, `ball_r` |
 //! | CMU, Axis / Perception Neuron | `LowerBack`, `LHipJoint`, `Neck1`, `LeftFingerBase`, `Spine3` |
-//! | Poser / DAZ | `hip`, `abdomen`, `chest`, `lCollar`, `lShldr` (the upper arm), `lForeArm`, `rButtock`, `lThigh`, `lShin` |
+//! | Poser / DAZ | `hip`, `abdomen`, `chest`, `lCollar`, `lShldr` (the upper arm), `lForeArm`, `rButtock`, `lThigh`, `lShin`; Genesis's `lShldrBend`, `lForearmBend`, `lThighBend` (their `…Twist` are helpers) |
 //! | SlimeVR | `Hip` (the pelvis), `Waist`, `Left-Hip` (the thigh), `Left-Knee`, `Left-Ankle`, `Left-Foot` (the toes, below the ankle) |
 //! | Xsens MVN (BVH: joints named by the joint) | `Chest2`, `LeftCollar`, `LeftShoulder` (the upper arm), `LeftElbow`, `LeftWrist`, `LeftHip` (the thigh), `LeftKnee`, `LeftAnkle` |
 //! | Xsens MVN segments | `Pelvis`, `L5`, `L3`, `T12`, `T8`, `LeftUpperArm`, `LeftToe` |
@@ -133,7 +133,7 @@ fn normalise(s: &str) -> String {
 }
 
 /// A central word: an alias, or `spine`/`torso`/`chest`/`neck` followed by a number (`spine01`,
-/// `torso7`), or MVN's vertebrae (`l5`, `l3`, `t12`, `t8`).
+/// `torso7`), or vertebrae (`l5`, `t12`, `t8`: the spine; `c1`…`c7`: the neck).
 fn central_word(n: &str) -> Option<Word> {
     if let Some((w, _)) = CENTRAL.iter().find(|(_, a)| a.contains(&n)) {
         return Some(*w);
@@ -156,21 +156,30 @@ fn central_word(n: &str) -> Option<Word> {
             .and_then(|d| d.parse::<u32>().ok())
             .is_some_and(|k| (1..=max).contains(&k) && !n[1..].starts_with('0'))
     };
-    (vertebra("l", 5) || vertebra("t", 12) || vertebra("c", 7)).then_some(Word::Spine)
+    if vertebra("c", 7) {
+        return Some(Word::Neck);
+    }
+    (vertebra("l", 5) || vertebra("t", 12)).then_some(Word::Spine)
 }
 
 fn sided_word(bare: &str) -> Option<Word> {
     let n = normalise(bare);
-    SIDED
-        .iter()
-        .find(|(_, a)| a.contains(&n.as_str()))
-        .map(|(w, _)| *w)
+    // DAZ Genesis splits a limb into its bend joint (the part) and a twist helper.
+    let n = n
+        .strip_suffix("bend")
+        .filter(|s| !s.is_empty())
+        .unwrap_or(&n);
+    SIDED.iter().find(|(_, a)| a.contains(&n)).map(|(w, _)| *w)
 }
 
 /// `mixamorig:LeftArm`, `Armature|LeftArm`, `mixamorig_LeftArm`, `LeftArm_chr00` → `LeftArm`.
 fn strip_decoration(name: &str) -> &str {
     let mut name = name.rsplit([':', '|']).next().unwrap_or(name);
-    if name.len() > 10 && name[..10].eq_ignore_ascii_case("mixamorig_") {
+    if name.len() > 10
+        && name
+            .get(..10)
+            .is_some_and(|p| p.eq_ignore_ascii_case("mixamorig_"))
+    {
         name = &name[10..];
     }
     // Perception Neuron's character suffix.
@@ -318,6 +327,13 @@ mod tests {
             ("lThigh", l(Thigh)),
             ("lShin", l(Shank)),
             ("lFoot", l(Foot)),
+            ("lShldrBend", l(UpperArm)),
+            ("lForearmBend", l(Forearm)),
+            ("rThighBend", r(Thigh)),
+            ("lShldrTwist", None),
+            ("C7", c(Neck)),
+            ("センター", None),
+            ("左足ＩＫ_mixamo", None),
             // SlimeVR.
             ("Hip", c(Pelvis)),
             ("Waist", c(Spine)),

@@ -37,22 +37,16 @@ pub struct SubjectError {
     pub message: String,
 }
 
-/// The joint of a body part named by its key (`left_thigh`; [`super::anatomy::Part::key`]), for
-/// the one-joint parts.
+/// The joint of a body part named by its key (`left_thigh`; [`super::anatomy::Part::key`]): the
+/// part's joint, the spine's top for `thorax`, the neck's first joint for `neck`.
 fn part_joint(rig: &Rig, key: &str) -> Option<usize> {
-    let part = super::anatomy::Part::all().into_iter().find(|p| {
-        p.key() == key
-            && matches!(
-                p,
-                super::anatomy::Part::Limb(..)
-                    | super::anatomy::Part::Pelvis
-                    | super::anatomy::Part::Head
-            )
-    })?;
-    super::anatomy::Anatomy::of(rig)
-        .joints(part)
-        .first()
-        .copied()
+    use super::anatomy::{Anatomy, Part};
+    let part = Part::all().into_iter().find(|p| p.key() == key)?;
+    let joints = Anatomy::of(rig).joints(part);
+    match part {
+        Part::Spine => joints.last().copied(),
+        _ => joints.first().copied(),
+    }
 }
 
 impl Subject {
