@@ -61,7 +61,8 @@ class Resolve(unittest.TestCase):
         a = self.names.resolve(names, [None, 0, 1, 2, 0, 4, 5])
         p = self.parts(a)
         self.assertEqual((p["left_thigh"], p["left_shank"], p["left_foot"]), (["LeftHip"], ["LeftKnee"], ["LeftAnkle"]))
-        self.assertEqual(a.found("pelvis"), "shape")
+        # Where the thighs meet, and named `Hips`: named.
+        self.assertEqual(a.found("pelvis"), "named")
 
     def test_chains_and_the_one_joint_between(self):
         names = ["root", "torso_1", "torso_2", "torso_3", "neck_1", "neck_2", "head", "l_shoulder", "l_up_arm",
