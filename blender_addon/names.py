@@ -747,7 +747,8 @@ def _assign_chain(t, chain, side, parts, arm, limbs, found):
     # An arm that branches into fingers: the hand is where it branches (or the joint it sits
     # on), the forearm and upper arm the two joints with a bone of their own above it.
     if arm:
-        b = next((i for i, j in enumerate(chain) if len(t.children[j]) > 1), None)
+        # The last branch: twist helpers branch off the upper arm and forearm before it.
+        b = next((i for i in range(len(chain) - 1, -1, -1) if len(t.children[chain[i]]) > 1), None)
         if b is not None:
             r = t.rest[chain[b]]
             eps = 1e-9 * (1.0 + _norm(r))

@@ -17,8 +17,9 @@
 //! 3. **Shape**, where the names say nothing of a limb (rest positions needed): the legs end in
 //!    the lowest leaves of the skeleton, one on each side (+X is the body's left), the arms in the
 //!    leaves furthest out to each side; along such a chain the upper arm (thigh) starts the two
-//!    longest consecutive bones, the clavicle is the joint before it, and the forearm, hand
-//!    (shank, foot, toes) follow. The head is the end of the chain that rises from the thorax
+//!    longest consecutive bones — in an arm that branches into fingers, the hand is where it last
+//!    branches and the forearm and upper arm the two joints with a bone above it —, the clavicle
+//!    is the joint before it, and the forearm, hand (shank, foot, toes) follow. The head is the end of the chain that rises from the thorax
 //!    between the arms.
 //!
 //! The centre comes from the limbs: the pelvis is the lowest common ancestor of the two thighs
@@ -1074,7 +1075,8 @@ fn assign_chain(
     // do not tell.
     let hand = arm
         .then(|| {
-            let b = chain.iter().position(|&j| t.children[j].len() > 1)?;
+            // The last branch: twist helpers branch off the upper arm and forearm before it.
+            let b = chain.iter().rposition(|&j| t.children[j].len() > 1)?;
             let eps = 1e-9 * (1.0 + t.sk.rest[chain[b]].norm());
             let sits = b > 0 && (t.sk.rest[chain[b]] - t.sk.rest[chain[b - 1]]).norm() <= eps;
             Some(if sits { b - 1 } else { b })
@@ -1258,6 +1260,54 @@ mod tests {
         let a = Anatomy::resolve(&sk);
         // The deepest Hip, with no Hip below it, is the thigh.
         assert_eq!(a.limb(Side::Left, Limb::Thigh), Some(n - 1));
+    }
+
+    /// An Unreal-like skeleton with its names stripped: twist helpers branch off the upper arm
+    /// and the forearm, the fingers off the hand; the hand is where the arm last branches.
+    #[test]
+    fn twist_helpers_do_not_pass_for_the_hand() {
+        let (mut parents, mut rest) = (Vec::new(), Vec::new());
+        let mut add = |p: Option<usize>, x: f64, y: f64, z: f64| {
+            parents.push(p);
+            rest.push(Vector3::new(x, y, z));
+            parents.len() - 1
+        };
+        let root = add(None, 0.0, 0.0, 0.0);
+        let pelvis = add(Some(root), 0.0, 1.0, 0.0);
+        let spine = add(Some(pelvis), 0.0, 1.4, 0.0);
+        add(Some(spine), 0.0, 1.7, 0.0);
+        let mut arm = Vec::new();
+        for sx in [1.0, -1.0] {
+            let c = add(Some(spine), 0.05 * sx, 1.45, 0.0);
+            let u = add(Some(c), 0.2 * sx, 1.45, 0.0);
+            add(Some(u), 0.3 * sx, 1.45, 0.0);
+            let l = add(Some(u), 0.48 * sx, 1.45, 0.0);
+            add(Some(l), 0.6 * sx, 1.45, 0.0);
+            let h = add(Some(l), 0.74 * sx, 1.45, 0.0);
+            let f = add(Some(h), 0.8 * sx, 1.45, 0.02);
+            add(Some(f), 0.84 * sx, 1.45, 0.02);
+            let g = add(Some(h), 0.8 * sx, 1.45, -0.02);
+            add(Some(g), 0.83 * sx, 1.45, -0.02);
+            let th = add(Some(pelvis), 0.1 * sx, 0.95, 0.0);
+            let k = add(Some(th), 0.1 * sx, 0.5, 0.0);
+            let fo = add(Some(k), 0.1 * sx, 0.08, 0.0);
+            add(Some(fo), 0.1 * sx, 0.0, 0.1);
+            arm.push([c, u, l, h]);
+        }
+        let names: Vec<String> = (0..parents.len()).map(|i| format!("j{i}")).collect();
+        let a = Anatomy::resolve(&Skeleton {
+            name: "stripped",
+            names: names.iter().map(String::as_str).collect(),
+            end_sites: vec![None; parents.len()],
+            parents,
+            rest,
+            declared: BTreeMap::new(),
+        });
+        let [c, u, l, h] = arm[0];
+        let got = [Limb::Clavicle, Limb::UpperArm, Limb::Forearm, Limb::Hand]
+            .map(|limb| a.limb(Side::Left, limb));
+        assert_eq!(got, [Some(c), Some(u), Some(l), Some(h)]);
+        assert_eq!(a.pelvis(), Some(pelvis));
     }
 
     #[test]
