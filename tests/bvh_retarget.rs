@@ -204,3 +204,62 @@ fn a_bvh_take_s_hash_is_the_whole_file_s() {
         expected.split_whitespace().next().unwrap()
     );
 }
+
+/// pymo's walk with a joint `Tail` added below the hips (no body part by any name or shape),
+/// turning 0°…29° about Y: the conversion warns of it on the terminal and in the sidecar; the
+/// walk as it is gives no such warning.
+#[test]
+fn a_moving_joint_that_is_no_body_part_is_warned_of() {
+    let Some(pymo) = shared("bvh/pymo_walk.bvh") else {
+        return;
+    };
+    let text = std::fs::read_to_string(&pymo).unwrap();
+    let (hierarchy, motion) = text.split_at(text.find("MOTION").unwrap());
+    let close = hierarchy.trim_end().rfind('}').unwrap();
+    let tail = "  JOINT Tail\n  {\n    OFFSET 0 0 -10\n    CHANNELS 3 Zrotation Xrotation Yrotation\n    End Site\n    {\n      OFFSET 0 0 -10\n    }\n  }\n";
+    let mut with_tail = format!("{}{tail}}}\n", &hierarchy[..close]);
+    for (i, line) in motion.lines().enumerate() {
+        with_tail.push_str(line);
+        // The frame lines follow `MOTION`, `Frames:` and `Frame Time:`.
+        if i >= 3 && !line.trim().is_empty() {
+            with_tail.push_str(&format!(" 0 0 {}", (i - 3) % 30));
+        }
+        with_tail.push('\n');
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let bvh = dir.path().join("tail.bvh");
+    std::fs::write(&bvh, with_tail).unwrap();
+    for (file, expect) in [(&bvh, true), (&pymo, false)] {
+        let out = dir.path().join(format!("out-{expect}"));
+        let run = Command::new(imubake_bin())
+            .arg("convert")
+            .arg(file)
+            .args(["--rig", "mixamo", "--format", "bvh", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        let stem = file.file_stem().unwrap().to_string_lossy();
+        let sidecar: Value = serde_json::from_slice(
+            &std::fs::read(out.join(format!("{stem}.imubake.json"))).unwrap(),
+        )
+        .unwrap();
+        let warned = sidecar["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(Value::as_str)
+            .any(|w| {
+                w.starts_with("source joint `Tail` (below the pelvis) turns up to 29°")
+                    && w.ends_with("no bone of `mixamo` follows it")
+            });
+        assert_eq!(warned, expect, "{}", sidecar["warnings"]);
+        assert_eq!(stderr.contains("source joint `Tail`"), expect, "{stderr}");
+        assert!(!stderr.contains("is no body part") || expect, "{stderr}");
+    }
+}
