@@ -105,11 +105,6 @@ impl Recorder {
         &self.done
     }
 
-    /// The file being written.
-    pub fn part_path(&self) -> &Path {
-        &self.part
-    }
-
     pub fn lines(&self) -> u64 {
         self.lines
     }

@@ -14,7 +14,6 @@
 pub mod bone_world;
 pub mod calibrate;
 pub mod legacy;
-pub mod output;
 pub mod relative;
 pub mod resample;
 pub mod root;

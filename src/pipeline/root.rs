@@ -566,10 +566,6 @@ impl Contacts {
             per_frame,
         }
     }
-
-    pub fn airborne_frames(&self) -> usize {
-        self.airborne.iter().map(|[s, e]| e - s + 1).sum()
-    }
 }
 
 /// Stage 7 over a whole take: the root position at every frame (rig units) from every joint's

@@ -970,4 +970,23 @@ mod tests {
             }
         }
     }
+
+    /// A whole track turning about Y from 0° to 390° in ZYX order: past ±180° the middle
+    /// channel keeps counting (was the test of `pipeline/output.rs`, whose whole-take function
+    /// had no caller).
+    #[test]
+    fn a_track_turning_through_180_degrees_stays_continuous() {
+        let track: Vec<UnitQuaternion<f64>> = (0..40)
+            .map(|f| {
+                UnitQuaternion::from_axis_angle(&Vector3::y_axis(), (f as f64 * 10.0).to_radians())
+            })
+            .collect();
+        let euler = filter_track_degrees(&track, EulerOrder::ZYX);
+        for (f, angles) in euler.iter().enumerate() {
+            assert!(
+                (angles[1] - f as f64 * 10.0).abs() < 1e-6,
+                "frame {f}: {angles:?}"
+            );
+        }
+    }
 }

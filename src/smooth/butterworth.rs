@@ -92,14 +92,6 @@ impl Default for ButterworthOptions {
     }
 }
 
-impl ButterworthOptions {
-    /// Designs the filter for `sample_rate_hz` and applies it with [`sosfiltfilt`].
-    pub fn filtfilt(&self, x: &[f64], sample_rate_hz: f64) -> Result<Vec<f64>, FilterError> {
-        let sos = design_lowpass_sos(self.order, self.cutoff_hz, sample_rate_hz)?;
-        sosfiltfilt(&sos, x)
-    }
-}
-
 /// `scipy.signal.butter(order, cutoff_hz, fs=sample_rate_hz, output='sos')`.
 ///
 /// Returns `(order + 1) / 2` sections; the overall gain sits in the first section's numerator.

@@ -364,10 +364,6 @@ impl TakeBuilder {
         self.recalibrations.push(t_s);
     }
 
-    pub fn set_world(&mut self, world: World) {
-        self.world = world;
-    }
-
     /// Names the file that following line numbers refer to (multi-file takes).
     pub fn set_file(&mut self, file: Option<String>) {
         self.current_file = file;
@@ -427,10 +423,6 @@ impl TakeBuilder {
 
     pub fn warn(&mut self, warning: impl Into<String>) {
         self.warnings.push(warning.into());
-    }
-
-    pub fn dropped_count(&self) -> usize {
-        self.dropped.len()
     }
 
     pub fn push_quaternion(

@@ -259,25 +259,6 @@ impl ViewTake {
         }
     }
 
-    /// An animation in memory.
-    pub fn from_animation(name: &str, source: &str, animation: Animation, chunk_s: f64) -> Self {
-        let fps = animation.fps();
-        let (joints, feet) = skeleton(animation.rig());
-        ViewTake {
-            name: name.into(),
-            source: source.into(),
-            fps,
-            frames: animation.frames(),
-            chunk_frames: chunk_frames(fps, chunk_s),
-            motion: Motion::Animation(animation),
-            sensors: Vec::new(),
-            contacts: None,
-            live: false,
-            joints,
-            feet,
-        }
-    }
-
     /// How many chunks the take is cut into.
     pub fn chunks(&self) -> usize {
         match self.motion {

@@ -123,7 +123,7 @@ pub struct TakeOutputs<'a> {
     pub stem: &'a str,
     pub animation: &'a Animation,
     /// BVH channel values, `[joint][frame]` degrees in each joint's order, continuous
-    /// ([`crate::pipeline::output`]), when made already (paper 002's channel copy); else the
+    /// ([`crate::rotation::euler::filter_track_degrees`]), when made already (paper 002's channel copy); else the
     /// BVH writer makes them from the animation's rotations as it writes.
     pub euler_deg: Option<&'a [Vec<[f64; 3]>]>,
     /// Length unit of the BVH (glTF is always metres).
