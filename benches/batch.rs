@@ -42,6 +42,7 @@ fn main() {
         ..ConvertSettings::default()
     };
     settings.pipeline.fps = "60".parse().expect("fps");
+    let plan = imubake::convert::Plan::resolve(settings).expect("a plan");
     let library = discover(std::slice::from_ref(&input), DiscoverOptions::default())
         .expect("discover")
         .takes;
@@ -54,7 +55,7 @@ fn main() {
     println!("before: {}", HostProbe::measure());
     let never_stop = AtomicBool::new(false);
     let batch = |out: &Path, jobs: usize| {
-        run(&library, out, &settings, jobs, &never_stop, &|_| {}).expect("batch")
+        run(&library, out, &plan, jobs, &never_stop, &|_| {}).expect("batch")
     };
     let mut throughput = Vec::new();
     // 0 is the default: one job per core.

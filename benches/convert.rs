@@ -18,7 +18,7 @@ use common::{
     Cpu, HostProbe, PAPER000_SENSORS, median, minutes_from_env, status_kib, write_log,
     write_raw_log,
 };
-use imubake::convert::{ConvertSettings, convert};
+use imubake::convert::{ConvertSettings, Plan, convert};
 use imubake::pipeline::PipelineOptions;
 use imubake::pipeline::root::RootMode;
 use std::path::Path;
@@ -123,9 +123,12 @@ fn main() {
         cores,
     );
 
+    // Each setting's plan, resolved once as a command does.
+    let plan = |settings: ConvertSettings| Plan::resolve(settings).expect("a plan");
+    let (default, fixed, unsmoothed) = (plan(default), plan(fixed), plan(unsmoothed));
     let out = dir.path().join("out");
     // Each run's wall time, and the CPU it took.
-    let timed = |input: &Path, settings: &ConvertSettings, n: usize| -> Vec<(f64, Cpu)> {
+    let timed = |input: &Path, settings: &Plan, n: usize| -> Vec<(f64, Cpu)> {
         (0..n)
             .map(|_| {
                 let (start, cpu) = (Instant::now(), Cpu::now());
@@ -134,7 +137,7 @@ fn main() {
             })
             .collect()
     };
-    let runs = |input: &Path, settings: &ConvertSettings, n: usize| -> Vec<f64> {
+    let runs = |input: &Path, settings: &Plan, n: usize| -> Vec<f64> {
         timed(input, settings, n).into_iter().map(|r| r.0).collect()
     };
 

@@ -213,10 +213,11 @@ fn main() {
         let out = dir.path().join("out");
         let mut settings = settings.clone();
         settings.pipeline.fusion = fusion.map(|f| f.parse().expect("filter"));
+        let plan = imubake::convert::Plan::resolve(settings).expect("a plan");
         (0..2)
             .map(|_| {
                 let start = Instant::now();
-                convert(input, &out, &settings).expect("convert");
+                convert(input, &out, &plan).expect("convert");
                 start.elapsed().as_secs_f64()
             })
             .fold(f64::INFINITY, f64::min)

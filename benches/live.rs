@@ -54,7 +54,7 @@ fn main() {
     convert.pipeline.causal = true;
     let settings = LiveSettings {
         sources: vec![format!("udp:{port}").parse().unwrap()],
-        convert,
+        plan: std::sync::Arc::new(imubake::convert::Plan::resolve(convert).unwrap()),
         vmc: Some(vmc),
         listen: None,
         record: None,

@@ -44,7 +44,8 @@ fn main() {
     };
     settings.pipeline.fps = "60".parse().expect("fps");
     let out = dir.path().join("out");
-    let outcome = convert(&input, &out, &settings).expect("convert");
+    let plan = imubake::convert::Plan::resolve(settings).expect("a plan");
+    let outcome = convert(&input, &out, &plan).expect("convert");
     let bvh_mb = std::fs::metadata(out.join("long.bvh")).map_or(0, |m| m.len()) as f64 / 1e6;
     println!(
         "take: {minutes} min, {} frames at 60 fps on mixamo, BVH {bvh_mb:.0} MB",

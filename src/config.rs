@@ -35,7 +35,7 @@
 //! # smoothing: {method: "butterworth:cutoff=4", bones: {LeftHand: none, Head: "gaussian:sigma=0.05"}}
 //! ```
 
-use crate::convert::{ConvertSettings, OutputFormat};
+use crate::convert::{ConvertSettings, Given, Layer, OutputFormat};
 use crate::fps::Fps;
 use crate::pipeline::Trim;
 use crate::pipeline::root::RootMode;
@@ -366,7 +366,22 @@ pub fn settings(flags: Config, config: Option<&Path>) -> Result<ConvertSettings,
     } else {
         WorldFrom::Config
     };
-    Ok(flags.over(file).to_settings(world_from))
+    let layer = |flag: bool, config: bool| Layer::of(flag, config);
+    let given = Given {
+        fps: layer(flags.fps.is_some(), file.fps.is_some()),
+        mapping: layer(flags.mapping.is_some(), file.mapping.is_some()),
+        rig: layer(flags.rig.is_some(), file.rig.is_some()),
+        subject: layer(flags.subject.is_some(), file.subject.is_some()),
+        sensor_calibration: layer(
+            flags.sensor_calibration.is_some(),
+            file.sensor_calibration.is_some(),
+        ),
+        bone_map: layer(flags.bone_map.is_some(), file.bone_map.is_some()),
+    };
+    Ok(ConvertSettings {
+        given,
+        ..flags.over(file).to_settings(world_from)
+    })
 }
 
 #[cfg(test)]

@@ -12,7 +12,8 @@
 //! `write_all` and synced. Several processes may append to the same ledger on a local file system
 //! (O_APPEND); reading ignores a torn last line (a crash mid-write) and counts it.
 
-use crate::convert::ConvertSettings;
+use crate::convert::Plan;
+use crate::convert::plan::PlanMapping;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
@@ -210,29 +211,25 @@ struct FingerprintInput<'a> {
     rate_hz: Option<f64>,
 }
 
-fn file_sha256(path: &Path) -> String {
-    match fs::read(path) {
-        Ok(bytes) => hex(&Sha256::digest(&bytes)),
-        Err(_) => "(unreadable)".to_string(),
-    }
-}
-
-/// `<schema>:<SHA-256 of the settings' stable serialisation>`.
-pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
+/// `<schema>:<SHA-256 of the settings' stable serialisation>`: the plan's settings, each file
+/// it read by the SHA-256 of the bytes it parsed.
+pub fn settings_fingerprint(plan: &Plan) -> String {
+    let settings = plan.settings();
     let p = &settings.pipeline;
+    let mapping = match plan.mapping() {
+        PlanMapping::ByName => None,
+        PlanMapping::Quaternion(m) => Some(m.sha256.clone()),
+        PlanMapping::Euler(m) => Some(m.sha256.clone()),
+    };
     let input = FingerprintInput {
         input_format: settings.read.format.map(|f| f.name()),
         skip_lines: settings.read.skip_lines,
         skip_seconds: settings.read.skip_seconds,
         world: settings.read.world,
-        mapping: settings.mapping.as_deref().map(file_sha256),
-        rig: settings.rig.as_ref().map(|rig| {
-            let path = Path::new(rig);
-            if path.is_file() {
-                format!("file:{}", file_sha256(path))
-            } else {
-                rig.clone()
-            }
+        mapping,
+        rig: settings.rig.as_ref().map(|rig| match plan.rig_sha256() {
+            Some(sha) => format!("file:{sha}"),
+            None => rig.clone(),
         }),
         fps: [p.fps.num(), p.fps.den()],
         trim: p
@@ -249,9 +246,9 @@ pub fn settings_fingerprint(settings: &ConvertSettings) -> String {
         unsensed: p.unsensed.label(),
         sensor_rate_hz: p.sensor_rate_hz,
         fusion: p.fusion.as_ref().map(|f| f.to_string()),
-        sensor_calibration: settings.sensor_calibration.as_deref().map(file_sha256),
-        subject: settings.subject.as_deref().map(file_sha256),
-        bone_map: settings.bone_map.as_deref().map(file_sha256),
+        sensor_calibration: plan.sensor_calibration().map(|c| c.sha256.clone()),
+        subject: plan.subject().map(|s| s.sha256.clone()),
+        bone_map: plan.bone_map().map(|b| b.sha256.clone()),
         bvh_reference: (settings.bvh_reference != crate::retarget::Reference::Rest)
             .then(|| settings.bvh_reference.to_string()),
         mvnx_segments: settings.mvnx_segments,
@@ -493,6 +490,7 @@ impl Ledger {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::convert::ConvertSettings;
 
     fn entry(source: &str, status: Status, sha: &str) -> LedgerEntry {
         LedgerEntry {
@@ -622,50 +620,55 @@ mod tests {
 
     #[test]
     fn fingerprints_are_stable_and_say_their_schema() {
+        let fingerprint = |settings: &ConvertSettings| {
+            settings_fingerprint(&Plan::resolve(settings.clone()).unwrap())
+        };
         let dir = tempfile::tempdir().unwrap();
+        let mapping_text = include_str!("../samples/sou_wave.mapping.json");
         let mapping = dir.path().join("m.json");
-        fs::write(&mapping, "{}").unwrap();
+        fs::write(&mapping, mapping_text).unwrap();
         let settings = ConvertSettings {
             mapping: Some(mapping.clone()),
             ..ConvertSettings::default()
         };
-        let fp = settings_fingerprint(&settings);
+        let fp = fingerprint(&settings);
         assert_eq!(fingerprint_schema(&fp), FINGERPRINT_SCHEMA);
-        assert_eq!(fp, settings_fingerprint(&settings.clone()));
+        assert_eq!(fp, fingerprint(&settings.clone()));
         // The mapping counts by content, not by path.
         let moved = dir.path().join("moved.json");
-        fs::write(&moved, "{}").unwrap();
+        fs::write(&moved, mapping_text).unwrap();
         let elsewhere = ConvertSettings {
             mapping: Some(moved),
             ..settings.clone()
         };
-        assert_eq!(fp, settings_fingerprint(&elsewhere));
-        fs::write(&mapping, "{ }").unwrap();
-        assert_ne!(fp, settings_fingerprint(&settings));
+        assert_eq!(fp, fingerprint(&elsewhere));
+        fs::write(&mapping, format!("{mapping_text}\n")).unwrap();
+        assert_ne!(fp, fingerprint(&settings));
         let mut other = settings.clone();
         other.pipeline.fps = "60".parse().unwrap();
-        assert_ne!(
-            settings_fingerprint(&other),
-            settings_fingerprint(&settings)
-        );
+        assert_ne!(fingerprint(&other), fingerprint(&settings));
         // Fusion asked for, and each of its parameters, change the outputs.
         let mut fused = settings.clone();
         fused.pipeline.fusion = Some("vqf".parse().unwrap());
         let mut tuned = settings.clone();
         tuned.pipeline.fusion = Some("vqf:tau_acc=2".parse().unwrap());
-        let fps = [&settings, &fused, &tuned].map(settings_fingerprint);
+        let fps = [&settings, &fused, &tuned].map(fingerprint);
         assert!(fps[0] != fps[1] && fps[1] != fps[2] && fps[0] != fps[2]);
         // A sensor calibration file counts by content.
         let cal = dir.path().join("sensors.yaml");
-        fs::write(&cal, "a").unwrap();
+        fs::write(&cal, "imubake_sensor_calibration: 1\nsensors: {}\n").unwrap();
         let calibrated = ConvertSettings {
             sensor_calibration: Some(cal.clone()),
             ..settings.clone()
         };
-        let before = settings_fingerprint(&calibrated);
-        assert_ne!(before, settings_fingerprint(&settings));
-        fs::write(&cal, "b").unwrap();
-        assert_ne!(before, settings_fingerprint(&calibrated));
+        let before = fingerprint(&calibrated);
+        assert_ne!(before, fingerprint(&settings));
+        fs::write(
+            &cal,
+            "imubake_sensor_calibration: 1\nsensors: {}\n# edited\n",
+        )
+        .unwrap();
+        assert_ne!(before, fingerprint(&calibrated));
         // Fingerprints written before schemas were bare SHA-256s.
         assert_eq!(fingerprint_schema(&"ab".repeat(32)), 0);
     }

@@ -85,53 +85,82 @@ pub enum RetargetError {
     Animation(#[from] AnimationError),
 }
 
-/// `(source joint, target joint)` pairs from a bone map file: `{"bones": {"<source joint>":
-/// "<target bone, or a canonical part such as LeftArm>"}}` (a flat object works too), the
-/// Blender add-on's format. Every source joint and target bone must exist.
-pub fn load_bone_map(
-    path: &Path,
-    source: &[&str],
-    target_rig: &Rig,
-) -> Result<Vec<(usize, usize)>, RetargetError> {
-    let target: Vec<&str> = target_rig
-        .joints()
-        .iter()
-        .map(|j| j.name.as_str())
-        .collect();
-    let fail = |reason: String| RetargetError::BoneMap {
-        path: path.to_path_buf(),
-        reason,
-    };
-    let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
-    let value: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| fail(format!("not JSON: {e}")))?;
-    let bones = value.get("bones").unwrap_or(&value);
-    let bones = bones
-        .as_object()
-        .ok_or_else(|| fail(r#"expected {"bones": {"source joint": "target bone", …}}"#.into()))?;
-    let parts = Anatomy::of(target_rig).mixamo_slots();
-    let mut pairs = Vec::with_capacity(bones.len());
-    for (s, t) in bones {
-        let t = t
-            .as_str()
-            .ok_or_else(|| fail(format!("the target of `{s}` is not a bone name")))?;
-        let si = source.iter().position(|n| n == s).ok_or_else(|| {
-            fail(format!(
-                "source joint `{s}` is not in the BVH (it has: {})",
-                source.join(", ")
-            ))
+/// A bone map file as read: `{"bones": {"<source joint>": "<target bone, or a canonical part
+/// such as LeftArm>"}}` (a flat object works too), the Blender add-on's format. Its names are
+/// checked against a source and a rig by [`BoneMap::pairs`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoneMap {
+    /// The file, named in errors.
+    pub path: PathBuf,
+    /// (source joint, target bone or part), in the file's order.
+    pub names: Vec<(String, String)>,
+}
+
+impl BoneMap {
+    /// Parses a bone map's text (reading the file is the caller's: `convert::Plan` reads and
+    /// hashes it once).
+    pub fn parse(text: &str, path: &Path) -> Result<BoneMap, RetargetError> {
+        let fail = |reason: String| RetargetError::BoneMap {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| fail(format!("not JSON: {e}")))?;
+        let bones = value.get("bones").unwrap_or(&value);
+        let bones = bones.as_object().ok_or_else(|| {
+            fail(r#"expected {"bones": {"source joint": "target bone", …}}"#.into())
         })?;
-        let ti = target
+        let names = bones
             .iter()
-            .position(|n| *n == t)
-            .or_else(|| parts.iter().find(|(p, _)| p == t).map(|(_, i)| *i))
-            .ok_or_else(|| fail(format!("target bone `{t}` is not in the rig")))?;
-        if pairs.iter().any(|&(_, other)| other == ti) {
-            return Err(fail(format!("two source joints drive `{}`", target[ti])));
-        }
-        pairs.push((si, ti));
+            .map(|(s, t)| {
+                t.as_str()
+                    .map(|t| (s.clone(), t.to_string()))
+                    .ok_or_else(|| fail(format!("the target of `{s}` is not a bone name")))
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(BoneMap {
+            path: path.to_path_buf(),
+            names,
+        })
     }
-    Ok(pairs)
+
+    /// `(source joint, target joint)` index pairs: every source joint and target bone must
+    /// exist, and no bone is driven twice.
+    pub fn pairs(
+        &self,
+        source: &[&str],
+        target_rig: &Rig,
+    ) -> Result<Vec<(usize, usize)>, RetargetError> {
+        let target: Vec<&str> = target_rig
+            .joints()
+            .iter()
+            .map(|j| j.name.as_str())
+            .collect();
+        let fail = |reason: String| RetargetError::BoneMap {
+            path: self.path.clone(),
+            reason,
+        };
+        let parts = Anatomy::of(target_rig).mixamo_slots();
+        let mut pairs = Vec::with_capacity(self.names.len());
+        for (s, t) in &self.names {
+            let si = source.iter().position(|n| n == s).ok_or_else(|| {
+                fail(format!(
+                    "source joint `{s}` is not in the BVH (it has: {})",
+                    source.join(", ")
+                ))
+            })?;
+            let ti = target
+                .iter()
+                .position(|n| n == t)
+                .or_else(|| parts.iter().find(|(p, _)| p == t).map(|(_, i)| *i))
+                .ok_or_else(|| fail(format!("target bone `{t}` is not in the rig")))?;
+            if pairs.iter().any(|&(_, other)| other == ti) {
+                return Err(fail(format!("two source joints drive `{}`", target[ti])));
+            }
+            pairs.push((si, ti));
+        }
+        Ok(pairs)
+    }
 }
 
 /// A skeleton's motion, as retargeting reads it: each joint's world rotation per frame (rig

@@ -39,7 +39,7 @@ use crate::batch::{
     Attempt, BatchTake, DiscoverOptions, Skipped, Summary, TakeJob, TakeResult, TakeStatus,
     attempt_take, discover,
 };
-use crate::convert::{ConvertSettings, source_sha256};
+use crate::convert::{Plan, source_sha256};
 use crate::ledger::{
     FINGERPRINT_SCHEMA, Ledger, SourceStat, Status, fingerprint_schema, settings_fingerprint,
 };
@@ -327,16 +327,37 @@ struct Retry {
     at: Instant,
 }
 
-/// A subfolder config's stat when last loaded, and its last good settings and fingerprint.
-type FolderSettings = (Option<SourceStat>, Option<(ConvertSettings, String)>);
+/// A plan and its fingerprint.
+type Resolved = (Arc<Plan>, String);
+
+/// The stat of each file a plan read (mapping, rig, subject, …): a change resolves it again.
+type FileStats = Vec<(PathBuf, Option<SourceStat>)>;
+
+fn file_stats(plan: &Plan) -> FileStats {
+    plan.files()
+        .into_iter()
+        .map(|f| (f.to_path_buf(), config_stat(f)))
+        .collect()
+}
+
+/// Whether a file of `stats` changed since they were taken.
+fn files_changed(stats: &FileStats) -> bool {
+    stats.iter().any(|(path, stat)| config_stat(path) != *stat)
+}
+
+/// A subfolder config's stat when last loaded, the stats of the files its plan read, and its
+/// last good plan and fingerprint.
+type FolderSettings = (Option<SourceStat>, FileStats, Option<Resolved>);
 
 /// The follower of one inbox.
 struct Watch<'a> {
     opts: &'a WatchOptions,
-    load_settings: &'a dyn Fn(Option<&Path>) -> Result<ConvertSettings, String>,
-    settings: ConvertSettings,
+    load_plan: &'a dyn Fn(Option<&Path>) -> Result<Plan, String>,
+    plan: Arc<Plan>,
     fingerprint: String,
     config_seen: Option<SourceStat>,
+    /// The files the inbox's plan read, as they were when it was resolved.
+    files_seen: FileStats,
     /// Shared with the conversion's worker thread.
     ledger: Arc<Ledger>,
     /// Takes handled at this size, mtime and ctime.
@@ -424,17 +445,18 @@ impl Watch<'_> {
             .then_some(self.opts.config.as_path())
     }
 
-    /// Reloads the settings when the config file changed; a bad config is reported and the last
-    /// good settings stay.
+    /// Resolves the plan again when the config file or a file the plan read changed; a bad
+    /// config is reported and the last good plan stays.
     fn refresh_config(&mut self) {
         let stat = config_stat(&self.opts.config);
-        if stat == self.config_seen {
+        if stat == self.config_seen && !files_changed(&self.files_seen) {
             return;
         }
         self.config_seen = stat;
-        match (self.load_settings)(self.config_arg()) {
-            Ok(settings) => {
-                let fingerprint = settings_fingerprint(&settings);
+        match (self.load_plan)(self.config_arg()) {
+            Ok(plan) => {
+                self.files_seen = file_stats(&plan);
+                let fingerprint = settings_fingerprint(&plan);
                 if fingerprint != self.fingerprint {
                     info!(
                         config = %self.opts.config.display(),
@@ -445,7 +467,7 @@ impl Watch<'_> {
                             "new takes use them (--reconvert to redo converted ones)"
                         }
                     );
-                    self.settings = settings;
+                    self.plan = Arc::new(plan);
                     self.fingerprint = fingerprint;
                     if self.opts.reconvert {
                         self.done.clear();
@@ -516,24 +538,25 @@ impl Watch<'_> {
         None
     }
 
-    /// The settings and fingerprint for a take: a subfolder's own `imubake.yaml` (reloaded when
-    /// it changes; a bad one is reported and its last good settings stay, else the inbox's),
-    /// else the inbox's.
-    fn settings_for(&mut self, take: &BatchTake) -> (ConvertSettings, String) {
+    /// The plan and fingerprint for a take: a subfolder's own `imubake.yaml` (resolved again when
+    /// it or a file its plan read changes; a bad one is reported and its last good plan stays,
+    /// else the inbox's), else the inbox's.
+    fn settings_for(&mut self, take: &BatchTake) -> Resolved {
         let Some(config) = self.folder_config(take) else {
-            return (self.settings.clone(), self.fingerprint.clone());
+            return (Arc::clone(&self.plan), self.fingerprint.clone());
         };
         let stat = config_stat(&config);
         let entry = self
             .folder_settings
             .entry(config.clone())
-            .or_insert((None, None));
-        if entry.0 != stat || entry.1.is_none() && stat.is_none() {
+            .or_insert((None, Vec::new(), None));
+        if entry.0 != stat || entry.2.is_none() && stat.is_none() || files_changed(&entry.1) {
             entry.0 = stat;
-            match (self.load_settings)(Some(&config)) {
-                Ok(settings) => {
-                    let fingerprint = settings_fingerprint(&settings);
-                    entry.1 = Some((settings, fingerprint));
+            match (self.load_plan)(Some(&config)) {
+                Ok(plan) => {
+                    entry.1 = file_stats(&plan);
+                    let fingerprint = settings_fingerprint(&plan);
+                    entry.2 = Some((Arc::new(plan), fingerprint));
                 }
                 Err(e) => error!(
                     config = %config.display(),
@@ -542,9 +565,9 @@ impl Watch<'_> {
             }
         }
         entry
-            .1
+            .2
             .clone()
-            .unwrap_or_else(|| (self.settings.clone(), self.fingerprint.clone()))
+            .unwrap_or_else(|| (Arc::clone(&self.plan), self.fingerprint.clone()))
     }
 
     /// Whether the take was converted from this content, under whatever settings (without
@@ -589,7 +612,7 @@ impl Watch<'_> {
     fn convert(&mut self, take: &BatchTake, stat: SourceStat, force_hash: bool, stop: &AtomicBool) {
         self.pending.remove(&take.rel);
         self.done.insert(take.rel.clone(), stat);
-        let (settings, fingerprint) = self.settings_for(take);
+        let (plan, fingerprint) = self.settings_for(take);
         let retry = self.retries.remove(&take.rel);
         if self.current_under_its_own_settings(take, stat, &fingerprint, force_hash) {
             self.outcomes.record(&take.rel, TakeStatus::Skipped);
@@ -599,7 +622,7 @@ impl Watch<'_> {
         let Some(Attempt {
             result,
             environment,
-        }) = self.convert_on_worker(take, settings, fingerprint, again, stop)
+        }) = self.convert_on_worker(take, plan, fingerprint, again, stop)
         else {
             return;
         };
@@ -654,7 +677,7 @@ impl Watch<'_> {
     fn convert_on_worker(
         &mut self,
         take: &BatchTake,
-        settings: ConvertSettings,
+        plan: Arc<Plan>,
         fingerprint: String,
         retry: bool,
         stop: &AtomicBool,
@@ -667,7 +690,7 @@ impl Watch<'_> {
             .spawn(move || {
                 let job = TakeJob {
                     out_root: &out,
-                    settings: &settings,
+                    plan: &plan,
                     fingerprint: &fingerprint,
                     ledger: &ledger,
                 };
@@ -846,28 +869,29 @@ fn completed_paths(event: &notify::Event) -> Vec<PathBuf> {
 type Wake = Vec<PathBuf>;
 
 /// Converts the inbox's backlog, then (unless `once`) follows it until `stop` is set, finishing
-/// the take in progress. `load_settings` gives the settings from a config file (or none); it is
+/// the take in progress. `load_plan` resolves the plan of a config file (or none); it is
 /// called again whenever the config file changes. Returns what was converted, failed and skipped,
 /// each take counted once, by its latest outcome ([`Outcomes`]). The output folder's
 /// [`WatchLock`] is held throughout (`--once` too); when another watcher holds it, returns
 /// [`WatchError::AlreadyWatched`] before doing anything else.
 pub fn run(
     opts: &WatchOptions,
-    load_settings: &dyn Fn(Option<&Path>) -> Result<ConvertSettings, String>,
+    load_plan: &dyn Fn(Option<&Path>) -> Result<Plan, String>,
     stop: &AtomicBool,
 ) -> Result<Summary, WatchError> {
     fs::create_dir_all(&opts.out)?;
     let _lock = WatchLock::acquire(&opts.out, &opts.inbox)?;
     let config_seen = config_stat(&opts.config);
     let config_arg = opts.config.is_file().then_some(opts.config.as_path());
-    let settings = load_settings(config_arg).map_err(io::Error::other)?;
+    let plan = load_plan(config_arg).map_err(io::Error::other)?;
     let ledger = Ledger::load(&opts.out)?;
     ledger.report_older_schema();
     let mut watch = Watch {
         opts,
-        load_settings,
-        fingerprint: settings_fingerprint(&settings),
-        settings,
+        load_plan,
+        fingerprint: settings_fingerprint(&plan),
+        files_seen: file_stats(&plan),
+        plan: Arc::new(plan),
         config_seen,
         ledger: Arc::new(ledger),
         done: HashMap::new(),

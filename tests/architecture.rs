@@ -85,3 +85,53 @@ fn lower_layers_never_import_higher_ones() {
     }
     assert!(violations.is_empty(), "{violations:#?}");
 }
+
+/// The calls that open a mapping, rig, subject, sensor calibration or bone map file by its path
+/// (their definitions aside): only `convert/plan.rs` makes them, once per command, and the
+/// command line for commands of its own (`simulate`, `inspect`, `calibrate-sensors`).
+fn file_loads(code: &str) -> Vec<String> {
+    let re = regex::Regex::new(
+        r"\b(load_mapping|load_rig|load_bone_map)\s*\(|\b(Subject|SensorCalibration|BoneMap)::load\s*\(",
+    )
+    .unwrap();
+    code.lines()
+        .filter(|l| {
+            let t = l.trim_start();
+            !t.starts_with("pub fn ") && !t.starts_with("fn ") && re.is_match(l)
+        })
+        .map(|l| l.trim().to_string())
+        .collect()
+}
+
+#[test]
+fn only_the_plan_opens_the_files_settings_name() {
+    // The scanner sees a load, and passes a definition.
+    assert_eq!(file_loads("    let m = load_mapping(path)?;").len(), 1);
+    assert_eq!(file_loads("let s = Subject::load(p)?;").len(), 1);
+    assert!(file_loads("pub fn load_rig(name: &str) -> Result<Rig, E> {").is_empty());
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut violations = Vec::new();
+    let mut stack = vec![src.clone()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+                continue;
+            }
+            let rel = path
+                .strip_prefix(&src)
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            if rel == "convert/plan.rs" || rel.starts_with("cli/") || rel == "main.rs" {
+                continue;
+            }
+            let text = std::fs::read_to_string(&path).unwrap();
+            for call in file_loads(&code(&text)) {
+                violations.push(format!("src/{rel}: {call}"));
+            }
+        }
+    }
+    assert!(violations.is_empty(), "{violations:#?}");
+}

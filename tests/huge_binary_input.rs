@@ -4,7 +4,7 @@
 
 #![cfg(target_os = "linux")]
 
-use imubake::convert::{ConvertSettings, convert};
+use imubake::convert::{ConvertSettings, Plan, convert};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -29,7 +29,8 @@ fn an_8_gb_nul_file_is_refused_after_at_most_1_mib() {
     let (tx, rx) = mpsc::channel();
     let job = input.clone();
     std::thread::spawn(move || {
-        let result = convert(&job, &out, &ConvertSettings::default());
+        let plan = Plan::resolve(ConvertSettings::default()).unwrap();
+        let result = convert(&job, &out, &plan);
         let _ = tx.send(result.map(|_| ()).map_err(|e| e.to_string()));
     });
     let result = rx

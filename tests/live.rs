@@ -153,7 +153,7 @@ fn whole_take(input: &Path, mapping: &Path) -> Animation {
     };
     settings.pipeline.fps = "60".parse().unwrap();
     settings.pipeline.causal = true;
-    imubake::convert::animate(input, &settings).unwrap()
+    imubake::convert::animate(input, &imubake::convert::Plan::resolve(settings).unwrap()).unwrap()
 }
 
 /// Every received bone of every bundle against the animation: (the largest angle in degrees,
@@ -748,7 +748,8 @@ fn a_calibration_request_recalibrates_and_the_recording_says_so() {
             mapping: Some(mapping.clone()),
             ..Default::default()
         };
-        imubake::convert::animate(input, &settings).unwrap()
+        imubake::convert::animate(input, &imubake::convert::Plan::resolve(settings).unwrap())
+            .unwrap()
     };
     let (plain, baked) = (whole(&capture), whole(&recording));
     let at_30 = |s: f64| (s * 30.0) as usize;
@@ -867,7 +868,8 @@ fn raw_readings_are_fused_live() {
     };
     settings.pipeline.fps = "60".parse().unwrap();
     settings.pipeline.causal = true;
-    let anim = imubake::convert::animate(&raw, &settings).unwrap();
+    let anim = imubake::convert::animate(&raw, &imubake::convert::Plan::resolve(settings).unwrap())
+        .unwrap();
     // The Unity names of the joints this skeleton shares with Mixamo's.
     let names: Vec<(&str, &str)> = MIXAMO
         .iter()

@@ -961,6 +961,42 @@ fn a_take_that_failed_for_lack_of_settings_is_retried_when_they_arrive() {
     assert_eq!(interrupt(child), 0);
 }
 
+/// The plan is resolved again when a file it read changes, not only its config: a take that
+/// failed under a mapping naming a bone the rig lacks converts once the mapping file is fixed,
+/// the config untouched.
+#[test]
+fn a_take_is_retried_when_the_mapping_its_config_names_is_fixed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (inbox, out) = (dir.path().join("in"), dir.path().join("out"));
+    fs::create_dir_all(&inbox).unwrap();
+    let good = fs::read_to_string(repo("samples/sou_wave.mapping.json")).unwrap();
+    let bad = good.replacen("\"bone\": \"Hips\"", "\"bone\": \"Tail\"", 1);
+    assert_ne!(good, bad);
+    let mapping = dir.path().join("m.json");
+    fs::write(&mapping, &bad).unwrap();
+    fs::write(
+        inbox.join("imubake.yaml"),
+        format!("mapping: {}\n", mapping.display()),
+    )
+    .unwrap();
+    fs::write(inbox.join("take.log"), sample()).unwrap();
+    let child = bare_watch(&inbox, &out, &["--poll", "100", "--format", "bvh"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    assert!(wait_for(&out.join("take.error.json"), 20));
+    let report = fs::read_to_string(out.join("take.error.json")).unwrap();
+    assert!(report.contains("Tail"), "{report}");
+    fs::write(&mapping, &good).unwrap();
+    assert!(
+        wait_for(&out.join("take.imubake.json"), 20),
+        "the failed take is retried under the fixed mapping"
+    );
+    assert!(!out.join("take.error.json").exists());
+    assert_eq!(interrupt(child), 0);
+}
+
 /// A capture rewritten with the same size and its modification time put back, within 2 s of its
 /// conversion: converted again (events: the close-write; polling: the ctime changed).
 fn same_size_rewrite(extra: &[&str]) {

@@ -8,7 +8,7 @@ mod common;
 use common::{
     blender_import_bvh, gltf_validate, imubake_bin, node_modules, python, repo_file, run,
 };
-use imubake::convert::{ConvertSettings, animate};
+use imubake::convert::{ConvertSettings, Plan, animate};
 use imubake::read::{ReadOptions, read_take};
 use imubake::take::OrientationTrack;
 use serde_json::Value;
@@ -147,9 +147,12 @@ fn xsens_named_paper000(dir: &Path) -> PathBuf {
 fn an_mvnx_take_converts_like_its_csv_twin() {
     let Some(py) = python() else { return };
     let (dir, _) = fixtures(&py);
-    let settings = |mapping: PathBuf| ConvertSettings {
-        mapping: Some(mapping),
-        ..ConvertSettings::default()
+    let settings = |mapping: PathBuf| {
+        Plan::resolve(ConvertSettings {
+            mapping: Some(mapping),
+            ..ConvertSettings::default()
+        })
+        .unwrap()
     };
     let mvnx = animate(
         &dir.path().join("walk.mvnx"),

@@ -14,7 +14,7 @@ pub use discover::{
 pub use process::{Attempt, TakeJob, attempt_take, environmental, process_take};
 pub use shard::Shard;
 
-use crate::convert::ConvertSettings;
+use crate::convert::Plan;
 use crate::ledger::Ledger;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -166,7 +166,7 @@ fn is_zero(n: &usize) -> bool {
 pub fn run(
     takes: &[BatchTake],
     out_root: &Path,
-    settings: &ConvertSettings,
+    plan: &Plan,
     jobs: usize,
     stop: &AtomicBool,
     on_result: &(dyn Fn(&TakeResult) + Sync),
@@ -174,7 +174,7 @@ pub fn run(
     fs::create_dir_all(out_root)?;
     let ledger = Ledger::load(out_root)?;
     ledger.report_older_schema();
-    let fingerprint = crate::ledger::settings_fingerprint(settings);
+    let fingerprint = crate::ledger::settings_fingerprint(plan);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs)
         .build()
@@ -189,7 +189,7 @@ pub fn run(
                 }
                 let job = TakeJob {
                     out_root,
-                    settings,
+                    plan,
                     fingerprint: &fingerprint,
                     ledger: &ledger,
                 };

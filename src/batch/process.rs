@@ -8,7 +8,7 @@
 //! try the take again.
 
 use super::{BatchTake, TakeResult, TakeStatus, slash};
-use crate::convert::{ConvertError, ConvertSettings, convert, source_sha256};
+use crate::convert::{ConvertError, Plan, convert, source_sha256};
 use crate::ledger::{Freshness, Ledger, LedgerEntry, SourceStat, Status, now_ns};
 use crate::write::OutputError;
 use crate::write::error_report::{ErrorReport, remove_error_report, write_error_report};
@@ -91,12 +91,11 @@ fn environmental_kind(error: &ConvertError) -> Option<io::ErrorKind> {
     }
 }
 
-/// What every take of a run shares: where outputs go, the settings and their fingerprint, the
-/// ledger.
+/// What every take of a run shares: where outputs go, the plan and its fingerprint, the ledger.
 #[derive(Debug, Clone, Copy)]
 pub struct TakeJob<'a> {
     pub out_root: &'a Path,
-    pub settings: &'a ConvertSettings,
+    pub plan: &'a Plan,
     pub fingerprint: &'a str,
     pub ledger: &'a Ledger,
 }
@@ -104,7 +103,7 @@ pub struct TakeJob<'a> {
 fn process_take_untimed(take: &BatchTake, job: &TakeJob<'_>, retry: bool) -> Attempt {
     let TakeJob {
         out_root,
-        settings,
+        plan,
         fingerprint,
         ledger,
     } = *job;
@@ -157,7 +156,7 @@ fn process_take_untimed(take: &BatchTake, job: &TakeJob<'_>, retry: bool) -> Att
         })
         .and_then(|()| {
             std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                convert(&take.path, &out_dir, settings)
+                convert(&take.path, &out_dir, plan)
             }))
             .map_err(|panic| {
                 let msg = panic

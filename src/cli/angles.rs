@@ -4,6 +4,7 @@
 use super::convert::SettingsArgs;
 use clap::Args;
 use imubake::analysis::{AngleTable, angles};
+use imubake::convert::Plan;
 use imubake::write::write_atomic;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -63,9 +64,32 @@ fn is_angle_table(path: &Path) -> bool {
         })
 }
 
+/// The plan of a command's settings, resolved the first time a capture needs it and kept for
+/// the inputs after (a BVH file or an angle table needs none).
+pub struct LazyPlan<'a> {
+    settings: &'a SettingsArgs,
+    plan: Option<Plan>,
+}
+
+impl<'a> LazyPlan<'a> {
+    pub fn new(settings: &'a SettingsArgs) -> LazyPlan<'a> {
+        LazyPlan {
+            settings,
+            plan: None,
+        }
+    }
+
+    fn get(&mut self) -> anyhow::Result<&Plan> {
+        if self.plan.is_none() {
+            self.plan = Some(self.settings.plan()?);
+        }
+        Ok(self.plan.as_ref().expect("resolved above"))
+    }
+}
+
 /// The angle table of an input: a BVH file's motion, an angle table as it is, else a capture
-/// converted with `settings`.
-pub fn load(input: &Path, settings: &SettingsArgs) -> anyhow::Result<AngleTable> {
+/// converted with the plan.
+pub fn load(input: &Path, plan: &mut LazyPlan<'_>) -> anyhow::Result<AngleTable> {
     if is_bvh(input) {
         let bytes =
             std::fs::read(input).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
@@ -78,12 +102,12 @@ pub fn load(input: &Path, settings: &SettingsArgs) -> anyhow::Result<AngleTable>
     if is_angle_table(input) {
         return Ok(AngleTable::read_csv(input)?);
     }
-    let animation = imubake::convert::animate(input, &settings.settings()?)?;
+    let animation = imubake::convert::animate(input, plan.get()?)?;
     angles::of_animation(&animation).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))
 }
 
 pub fn run(args: AnglesArgs) -> anyhow::Result<ExitCode> {
-    let table = load(&args.input, &args.settings)?;
+    let table = load(&args.input, &mut LazyPlan::new(&args.settings))?;
     let text = if args.json {
         let mut s = serde_json::to_string(&table.to_json())?;
         s.push('\n');

@@ -116,7 +116,7 @@ pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
         }
         return Ok(ExitCode::SUCCESS);
     }
-    let settings = args.settings.settings()?;
+    let plan = args.settings.plan()?;
 
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::with_draw_target(Some(takes.len() as u64), ProgressDrawTarget::stderr())
@@ -155,7 +155,7 @@ pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
             std::process::exit(INTERRUPTED);
         });
     }
-    let results = batch::run(&takes, &args.out, &settings, jobs, &stop, &on_result)
+    let results = batch::run(&takes, &args.out, &plan, jobs, &stop, &on_result)
         .with_context(|| format!("{}: cannot run the batch", args.out.display()))?;
     bar.finish_and_clear();
 

@@ -1,7 +1,7 @@
 //! `imubake compare <a> <b> [--json]`: RMSE and Pearson's r per joint angle of two takes, BVH
 //! files or angle tables, after synchronising them (paper 000's Table 1).
 
-use super::angles::load;
+use super::angles::{LazyPlan, load};
 use super::convert::SettingsArgs;
 use clap::Args;
 use imubake::analysis::{CompareOptions, Sync, compare};
@@ -44,8 +44,9 @@ fn parse_lag(s: &str) -> Result<f64, String> {
 }
 
 pub fn run(args: CompareArgs) -> anyhow::Result<ExitCode> {
-    let a = load(&args.a, &args.settings)?;
-    let b = load(&args.b, &args.settings)?;
+    let mut plan = LazyPlan::new(&args.settings);
+    let a = load(&args.a, &mut plan)?;
+    let b = load(&args.b, &mut plan)?;
     let options = CompareOptions {
         sync: args.sync,
         sync_angle: args.sync_angle,

@@ -4,7 +4,7 @@ use super::ReadArgs;
 use anyhow::Context;
 use clap::Args;
 use imubake::config::Config;
-use imubake::convert::{ConvertSettings, OutputFormat, convert, take_stem};
+use imubake::convert::{ConvertSettings, OutputFormat, Plan, convert, take_stem};
 use imubake::fps::Fps;
 use imubake::pipeline::Trim;
 use imubake::rig::LengthUnit;
@@ -150,13 +150,14 @@ impl SettingsArgs {
         Ok(imubake::config::settings(self.layer(), config)?)
     }
 
-    /// Whether a frame rate was given, by flag or in the config file.
-    pub fn fps_given(&self) -> anyhow::Result<bool> {
-        Ok(self.fps.is_some()
-            || match self.config() {
-                Some(path) => Config::load(path)?.fps.is_some(),
-                None => false,
-            })
+    /// The plan of these settings: every file they name read once.
+    pub fn plan(&self) -> anyhow::Result<Plan> {
+        Ok(Plan::resolve(self.settings()?)?)
+    }
+
+    /// The plan of the settings from `config` (a YAML file, or none) with these flags over it.
+    pub fn plan_with(&self, config: Option<&Path>) -> anyhow::Result<Plan> {
+        Ok(Plan::resolve(self.settings_with(config)?)?)
     }
 
     /// These flags as one settings layer.
@@ -211,11 +212,11 @@ pub fn run(args: ConvertArgs) -> anyhow::Result<ExitCode> {
             return Ok(ExitCode::from(2));
         }
     }
-    let settings = args.settings.settings()?;
+    let plan = args.settings.plan()?;
     let mut sidecars = Vec::new();
     let mut failed = 0;
     for input in &args.inputs {
-        match convert(input, &args.out, &settings) {
+        match convert(input, &args.out, &plan) {
             Ok(outcome) => {
                 for w in &outcome.sidecar.warnings {
                     eprintln!("warning: {}: {w}", input.display());

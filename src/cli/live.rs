@@ -108,15 +108,15 @@ fn status_line(s: &Status) -> String {
 /// The browser preview: the rig at rest on `imubake view`'s page, served on loopback beside the
 /// session until it stops; its URL printed.
 fn start_preview(
-    convert: &imubake::convert::ConvertSettings,
+    plan: &imubake::convert::Plan,
     port: u16,
     stop: &std::sync::Arc<std::sync::atomic::AtomicBool>,
 ) -> anyhow::Result<std::sync::Arc<imubake::view::Preview>> {
     use imubake::view::{Preview, ServeOptions, Server, ViewTake};
-    let (rig, _, _, options) = imubake::convert::stream_setup(convert)?;
+    let (rig, _, _, options) = plan.stream()?;
     let preview = Preview::new(rig.units().metres_per_unit());
     let server = Server::bind(
-        ViewTake::live(rig, options.fps, Vec::new()),
+        ViewTake::live(rig.clone(), options.fps, Vec::new()),
         &ServeOptions {
             listen: SocketAddr::from(([127, 0, 0, 1], port)),
         },
@@ -130,7 +130,7 @@ fn start_preview(
 
 pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
     let mut convert = args.settings.settings()?;
-    if !args.settings.fps_given()? {
+    if convert.given.fps == imubake::convert::Layer::Default {
         // A live view runs smoother than a file's default 30 fps.
         convert.pipeline.fps = "60".parse().expect("a frame rate");
     }
@@ -153,14 +153,15 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
             ignored.join(", ")
         );
     }
+    let plan = std::sync::Arc::new(imubake::convert::Plan::resolve(convert)?);
     let stop = super::stop_on_signals()?;
     let preview = match args.preview {
-        Some(port) => Some(start_preview(&convert, port, &stop)?),
+        Some(port) => Some(start_preview(&plan, port, &stop)?),
         None => None,
     };
     let settings = LiveSettings {
         sources: args.sources.clone(),
-        convert,
+        plan,
         vmc: address("vmc", args.vmc.as_deref(), imubake::live::DEFAULT_VMC)?,
         listen: address(
             "listen",

@@ -46,8 +46,8 @@ pub fn run(args: ViewArgs) -> anyhow::Result<ExitCode> {
         ViewTake::open(&args.take, args.chunk_seconds)?
     } else {
         let dir = tempfile::Builder::new().prefix("imubake-view-").tempdir()?;
-        let settings = args.settings.settings()?;
-        let outcome = imubake::convert::convert(&args.take, dir.path(), &settings)?;
+        let plan = args.settings.plan()?;
+        let outcome = imubake::convert::convert(&args.take, dir.path(), &plan)?;
         eprintln!(
             "{} converted ({} frames at {} fps)",
             args.take.display(),

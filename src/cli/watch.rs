@@ -3,7 +3,7 @@
 use super::convert::SettingsArgs;
 use anyhow::Context;
 use clap::Args;
-use imubake::convert::ConvertSettings;
+use imubake::convert::Plan;
 use imubake::watch::{self, WatchOptions};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -59,9 +59,9 @@ pub fn run(args: WatchArgs) -> anyhow::Result<ExitCode> {
     opts.follow_symlinks = args.follow_symlinks;
     let stop = super::stop_on_signals()?;
     // `--config` wins; else the inbox's imubake.yaml the watcher passes in. Flags override both.
-    let load = |config: Option<&Path>| -> Result<ConvertSettings, String> {
+    let load = |config: Option<&Path>| -> Result<Plan, String> {
         args.settings
-            .settings_with(user_config.as_deref().or(config))
+            .plan_with(user_config.as_deref().or(config))
             .map_err(|e| format!("{e:#}"))
     };
     let summary = match watch::run(&opts, &load, &stop) {

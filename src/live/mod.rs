@@ -17,7 +17,7 @@ pub mod source;
 pub mod vmc;
 
 use crate::anim::Pose;
-use crate::convert::{ConvertError, ConvertSettings};
+use crate::convert::{ConvertError, Plan};
 use crate::pipeline::stream::{PoseStream, StreamStatus};
 use crate::read::stream::{HostStamps, LineFormat, LineStream, recorded_before_header};
 use crate::take::{DroppedLines, LineReport, StreamSample, StreamValue};
@@ -102,8 +102,8 @@ impl std::str::FromStr for Clock {
 #[derive(Debug, Clone)]
 pub struct LiveSettings {
     pub sources: Vec<SourceSpec>,
-    /// The conversion settings (mapping, rig, fps, smoothing, root, world …), run causal.
-    pub convert: ConvertSettings,
+    /// The conversion's plan (mapping, rig, fps, smoothing, root, world …), run causal.
+    pub plan: Arc<Plan>,
     /// Where VMC bundles go (`None`: not sent).
     pub vmc: Option<SocketAddr>,
     /// Where calibration requests are heard (`None`: not at all).
@@ -237,10 +237,12 @@ pub fn run(
     stop: Arc<AtomicBool>,
     mut report: impl FnMut(Report),
 ) -> Result<Summary, LiveError> {
-    let (rig, mapping, mapping_file, mut options) =
-        crate::convert::stream_setup(&settings.convert)?;
-    options.causal = true;
-    let skeleton = vmc::VmcSkeleton::new(&rig);
+    let (rig, mapping, mapping_file, options) = settings.plan.stream()?;
+    let options = crate::pipeline::PipelineOptions {
+        causal: true,
+        ..options.clone()
+    };
+    let skeleton = vmc::VmcSkeleton::new(rig);
     let vmc_out = match settings.vmc {
         Some(addr) => {
             let skeleton = skeleton
@@ -265,7 +267,7 @@ pub fn run(
     // Each frame out: the VMC bundle and the browser preview, as asked.
     let send_out = |pose: &Pose| {
         if let Some((socket, skeleton)) = &vmc_out {
-            let _ = socket.send(&skeleton.frame(pose, &rig));
+            let _ = socket.send(&skeleton.frame(pose, rig));
         }
         if let Some(preview) = &settings.preview {
             preview.pose(pose);
@@ -525,7 +527,7 @@ pub fn run(
                             .map_err(|e| LiveError::Stream(e.to_string()))?;
                     }
                     running =
-                        start_running(lines, &rig, &mapping, &mapping_file, &options, settings)?;
+                        start_running(lines, rig, mapping, mapping_file, &options, settings)?;
                 }
                 line_no += 1;
                 if let Some(r) = &mut recorder {
@@ -702,8 +704,8 @@ fn start_running(
     settings: &LiveSettings,
 ) -> Result<Option<Running>, LiveError> {
     let world = settings
-        .convert
-        .read
+        .plan
+        .read_options()
         .world
         .or(mapping.world)
         .unwrap_or(lines.world());

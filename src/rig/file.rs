@@ -229,20 +229,17 @@ pub fn bvh_rig(bytes: &[u8], path: &Path) -> Result<Rig, RigLoadError> {
     Ok(rig)
 }
 
-/// Loads a rig by built-in name (`mixamo`, `sou12`), from a `.yaml`/`.json` rig file, or from
-/// a `.bvh` file's hierarchy.
-pub fn load_rig(name_or_path: &str) -> Result<Rig, RigLoadError> {
-    if let Some((name, text)) = BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
-        return parse_rig(text, Path::new(&format!("rigs/{name}.yaml")));
-    }
-    let path = Path::new(name_or_path);
-    if !path.exists() {
-        return Err(RigLoadError::Unknown(name_or_path.to_string()));
-    }
-    let bytes = std::fs::read(path).map_err(|source| RigLoadError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+/// A built-in rig (`mixamo`, `sou12`) by name, `None` for any other name.
+pub fn builtin_rig(name: &str) -> Option<Result<Rig, RigLoadError>> {
+    BUILTIN
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(name, text)| parse_rig(text, Path::new(&format!("rigs/{name}.yaml"))))
+}
+
+/// A rig file's bytes as a rig: a `.bvh` file's hierarchy, else a YAML or JSON rig file. Reading
+/// the file is the caller's (`convert::Plan` reads and hashes it once).
+pub fn rig_from_bytes(path: &Path, bytes: Vec<u8>) -> Result<Rig, RigLoadError> {
     if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("bvh"))
@@ -254,6 +251,23 @@ pub fn load_rig(name_or_path: &str) -> Result<Rig, RigLoadError> {
         message: "not UTF-8 text; expected a YAML or JSON rig file".into(),
     })?;
     parse_rig(&text, path)
+}
+
+/// Loads a rig by built-in name (`mixamo`, `sou12`), from a `.yaml`/`.json` rig file, or from
+/// a `.bvh` file's hierarchy.
+pub fn load_rig(name_or_path: &str) -> Result<Rig, RigLoadError> {
+    if let Some(rig) = builtin_rig(name_or_path) {
+        return rig;
+    }
+    let path = Path::new(name_or_path);
+    if !path.exists() {
+        return Err(RigLoadError::Unknown(name_or_path.to_string()));
+    }
+    let bytes = std::fs::read(path).map_err(|source| RigLoadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    rig_from_bytes(path, bytes)
 }
 
 #[cfg(test)]

@@ -12,7 +12,7 @@ pub mod subject;
 
 mod bvh;
 
-pub use file::{RigFile, load_rig};
+pub use file::{RigFile, builtin_rig, load_rig, rig_from_bytes};
 
 use crate::rotation::EulerOrder;
 use nalgebra::{UnitQuaternion, Vector3};

@@ -56,7 +56,16 @@ impl Subject {
             message,
         };
         let text = std::fs::read_to_string(path).map_err(|e| err(format!("cannot read: {e}")))?;
-        serde_yaml::from_str(&text).map_err(|e| {
+        Subject::parse(&text, path)
+    }
+
+    /// A subject file's text; `path` names the file in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Subject, SubjectError> {
+        let err = |message: String| SubjectError {
+            path: path.to_path_buf(),
+            message,
+        };
+        serde_yaml::from_str(text).map_err(|e| {
             err(format!(
                 "{e}; expected `height_m: <metres>` and/or `segments: {{<bone>: <metres>}}`"
             ))

@@ -9,6 +9,7 @@ pub mod gltf;
 pub mod orientation_csv;
 pub mod report;
 pub mod sidecar;
+pub mod take;
 
 use crate::anim::Animation;
 use crate::rig::LengthUnit;

@@ -1,0 +1,147 @@
+//! One take from capture to outputs, under a [`Plan`] resolved once per command:
+//!
+//! ```text
+//! plan ── mode_for(input) ──▶ bvh_retarget │ mvnx_segments │ euler │ orientations ──▶ Conversion
+//!      ──▶ output transforms (--in-place, --bind-frame) ──▶ write::take (outputs, sidecar last)
+//! ```
+//!
+//! Each mode is a module of its own; every mode yields one [`Conversion`], so there is one
+//! output path.
+
+mod bvh_retarget;
+mod error;
+mod euler;
+mod hash;
+mod mvnx_segments;
+mod orientations;
+pub mod plan;
+mod records;
+pub mod settings;
+mod skeleton;
+pub mod transforms;
+
+pub use error::ConvertError;
+pub use hash::source_sha256;
+pub use plan::{Mode, Plan};
+pub use settings::{ConvertSettings, Given, Layer, Output, OutputFormat};
+pub use transforms::OutputTransform;
+
+use crate::anim::Animation;
+pub use crate::read::take_stem;
+use crate::take::Take;
+use crate::write::remove_take_outputs;
+use crate::write::sidecar::SourceRecord;
+use crate::write::take::{Conversion, SubjectFile, TakeFacts, TakeJob, WrittenTake, write_take};
+use std::path::Path;
+
+/// What a conversion wrote: the sidecar and where it is.
+pub type ConvertOutcome = WrittenTake;
+
+/// Converts one take into `out_dir`. A failure after the outputs were started (a full disk, say)
+/// removes every output of the take, the sidecar first, so no partial take is left behind; a
+/// failure before that leaves an earlier conversion's outputs as they were.
+pub fn convert(input: &Path, out_dir: &Path, plan: &Plan) -> Result<ConvertOutcome, ConvertError> {
+    convert_unclean(input, out_dir, plan).inspect_err(|e| {
+        if matches!(e, ConvertError::Output(_)) {
+            remove_take_outputs(out_dir, &take_stem(input));
+        }
+    })
+}
+
+fn convert_unclean(
+    input: &Path,
+    out_dir: &Path,
+    plan: &Plan,
+) -> Result<ConvertOutcome, ConvertError> {
+    let (conversion, source, facts) = match plan.mode_for(input) {
+        Mode::BvhRetarget => {
+            let (conversion, source) = bvh_retarget::convert(input, plan)?;
+            let conversion = transforms::apply_all(conversion, &transforms(plan), input)?;
+            let facts = TakeFacts {
+                warnings: conversion.warnings.clone(),
+                ..TakeFacts::default()
+            };
+            (conversion, source, facts)
+        }
+        Mode::MvnxSegments => {
+            let mvnx = mvnx_segments::convert(input, plan)?;
+            let mut conversion = transforms::apply_all(mvnx.conversion, &transforms(plan), input)?;
+            conversion.vendor_contacts = mvnx
+                .contacts
+                .as_ref()
+                .map(|v| records::vendor_contacts_record(v, &conversion));
+            let facts = TakeFacts {
+                warnings: conversion.warnings.clone(),
+                dropped_lines: mvnx.dropped,
+                ..TakeFacts::default()
+            };
+            (conversion, mvnx.source, facts)
+        }
+        Mode::Euler | Mode::Orientations => {
+            let read_span = tracing::debug_span!("read and hash").entered();
+            let (take, sha256) = hash::read_and_hash(input, plan.read_options())?;
+            drop(read_span);
+            // What the sidecar and the report keep of the take; the pipeline then consumes it,
+            // so its samples are never held twice and are freed before the outputs are built.
+            let mut facts = TakeFacts::of(&take);
+            let vendor_contacts = take.vendor_contacts().cloned();
+            let source_info = take.source().clone();
+            let mut conversion = of_take(input, take, plan)?;
+            facts.warnings.extend(conversion.warnings.iter().cloned());
+            conversion.vendor_contacts = vendor_contacts
+                .as_ref()
+                .map(|v| records::vendor_contacts_record(v, &conversion));
+            let source = SourceRecord {
+                path: input.to_string_lossy().into_owned(),
+                sha256,
+                format: source_info.format,
+                world: conversion.world.0,
+                world_from: conversion.world.1,
+                start_timestamp: source_info.start_timestamp,
+            };
+            (conversion, source, facts)
+        }
+    };
+    let settings = plan.settings();
+    let outputs = settings.outputs();
+    let job = TakeJob {
+        input,
+        out_dir,
+        outputs: &outputs,
+        units: settings.units,
+        smoothing: plan.pipeline().smoothing.describe(),
+        subject: plan.subject().map(|s| SubjectFile {
+            path: &s.path,
+            sha256: &s.sha256,
+            subject: &s.value,
+        }),
+        source,
+        facts,
+    };
+    Ok(write_take(job, conversion)?)
+}
+
+/// The output transforms the plan asks for.
+fn transforms(plan: &Plan) -> Vec<OutputTransform> {
+    OutputTransform::list(plan.settings())
+}
+
+/// A take read into memory, converted by the plan's mapping mode, then the output transforms.
+fn of_take(input: &Path, take: Take, plan: &Plan) -> Result<Conversion, ConvertError> {
+    let conversion = match plan.mode_for(input) {
+        Mode::Euler => euler::convert(input, &take, plan)?,
+        _ => orientations::convert(input, take, plan)?,
+    };
+    transforms::apply_all(conversion, &transforms(plan), input)
+}
+
+/// The animation of one take, as `convert` would write it, without writing anything (for
+/// `imubake angles` and `compare` on a capture).
+pub fn animate(input: &Path, plan: &Plan) -> Result<Animation, ConvertError> {
+    if plan.mode_for(input) == Mode::BvhRetarget {
+        let (conversion, _) = bvh_retarget::convert(input, plan)?;
+        return Ok(transforms::apply_all(conversion, &transforms(plan), input)?.animation);
+    }
+    let take = crate::read::read_take(input, plan.read_options())?;
+    Ok(of_take(input, take, plan)?.animation)
+}

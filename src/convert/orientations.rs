@@ -1,0 +1,89 @@
+//! The orientations mode: sensors' orientations (from the device, or fused) through the
+//! quaternion pipeline ([`pipeline::run_owned`]), with the plan's mapping, or with the sensors
+//! driving the rig's bones named like them.
+
+use super::error::ConvertError;
+use super::plan::{Mode, Plan, PlanMapping};
+use super::records::{fusion_record, mapping_record, pipeline_record};
+use crate::mapping::Mapping;
+use crate::pipeline;
+use crate::take::Take;
+use crate::world::{World, WorldFrom};
+use crate::write::sidecar::PipelineRecord;
+use crate::write::take::Conversion;
+use std::path::{Path, PathBuf};
+
+/// The take through the quaternion pipeline onto the plan's rig.
+pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversion, ConvertError> {
+    let by_name;
+    let (mapping, file) = match plan.mapping() {
+        PlanMapping::Quaternion(m) => (&m.value, Some(m.path.as_path())),
+        PlanMapping::ByName => {
+            let ids: Vec<&str> = take.sensors().iter().map(|s| s.id()).collect();
+            by_name =
+                Mapping::by_name(plan.rig(), &ids).ok_or_else(|| ConvertError::NoMapping {
+                    input: input.to_path_buf(),
+                    rig: plan
+                        .settings()
+                        .rig
+                        .clone()
+                        .unwrap_or_else(|| "mixamo".into()),
+                    sensors: ids.join(", "),
+                })?;
+            (&by_name, None)
+        }
+        PlanMapping::Euler(_) => unreachable!("a Listing-2 mapping converts in the Euler mode"),
+    };
+    let rig = plan.rig();
+    let mapping_name = file.map_or_else(
+        || PathBuf::from("(sensors matched to bones by name)"),
+        Path::to_path_buf,
+    );
+    let mut options = plan.pipeline().clone();
+    let (world, world_from) = resolve_world(&take, plan, mapping.world);
+    options.world = Some(world);
+    let converted =
+        pipeline::run_owned(take, rig, mapping, &mapping_name, &options).map_err(|source| {
+            ConvertError::Pipeline {
+                input: input.to_path_buf(),
+                source,
+            }
+        })?;
+    let heading = &converted.calibration;
+    Ok(Conversion {
+        euler_deg: None,
+        mapping: mapping_record(&converted, rig, mapping, file),
+        pipeline: PipelineRecord {
+            fusion: fusion_record(plan, &converted),
+            ..pipeline_record(
+                plan,
+                &heading.heading_source,
+                heading.heading.scaled_axis().y.to_degrees(),
+                converted.first_frame,
+                Mode::Orientations,
+                converted.root_mode,
+            )
+        },
+        contacts: converted.contacts,
+        world: (converted.world, world_from),
+        vendor_contacts: None,
+        unsmoothed: converted.unsmoothed,
+        warnings: converted.warnings,
+        animation: converted.animation,
+    })
+}
+
+/// The world of a take's sensors and where it came from: `--world` or the config file's (which
+/// the reader already applied), else the mapping's, else the format's own.
+pub(super) fn resolve_world(
+    take: &Take,
+    plan: &Plan,
+    mapping_world: Option<World>,
+) -> (World, WorldFrom) {
+    let settings = plan.settings();
+    match (settings.read.world, mapping_world) {
+        (Some(w), _) => (w, settings.world_from.unwrap_or(WorldFrom::Flag)),
+        (None, Some(w)) => (w, WorldFrom::Mapping),
+        (None, None) => (take.source().world, WorldFrom::Format),
+    }
+}
