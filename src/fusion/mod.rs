@@ -707,35 +707,22 @@ pub fn fuse(
     })
 }
 
-/// Fuses every sensor of `take` that has raw readings, in take order, each on its own thread
-/// (they are independent).
+/// Fuses every sensor of `take` that has raw readings, in take order, on rayon's pool (they are
+/// independent).
 pub fn fuse_take(
     take: &crate::take::Take,
     fusion: &Fusion,
 ) -> Result<Vec<(String, Fused)>, FusionError> {
+    use rayon::prelude::*;
     let raw: Vec<_> = take
         .sensors()
         .iter()
         .filter_map(|s| s.inertial().map(|i| (s.id(), i, s.magnetometer())))
         .collect();
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let mut out = Vec::with_capacity(raw.len());
-    for chunk in raw.chunks(threads.max(1)) {
-        let fused: Vec<_> = std::thread::scope(|scope| {
-            let handles: Vec<_> = chunk
-                .iter()
-                .map(|(id, inertial, mag)| scope.spawn(move || fuse(id, inertial, *mag, fusion)))
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-                .collect()
-        });
-        for ((id, _, _), f) in chunk.iter().zip(fused) {
-            out.push((id.to_string(), f?));
-        }
-    }
-    Ok(out)
+    raw.par_iter()
+        .with_max_len(1)
+        .map(|(id, inertial, mag)| Ok((id.to_string(), fuse(id, inertial, *mag, fusion)?)))
+        .collect()
 }
 
 #[cfg(test)]

@@ -526,8 +526,7 @@ pub fn run(
                             .push_line(line_no, &l, &mut samples)
                             .map_err(|e| LiveError::Stream(e.to_string()))?;
                     }
-                    running =
-                        start_running(lines, rig, mapping, mapping_file, &options, settings)?;
+                    running = start_running(lines, rig, mapping, mapping_file, &options, settings)?;
                 }
                 line_no += 1;
                 if let Some(r) = &mut recorder {

@@ -13,7 +13,7 @@ pub fn bone_world(
     calibration: &Calibration,
 ) -> Vec<Track<UnitQuaternion<f64>>> {
     // Each track on its own: spread over the cores.
-    super::parallel_map(tracks.into_iter().enumerate().collect(), |(i, t)| {
+    super::parallel::parallel_map(tracks.into_iter().enumerate().collect(), |(i, t)| {
         let world_side = calibration.heading * calibration.align[i];
         let inv = calibration.mounts[i].inverse();
         t.map_in_place(|q| world_side * q * inv)

@@ -1,19 +1,26 @@
 //! The conversion pipeline: a take and a mapping onto a rig → an [`Animation`] on a frame grid.
 //!
-//! Stages, each a small module with a pure function:
-//! 1. [`calibrate`]: heading and mounts from the calibration window;
-//! 2. bone world orientation `q_world_bone = H ⊗ C ⊗ q_world_sensor ⊗ q_bone_sensor⁻¹`, with `C`
+//! [`run`] is its stage list, each stage a function of its own module given what the stages
+//! before made and its options:
+//! 1. [`sources`]: the mapped sensors' orientation tracks (the device's, or fused);
+//! 2. [`calibrate`]: heading and mounts from the calibration window (and each recalibration);
+//! 3. [`bone_world`]: `q_world_bone = H ⊗ C ⊗ q_world_sensor ⊗ q_bone_sensor⁻¹`, with `C`
 //!    taking the sensors' world into the rig world ([`crate::world::World::to_rig`]);
-//! 3. [`resample`] onto the frame grid (slerp; held outside each sensor's range);
-//! 4. [`relative`]: local rotations `q_world_parent⁻¹ ⊗ q_world_bone`;
-//! 5. [`root`]: the root position; `--trim` cuts the frame range.
+//! 4. [`smoothing`] at each sensor's own rate, 5. [`resample`] onto the frame grid (slerp; held
+//!    outside each sensor's range), per sensor on rayon's pool;
+//! 6. [`relative`]: local rotations `q_world_parent⁻¹ ⊗ q_world_bone`;
+//! 7. [`root`]: the root position; `--trim` cuts the frame range.
 //!
-//! Euler angles (with the discontinuity filter) are made by the BVH writer's caller from the
-//! animation's quaternions ([`crate::rotation::euler`]).
+//! In causal mode the same stages run as the stream's incremental cores ([`stream`]). Euler
+//! angles (with the discontinuity filter) are made by the BVH writer from the animation's
+//! quaternions ([`crate::rotation::euler`]).
 
 pub mod bone_world;
 pub mod calibrate;
+mod error;
 pub mod legacy;
+mod options;
+pub(crate) mod parallel;
 pub mod relative;
 pub mod resample;
 pub mod root;
@@ -21,113 +28,24 @@ pub mod smoothing;
 pub mod sources;
 pub mod stream;
 
-use crate::anim::{Animation, AnimationBuilder, AnimationError, Pose};
-use crate::fps::Fps;
-use crate::mapping::{CalibrationWindow, Mapping, MappingError, ResolvedSensor};
+pub use error::PipelineError;
+pub use options::{PipelineOptions, Trim};
+
+use crate::anim::{Animation, AnimationBuilder, Pose};
+use crate::mapping::{CalibrationWindow, Mapping, ResolvedSensor};
 use crate::rig::Rig;
-use crate::smooth::Smoothing;
 use crate::take::Take;
+use crate::take::Track;
 use crate::world::World;
 use calibrate::Calibration;
 use nalgebra::UnitQuaternion;
+use parallel::parallel_map_with;
 use resample::FrameGrid;
 use root::RootMode;
 use smoothing::smooth_track;
 use sources::{Sources, TakeInput};
 use std::path::Path;
-
-/// A cut of the frame range, in seconds on the take's clock (both ends inclusive).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Trim {
-    pub start_s: f64,
-    pub end_s: f64,
-}
-
-impl std::fmt::Display for Trim {
-    /// `start:end` as given, an open end left empty.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}:", self.start_s)?;
-        if self.end_s < f64::MAX {
-            write!(f, "{}", self.end_s)?;
-        }
-        Ok(())
-    }
-}
-
-impl std::str::FromStr for Trim {
-    type Err = String;
-    /// `start:end` in seconds; either side may be empty (`:10`, `2.5:`).
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let (a, b) = s
-            .split_once(':')
-            .ok_or_else(|| format!("`{s}`: expected START:END in seconds, e.g. 2.5:10"))?;
-        let parse = |v: &str, default: f64| -> Result<f64, String> {
-            if v.trim().is_empty() {
-                return Ok(default);
-            }
-            match v.trim().parse::<f64>() {
-                Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
-                _ => Err(format!("`{v}` in `{s}` is not a number of seconds ≥ 0")),
-            }
-        };
-        let trim = Trim {
-            start_s: parse(a, 0.0)?,
-            end_s: parse(b, f64::MAX)?,
-        };
-        if trim.end_s < trim.start_s {
-            return Err(format!("`{s}`: the end is before the start"));
-        }
-        Ok(trim)
-    }
-}
-
-#[derive(Debug, Clone, PartialEq)]
-pub struct PipelineOptions {
-    pub fps: Fps,
-    pub trim: Option<Trim>,
-    pub root: RootMode,
-    pub smoothing: Smoothing,
-    /// Also produce the local rotations without smoothing (for the report).
-    pub keep_unsmoothed: bool,
-    /// Allow more than [`MAX_KEYFRAMES`] keyframes.
-    pub force: bool,
-    /// The sensors' world when the user set it (`--world`, the config file): over the mapping's
-    /// and the take's.
-    pub world: Option<World>,
-    /// Causal mode: the take runs through the stream's incremental cores ([`stream`]), as a live
-    /// capture would: smoothing causal, no heading from the direction of travel.
-    pub causal: bool,
-    /// The sensors' sample rate, when known: causal smoothing's grid uses it instead of the rate
-    /// of each sensor's first samples.
-    pub sensor_rate_hz: Option<f64>,
-    /// Fusion asked for (`--fusion`): every sensor with raw readings is fused with it, even when
-    /// the device gave an orientation. `None`: device orientations where there are some, the
-    /// default filter for sensors with raw readings only.
-    pub fusion: Option<crate::fusion::Fusion>,
-    /// What joints without a sensor do (`--unsensed`).
-    pub unsensed: relative::Unsensed,
-    /// Corrections of raw readings before fusion, per sensor id (`--sensor-calibration`).
-    pub sensor_calibration: Option<std::sync::Arc<crate::intrinsics::SensorCalibration>>,
-}
-
-impl Default for PipelineOptions {
-    fn default() -> Self {
-        PipelineOptions {
-            fps: Fps::new(30, 1).expect("30 fps"),
-            trim: None,
-            root: RootMode::Auto,
-            smoothing: Smoothing::default(),
-            keep_unsmoothed: false,
-            force: false,
-            world: None,
-            causal: false,
-            sensor_rate_hz: None,
-            fusion: None,
-            unsensed: relative::Unsensed::Interpolate,
-            sensor_calibration: None,
-        }
-    }
-}
+use tracing::debug_span;
 
 /// What the pipeline produced, and how.
 #[derive(Debug, Clone)]
@@ -152,119 +70,6 @@ pub struct Converted {
     /// `local[joint][frame]` before smoothing, when asked for (`keep_unsmoothed`).
     pub unsmoothed: Option<Vec<Vec<UnitQuaternion<f64>>>>,
     pub warnings: Vec<String>,
-}
-
-#[derive(Debug, thiserror::Error)]
-pub enum PipelineError {
-    #[error(transparent)]
-    Mapping(#[from] MappingError),
-    /// Boxed: five strings would make every `Result` of the pipeline large.
-    #[error(transparent)]
-    MissingPart(Box<crate::rig::anatomy::MissingPart>),
-    #[error(
-        "none of the mapped sensors ({mapped}) has orientation or raw readings in the take (sensors in the take: {present}); check the mapping's sensor ids"
-    )]
-    NoSensors { mapped: String, present: String },
-    #[error(
-        "{file}: `calibration`: the window {start_s} s + {duration_s} s is outside the take, which ends at {end_s:.3} s"
-    )]
-    CalibrationOutside {
-        file: String,
-        start_s: f64,
-        duration_s: f64,
-        end_s: f64,
-    },
-    #[error("{file}: `calibration.pose`: rig `{rig}` has no pose `{pose}`; it has {known}")]
-    UnknownPose {
-        file: String,
-        rig: String,
-        pose: String,
-        known: String,
-    },
-    #[error("--trim {trim} keeps no frame of the take (frames run from 0 s to {end_take_s:.3} s)")]
-    EmptyTrim { trim: Trim, end_take_s: f64 },
-    #[error(
-        "--fps {fps} over {frames} frames × {joints} joints is {cells} keyframes (about {mb} MB of BVH), \
-         more than the {max} allowed without --force. Hint: a lower --fps (the fastest mapped sensor \
-         samples at {sensor_hz:.1} Hz), or --force"
-    )]
-    TooManyFrames {
-        fps: Fps,
-        frames: usize,
-        joints: usize,
-        cells: usize,
-        mb: usize,
-        max: usize,
-        sensor_hz: f64,
-    },
-    #[error(transparent)]
-    Fusion(#[from] crate::fusion::FusionError),
-    #[error("`{bone}`: {reason}")]
-    NotCausal { bone: String, reason: String },
-    #[error(transparent)]
-    Animation(#[from] AnimationError),
-}
-
-/// Maps `f` over `items` on up to as many threads as there are cores, keeping the order.
-fn parallel_map<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> Vec<R> {
-    parallel_map_with(items, |_: &mut (), item| f(item))
-}
-
-/// [`parallel_map`] where each thread keeps its own `S` (working memory, say) from item to
-/// item, made with `S::default()` and dropped when its items are done.
-///
-/// Each thread takes the next item not yet taken when it finishes one, rather than a share
-/// dealt out first: items do not cost the same (a sensor fused from its rest, another through
-/// VQF's passes), and on a shared machine one thread can be held up, so a fixed share can
-/// leave a core idle while the other works through the rest of its own.
-fn parallel_map_with<T: Send, R: Send, S: Default>(
-    items: Vec<T>,
-    f: impl Fn(&mut S, T) -> R + Sync,
-) -> Vec<R> {
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(items.len().max(1));
-    if threads <= 1 {
-        let mut state = S::default();
-        return items.into_iter().map(|t| f(&mut state, t)).collect();
-    }
-    let slots: Vec<std::sync::Mutex<Option<T>>> = items
-        .into_iter()
-        .map(|t| std::sync::Mutex::new(Some(t)))
-        .collect();
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let (f, slots, next) = (&f, &slots, &next);
-    let mut results: Vec<(usize, R)> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..threads)
-            .map(|_| {
-                scope.spawn(move || {
-                    let mut state = S::default();
-                    let mut done = Vec::new();
-                    loop {
-                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(slot) = slots.get(i) else {
-                            return done;
-                        };
-                        let item = slot
-                            .lock()
-                            .unwrap_or_else(std::sync::PoisonError::into_inner)
-                            .take()
-                            .expect("each item is taken once");
-                        done.push((i, f(&mut state, item)));
-                    }
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| {
-                h.join()
-                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
-            })
-            .collect()
-    });
-    results.sort_by_key(|(i, _)| *i);
-    results.into_iter().map(|(_, r)| r).collect()
 }
 
 /// Runs the pipeline. `mapping_file` names the mapping in errors.
@@ -313,31 +118,77 @@ fn run_on(
     if options.causal {
         return run_causal(input.take(), rig, mapping, mapping_file, options);
     }
-    let file = mapping_file.display().to_string();
-    let mut warnings = Vec::new();
+    let (file, w) = (mapping_file.display().to_string(), &mut Vec::new());
     // What stage 1 may take away from an owned take.
-    let take_last_s = input.take().last_time_s();
-    let recalibrations_s = input.take().recalibrations_s().to_vec();
-    // 1. Sources, and the calibration window they call for.
-    let stage = tracing::debug_span!("sources").entered();
-    let (world, sources, window) =
-        sources_and_window(input, rig, mapping, mapping_file, options, &mut warnings)?;
-    // 2. Calibration.
-    drop(stage);
-    let stage = tracing::debug_span!("calibrate").entered();
-    let calibration = calibrate::calibrate(
-        rig,
-        &sources,
-        window.as_ref(),
-        take_last_s,
-        &file,
-        &mut warnings,
-    )?;
-    // A live session's recalibrations: the same pose held again, each solved on its own window
-    // and applying from the window's end.
+    let take = (
+        input.take().last_time_s(),
+        input.take().recalibrations_s().to_vec(),
+    );
+    let (world, sources, window) = stage(debug_span!("sources"), || {
+        sources_and_window(input, rig, mapping, mapping_file, options, w)
+    })?;
+    let (calibration, later) = stage(debug_span!("calibrate"), || {
+        calibrations(rig, &sources, window.as_ref(), (take.0, &take.1), &file, w)
+    })?;
+    let Sources {
+        sensors,
+        tracks,
+        origins,
+        fusion,
+    } = sources;
+    let bone_tracks = stage(debug_span!("bone world"), || {
+        bone_world::bone_world_recalibrated(tracks, &calibration, &later)
+    });
+    let grid = frame_grid(rig, &sensors, &bone_tracks, options, w)?;
+    let on_grid = stage(debug_span!("smooth and resample"), || {
+        smooth_and_resample(rig, &sensors, bone_tracks, &grid, options, w)
+    });
+    let held = calibrate::held_pose(rig, window.as_ref());
+    let local = stage(debug_span!("local rotations"), || {
+        local_rotations(rig, on_grid, &grid, options, &held)
+    });
+    let (animation, root_mode, contacts) = stage(debug_span!("root"), || {
+        root_stage(rig, local.local, &local.animated, options, &held)
+    })?;
+    Ok(Converted {
+        animation,
+        sensors,
+        calibration,
+        window,
+        world,
+        origins,
+        fusion,
+        root_mode,
+        contacts,
+        first_frame: grid.first,
+        unsmoothed: local.unsmoothed,
+        warnings: std::mem::take(w),
+    })
+}
+
+/// Runs one stage inside its `tracing` span (`IMUBAKE_LOG=imubake=debug` prints each one's
+/// wall time; `cargo bench --bench convert` reads them).
+fn stage<R>(span: tracing::Span, f: impl FnOnce() -> R) -> R {
+    let _entered = span.entered();
+    f()
+}
+
+/// Stage 2: the calibration from the window, and a live session's recalibrations — the same
+/// pose held again, each solved on its own window and applying from the window's end (`take`:
+/// the take's last time and its recalibration times, seconds).
+fn calibrations(
+    rig: &Rig,
+    sources: &Sources,
+    window: Option<&CalibrationWindow>,
+    take: (f64, &[f64]),
+    file: &str,
+    warnings: &mut Vec<String>,
+) -> Result<(Calibration, Vec<(f64, Calibration)>), PipelineError> {
+    let (take_last_s, recalibrations_s) = take;
+    let calibration = calibrate::calibrate(rig, sources, window, take_last_s, file, warnings)?;
     let mut later = Vec::new();
-    for &t in &recalibrations_s {
-        let Some(again) = window.as_ref().map(|w| w.starting_at(t)) else {
+    for &t in recalibrations_s {
+        let Some(again) = window.map(|w| w.starting_at(t)) else {
             break;
         };
         if again.end_s() > take_last_s {
@@ -346,48 +197,53 @@ fn run_on(
             ));
             continue;
         }
-        let c = calibrate::calibrate(
-            rig,
-            &sources,
-            Some(&again),
-            take_last_s,
-            &file,
-            &mut warnings,
-        )?;
+        let c = calibrate::calibrate(rig, sources, Some(&again), take_last_s, file, warnings)?;
         later.push((again.end_s(), c));
     }
-    let Sources {
-        sensors,
-        tracks,
-        origins,
-        fusion,
-    } = sources;
+    Ok((calibration, later))
+}
 
-    // 3. Bone world orientations, on each sensor's own sample times.
-    drop(stage);
-    let stage = tracing::debug_span!("bone world").entered();
-    let bone_tracks = bone_world::bone_world_recalibrated(tracks, &calibration, &later);
-
-    // The frame grid, and what to say about it.
-    let t_last = bone_tracks
-        .iter()
-        .map(|t| t.last_time_s())
-        .fold(0.0, f64::max);
+/// The frame grid over the tracks (to the last sample of any), with `--trim`; the rate checked
+/// against the sensors' and their long gaps reported. Both modes' one check.
+fn frame_grid(
+    rig: &Rig,
+    sensors: &[ResolvedSensor],
+    tracks: &[Track<UnitQuaternion<f64>>],
+    options: &PipelineOptions,
+    warnings: &mut Vec<String>,
+) -> Result<FrameGrid, PipelineError> {
+    let t_last = tracks.iter().map(|t| t.last_time_s()).fold(0.0, f64::max);
     let grid = FrameGrid::new(options.fps, t_last, options.trim)?;
-    let times: Vec<&[f64]> = bone_tracks.iter().map(|t| t.times_s()).collect();
-    resample::check_frame_rate(&grid, options.force, &times, rig.len(), &mut warnings)?;
+    let times: Vec<&[f64]> = tracks.iter().map(|t| t.times_s()).collect();
+    resample::check_frame_rate(&grid, options.force, &times, rig.len(), warnings)?;
     let names: Vec<&str> = sensors.iter().map(|s| s.sensor.as_str()).collect();
     warnings.extend(resample::long_gaps(&names, &times, &grid));
+    Ok(grid)
+}
 
-    // 4. Smoothing at each sensor's own rate (`smoothing` explains why), 5. resampling onto the
-    // frame grid: per sensor, independent, so spread over the cores.
-    drop(stage);
-    let stage = tracing::debug_span!("smooth and resample").entered();
+/// Each sensed bone's world rotations on the frame grid, and (`keep_unsmoothed`) before
+/// smoothing: `[joint]`, `None` for a joint no sensor drives.
+struct OnGrid {
+    smoothed: Vec<Option<Vec<UnitQuaternion<f64>>>>,
+    raw: Option<Vec<Option<Vec<UnitQuaternion<f64>>>>>,
+}
+
+/// Stages 4 and 5: smoothing at each sensor's own rate (`smoothing` explains why), then
+/// resampling onto the frame grid; per sensor, independent, so on rayon's pool, each worker
+/// reusing its scratch memory.
+fn smooth_and_resample(
+    rig: &Rig,
+    sensors: &[ResolvedSensor],
+    bone_tracks: Vec<Track<UnitQuaternion<f64>>>,
+    grid: &FrameGrid,
+    options: &PipelineOptions,
+    warnings: &mut Vec<String>,
+) -> OnGrid {
     let items = sensors.iter().zip(bone_tracks).collect();
     let per_sensor = parallel_map_with(items, |scratch, (s, track)| {
         let raw = options
             .keep_unsmoothed
-            .then(|| resample::resample(&track, &grid));
+            .then(|| resample::resample(&track, grid));
         let bone = &rig.joints()[s.bone].name;
         let (track, unsmoothed) = smooth_track(
             track,
@@ -408,50 +264,68 @@ fn run_on(
             unsmoothed.map(|why| (bone.clone(), why.0)),
         )
     });
-    let mut world_tracks = vec![None; rig.len()];
+    let mut smoothed = vec![None; rig.len()];
     let mut raw_tracks = options.keep_unsmoothed.then(|| vec![None; rig.len()]);
     let mut not_smoothed: Vec<(String, String)> = Vec::new();
     for (bone, on_grid, raw, unsmoothed) in per_sensor {
-        world_tracks[bone] = Some(on_grid);
+        smoothed[bone] = Some(on_grid);
         if let (Some(all), Some(raw)) = (&mut raw_tracks, raw) {
             all[bone] = Some(raw);
         }
         not_smoothed.extend(unsmoothed);
     }
     warnings.extend(smoothing::not_smoothed_warnings(&not_smoothed));
+    OnGrid {
+        smoothed,
+        raw: raw_tracks,
+    }
+}
 
-    // 6. Local rotations; 7. the root.
-    drop(stage);
-    let stage = tracing::debug_span!("local rotations").entered();
-    let held = calibrate::held_pose(rig, window.as_ref());
-    let animated: Vec<bool> = world_tracks.iter().map(Option::is_some).collect();
-    let local = relative::to_local(rig, world_tracks, grid.frames, options.unsensed, &held);
-    let unsmoothed =
-        raw_tracks.map(|raw| relative::to_local(rig, raw, grid.frames, options.unsensed, &held));
-    drop(stage);
-    let _stage = tracing::debug_span!("root").entered();
-    let root_mode = root::resolve(options.root, rig, &animated);
+/// Stage 6's output: `local[joint][frame]`, which joints a sensor drives, and the local
+/// rotations before smoothing when kept.
+struct Local {
+    local: Vec<Vec<UnitQuaternion<f64>>>,
+    animated: Vec<bool>,
+    unsmoothed: Option<Vec<Vec<UnitQuaternion<f64>>>>,
+}
+
+/// Stage 6: local rotations (joints without a sensor as `--unsensed` says, from the held pose).
+fn local_rotations(
+    rig: &Rig,
+    on_grid: OnGrid,
+    grid: &FrameGrid,
+    options: &PipelineOptions,
+    held: &[UnitQuaternion<f64>],
+) -> Local {
+    let animated: Vec<bool> = on_grid.smoothed.iter().map(Option::is_some).collect();
+    let local = relative::to_local(rig, on_grid.smoothed, grid.frames, options.unsensed, held);
+    let unsmoothed = on_grid
+        .raw
+        .map(|raw| relative::to_local(rig, raw, grid.frames, options.unsensed, held));
+    Local {
+        local,
+        animated,
+        unsmoothed,
+    }
+}
+
+/// Stage 7: the root position (the mode resolved), and the animation with the feet's contacts.
+fn root_stage(
+    rig: &Rig,
+    local: Vec<Vec<UnitQuaternion<f64>>>,
+    animated: &[bool],
+    options: &PipelineOptions,
+    held: &[UnitQuaternion<f64>],
+) -> Result<(Animation, RootMode, Option<root::Contacts>), PipelineError> {
+    let root_mode = root::resolve(options.root, rig, animated);
     let (roots, contacts) =
         root::root_positions(rig, root_mode, &local, options.fps.frame_time_s());
-    let moving = relative::moving(rig, &animated, options.unsensed, &held);
+    let moving = relative::moving(rig, animated, options.unsensed, held);
     let mut animation = Animation::new(rig.clone(), options.fps, local, moving, roots)?;
     if let Some(c) = &contacts {
         animation = animation.with_contacts(c.per_frame.clone())?;
     }
-    Ok(Converted {
-        animation,
-        sensors,
-        calibration,
-        window,
-        world,
-        origins,
-        fusion,
-        root_mode,
-        contacts,
-        first_frame: grid.first,
-        unsmoothed,
-        warnings,
-    })
+    Ok((animation, root_mode, contacts))
 }
 
 /// Stage 1 for both modes: the devices' world (the settings', else the mapping's, else the
@@ -494,16 +368,13 @@ fn run_causal(
         options,
         &mut warnings,
     )?;
-    let t_last = sources
-        .tracks
-        .iter()
-        .map(|t| t.last_time_s())
-        .fold(0.0, f64::max);
-    let grid = FrameGrid::new(options.fps, t_last, options.trim)?;
-    let times: Vec<&[f64]> = sources.tracks.iter().map(|t| t.times_s()).collect();
-    resample::check_frame_rate(&grid, options.force, &times, rig.len(), &mut warnings)?;
-    let names: Vec<&str> = sources.sensors.iter().map(|s| s.sensor.as_str()).collect();
-    warnings.extend(resample::long_gaps(&names, &times, &grid));
+    let grid = frame_grid(
+        rig,
+        &sources.sensors,
+        &sources.tracks,
+        options,
+        &mut warnings,
+    )?;
 
     let mut stream = stream::PoseStream::new(
         rig,
@@ -617,56 +488,5 @@ impl Ord for MergeHead {
             .t
             .total_cmp(&self.t)
             .then(other.sensor.cmp(&self.sensor))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    use std::time::{Duration, Instant};
-
-    #[test]
-    fn parallel_map_keeps_the_order_and_takes_each_item_once() {
-        let calls = AtomicUsize::new(0);
-        // Each thread's state counts the items it took.
-        let out = parallel_map_with((0..500u64).collect(), |taken: &mut usize, x| {
-            calls.fetch_add(1, Ordering::Relaxed);
-            *taken += 1;
-            x * x
-        });
-        assert_eq!(out, (0..500u64).map(|x| x * x).collect::<Vec<_>>());
-        assert_eq!(calls.load(Ordering::Relaxed), 500);
-        assert!(parallel_map(Vec::<u8>::new(), |x| x).is_empty());
-    }
-
-    #[test]
-    fn a_slow_item_leaves_the_rest_to_the_other_threads() {
-        if std::thread::available_parallelism().map_or(1, |n| n.get()) < 2 {
-            return;
-        }
-        // The first item waits until every other item is done: with shares dealt out first,
-        // its thread would own half of them and wait for itself until the deadline.
-        let others_done = AtomicUsize::new(0);
-        let n = 200;
-        let out = parallel_map((0..n).collect(), |i: usize| {
-            if i == 0 {
-                let deadline = Instant::now() + Duration::from_secs(10);
-                while others_done.load(Ordering::Acquire) < n - 1 {
-                    if Instant::now() > deadline {
-                        return false;
-                    }
-                    std::thread::sleep(Duration::from_millis(1));
-                }
-            } else {
-                others_done.fetch_add(1, Ordering::Release);
-            }
-            true
-        });
-        assert!(
-            out[0],
-            "the other items were not taken by the other threads"
-        );
-        assert!(out.iter().all(|&done| done));
     }
 }

@@ -7,7 +7,8 @@
 //! fusion is asked for (`--fusion`); the fusion of its raw gyroscope, accelerometer (and
 //! magnetometer) readings otherwise, with the default filter when none is asked for.
 
-use super::{PipelineError, parallel_map};
+use super::PipelineError;
+use super::parallel::parallel_map;
 use crate::fusion::{self, Fusion, FusionStats};
 use crate::intrinsics::BiasFallback;
 use crate::mapping::{Mapping, ResolvedSensor};

@@ -1,0 +1,57 @@
+//! What can stop the pipeline.
+
+use super::Trim;
+use crate::anim::AnimationError;
+use crate::fps::Fps;
+use crate::mapping::MappingError;
+
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error(transparent)]
+    Mapping(#[from] MappingError),
+    /// Boxed: five strings would make every `Result` of the pipeline large.
+    #[error(transparent)]
+    MissingPart(Box<crate::rig::anatomy::MissingPart>),
+    #[error(
+        "none of the mapped sensors ({mapped}) has orientation or raw readings in the take (sensors in the take: {present}); check the mapping's sensor ids"
+    )]
+    NoSensors { mapped: String, present: String },
+    #[error(
+        "{file}: `calibration`: the window {start_s} s + {duration_s} s is outside the take, which ends at {end_s:.3} s"
+    )]
+    CalibrationOutside {
+        file: String,
+        start_s: f64,
+        duration_s: f64,
+        end_s: f64,
+    },
+    #[error("{file}: `calibration.pose`: rig `{rig}` has no pose `{pose}`; it has {known}")]
+    UnknownPose {
+        file: String,
+        rig: String,
+        pose: String,
+        known: String,
+    },
+    #[error("--trim {trim} keeps no frame of the take (frames run from 0 s to {end_take_s:.3} s)")]
+    EmptyTrim { trim: Trim, end_take_s: f64 },
+    #[error(
+        "--fps {fps} over {frames} frames × {joints} joints is {cells} keyframes (about {mb} MB of BVH), \
+         more than the {max} allowed without --force. Hint: a lower --fps (the fastest mapped sensor \
+         samples at {sensor_hz:.1} Hz), or --force"
+    )]
+    TooManyFrames {
+        fps: Fps,
+        frames: usize,
+        joints: usize,
+        cells: usize,
+        mb: usize,
+        max: usize,
+        sensor_hz: f64,
+    },
+    #[error(transparent)]
+    Fusion(#[from] crate::fusion::FusionError),
+    #[error("`{bone}`: {reason}")]
+    NotCausal { bone: String, reason: String },
+    #[error(transparent)]
+    Animation(#[from] AnimationError),
+}
