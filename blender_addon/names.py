@@ -1,7 +1,7 @@
 """Bone names and body parts: matching a take's bones to the animator's armature.
 
 The same resolution as imubake's own (`src/rig/names.rs`, `src/rig/anatomy.rs`; checked against
-`imubake inspect --json` by `tests/addon_anatomy.rs`), in pure Python (no bpy):
+`imubake inspect --json` by `tests/outputs/addon_anatomy.rs`), in pure Python (no bpy):
 
 1. `classify(name)`: what a joint's name says, a side and a word, in the schemes people use —
    Mixamo (`mixamorig:LeftArm`), Unity/VRM (`LeftUpperArm`), `UpperLeg_L`, `upper_arm.L`,

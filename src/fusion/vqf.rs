@@ -1,5 +1,5 @@
 //! VQF (Laidig & Seel 2023), through the `vqf-rs` crate, a port of the authors' C++ that
-//! `tests/fusion_reference.rs` checks sample by sample against PyPI's `vqf` (the authors' own
+//! `tests/motion/fusion_reference.rs` checks sample by sample against PyPI's `vqf` (the authors' own
 //! package): the accelerometer low-passed in an almost-inertial frame (time constant `tau_acc`),
 //! gyro bias estimated at rest and in motion, the heading corrected slowly from the magnetometer
 //! (`tau_mag`) with magnetic disturbances detected and rejected. Its quaternions are

@@ -48,7 +48,7 @@
 //! rig world), not the bone-roll frames of the Mixamo armature the paper keyed in Blender.
 //!
 //! What Blender 5.0.1's BVH importer does with such a file (its source,
-//! `io_anim_bvh/import_bvh.py`, checked by `tests/legacy_mode.rs` with real Blender): it builds
+//! `io_anim_bvh/import_bvh.py`, checked by `tests/outputs/legacy_mode.rs` with real Blender): it builds
 //! each bone's rotation as `Euler(values, 'XYZ')` — R = Rz·Ry·Rx, exactly our reading — and
 //! stores `B⁻¹·R·B` on the pose bone, B being the bone's rest orientation in the (still Y-up)
 //! armature before the axis conversion, re-expressed as Euler angles in the pose bone's

@@ -65,7 +65,7 @@
 //! OpenSim/Common) reads the nine values the same way, outer loop over columns, inner over rows
 //! (`imu_matrix[mrow][mcol] = value[k++]`), and uses the result as the sensor orientation. The data
 //! agree: in the OpenSense example files the static accelerometer reading (specific force, +g
-//! upward), rotated by this matrix, points along world +z (tested in tests/vendor_readers.rs).
+//! upward), rotated by this matrix, points along world +z (tested in tests/readers/vendor_readers.rs).
 //! The columns are looked up by name, so a file with another column order reads the same.
 //!
 //! Rows with the wrong number of fields, an empty or bad counter (PacketCounter, or SampleTimeFine

@@ -3,7 +3,7 @@
 //! arm, forearm, hand, thigh, shank, foot and toes. Every feature takes its parts from here:
 //! retargeting, `angles`/`compare`, VMC's bone names, root motion's feet, calibration's legs,
 //! subject scaling, the viewer, and the Blender add-on (`names.py`, checked against this in
-//! `tests/addon_anatomy.rs`).
+//! `tests/outputs/addon_anatomy.rs`).
 //!
 //! # Resolution, in order
 //! 1. **Declared**: a rig file's `segments:` (`pelvis`, `thorax`, `neck`, `head`,

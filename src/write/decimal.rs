@@ -303,7 +303,7 @@ mod tests {
         assert_eq!(fast(f64::NEG_INFINITY), "-inf");
     }
 
-    /// A small random sample here; `tests/decimal_format.rs` checks ten million values in an
+    /// A small random sample here; `tests/outputs/decimal_format.rs` checks ten million values in an
     /// optimised build.
     #[test]
     fn random_values_match_format() {

@@ -4,7 +4,7 @@ usage: python tests/blender_addon/run.py ZIP TAKES_DIR [unittest names...]
 
 Installs the extension ZIP into a temporary BLENDER_USER_RESOURCES (never the home folder) with
 Blender's own `extensions.package_install_files`, enables it, then runs the test_*.py modules of
-this folder. TAKES_DIR holds imubake takes made by the Rust driver (tests/blender_addon.rs):
+this folder. TAKES_DIR holds imubake takes made by the Rust driver (tests/outputs/blender_addon.rs):
 `walk_24`, `walk_2997`, `walk_60`, `walk_120` (BVH + GLB + sidecar each). Also read from the
 environment: IMUBAKE_SHARED_DATA (../shared/data), IMUBAKE_BIN (the imubake binary).
 Exit status 0 when every test passes. Also runs as `blender -b -P run.py -- ZIP TAKES_DIR`.

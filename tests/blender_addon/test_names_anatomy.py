@@ -1,7 +1,7 @@
 """names.py's anatomy (no bpy): the hierarchy decides `Shoulder` and a sided `Hip`, rest positions
 decide limbs without names, chains pair by their place along them, Rigify's metarig is declared
 and a generated rig's FK controls are taken by name. Every BVH and built-in rig is also checked
-against `imubake inspect --json` by tests/addon_anatomy.rs; these cases are written out by hand."""
+against `imubake inspect --json` by tests/outputs/addon_anatomy.rs; these cases are written out by hand."""
 
 import unittest
 

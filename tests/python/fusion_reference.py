@@ -2,7 +2,7 @@
 """Reference orientations for imubake's fusion cores, computed by independent implementations on
 a real IMU log: PyPI `vqf` (the VQF authors' own C++, online, float64) and PyPI `ahrs` (Madgwick
 and Mahony, MARG and IMU). Writes one JSON file with the readings and each filter's quaternions
-(w, x, y, z); tests/fusion_reference.rs compares imubake's cores with them sample by sample.
+(w, x, y, z); tests/motion/fusion_reference.rs compares imubake's cores with them sample by sample.
 
     python fusion_reference.py <vqf_imu_data.npz> <out.json> [samples]
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """APDM Opal `.h5` recordings (file format 5, the layout OpenSim's APDM reader and public parsers
-read) with known values, written by h5py, for tests/apdm.rs.
+read) with known values, written by h5py, for tests/readers/apdm.rs.
 
     python make_apdm.py OUT_DIR
 

@@ -6,7 +6,7 @@ Run (from the crate root) with the Python that has Blender's `bpy` module:
     ~/.cache/imubake-test/venv/bin/python tests/python/make_euler_fixtures.py
 
 Deterministic (fixed seed); rerunning rewrites identical files. The Rust test
-tests/euler_mathutils.rs reads the JSON only; it never runs Python.
+tests/outputs/euler_mathutils.rs reads the JSON only; it never runs Python.
 
 Orders and angle layout
 -----------------------

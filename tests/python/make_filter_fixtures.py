@@ -4,7 +4,7 @@ Usage (from the crate root):
 
     ~/.cache/imubake-test/venv/bin/python tests/python/make_filter_fixtures.py
 
-The Rust test tests/filters_scipy.rs reads only the JSON; Python is not needed at test time.
+The Rust test tests/motion/filters_scipy.rs reads only the JSON; Python is not needed at test time.
 Deterministic: every random input comes from numpy.random.default_rng(SEED), and floats are
 written with repr (round-trip exact). Written with SciPy 1.17.1 and NumPy 1.26.4.
 

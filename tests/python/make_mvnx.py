@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Xsens MVN takes (MVNX 4, as MVN 2019 exports them) made from the bundled 16-sensor walk, and
-their imubake-CSV twin, for tests/xsens_mvnx.rs.
+their imubake-CSV twin, for tests/readers/xsens_mvnx.rs.
 
     python make_mvnx.py samples/walk.csv OUT_DIR
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""WitMotion recordings (the binary serial protocol) encoding known values, for tests/witmotion.rs.
+"""WitMotion recordings (the binary serial protocol) encoding known values, for tests/readers/witmotion.rs.
 
     python make_witmotion.py OUT_DIR
 

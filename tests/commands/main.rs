@@ -1,0 +1,17 @@
+//! The commands as a user runs them: batch, watch, live (and its hostile inputs), the viewer and its server, inspect, mapping errors, the tools.
+//!
+//! One test crate per area (issue 46): each file a module, linked once.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod batch;
+mod watch;
+mod live;
+mod live_hostile;
+mod viewer;
+mod viewer_properties;
+mod viewer_server;
+mod inspect_cli;
+mod mapping_errors;
+mod tools;

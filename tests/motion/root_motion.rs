@@ -1,0 +1,647 @@
+//! Root motion (issue 16) in closed loop: `simulate` a capture from real BVH motion (16 sensors,
+//! 0.5° of noise), `convert` it onto the source's own skeleton (the BVH as `--rig`), and compare
+//! where the body goes with where the source went — positions of both computed independently with
+//! numpy and scipy (tests/python/bvh_positions.py), every length in standing heights `h`.
+
+use crate::common;
+
+use common::{imubake_bin, python, repo_file, run, shared};
+use nalgebra::{Matrix2, Vector2, Vector3};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Converts the bundled walk into `dir/out` with `extra` flags; the output folder.
+fn convert_walk(dir: &Path, out: &str, extra: &[&str]) -> PathBuf {
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(repo_file("samples/walk.csv"))
+        .arg("--mapping")
+        .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
+        .arg("--out")
+        .arg(dir.join(out))
+        .args(extra));
+    dir.join(out)
+}
+
+/// A BVH's joint positions per frame, its lowest point per frame and its rest pose's extent.
+struct Positions {
+    joints: std::collections::HashMap<String, Vec<Vector3<f64>>>,
+    lowest: Vec<f64>,
+    rest_lowest: f64,
+    height: f64,
+    frame_time: f64,
+}
+
+fn positions(py: &Path, bvh: &Path, joints: &[&str]) -> Positions {
+    let out = run(Command::new(py)
+        .arg(repo_file("tests/python/bvh_positions.py"))
+        .arg(bvh)
+        .arg(joints.join(",")));
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let f = |x: &Value| x.as_f64().unwrap();
+    Positions {
+        joints: joints
+            .iter()
+            .map(|j| {
+                let track = v["joints"][j]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(common::vec3)
+                    .collect();
+                (j.to_string(), track)
+            })
+            .collect(),
+        lowest: v["lowest"].as_array().unwrap().iter().map(f).collect(),
+        rest_lowest: f(&v["rest_lowest"]),
+        height: f(&v["rest_highest"]) - f(&v["rest_lowest"]),
+        frame_time: f(&v["frame_time"]),
+    }
+}
+
+struct Take {
+    source: Positions,
+    output: Positions,
+    /// The output BVH's bytes.
+    output_bvh: Vec<u8>,
+    truth: Value,
+    sidecar: Value,
+}
+
+/// Simulates `bvh` (frames `frames`) through `mapping` onto the BVH's own skeleton, converts it
+/// at 60 fps with `convert_args`, and reads both back.
+fn closed_loop(
+    bvh_rel: &str,
+    mapping: &str,
+    frames: Option<&str>,
+    convert_args: &[&str],
+) -> Option<Take> {
+    let (bvh, py) = (shared(bvh_rel)?, python()?);
+    let dir = tempfile::tempdir().unwrap();
+    let (capture, truth) = (dir.path().join("take.csv"), dir.path().join("truth.json"));
+    let mapping = repo_file(mapping);
+    let mut sim = Command::new(imubake_bin());
+    sim.arg("simulate")
+        .arg(&bvh)
+        .arg("--mapping")
+        .arg(&mapping)
+        .arg("--rig")
+        .arg(&bvh)
+        .arg("--output")
+        .arg(&capture)
+        .arg("--truth")
+        .arg(&truth)
+        .args(["--noise-deg", "0.5", "--seed", "3"]);
+    if let Some(f) = frames {
+        sim.args(["--frames", f]);
+    }
+    run(&mut sim);
+    let out = dir.path().join("out");
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&capture)
+        .arg("--mapping")
+        .arg(&mapping)
+        .arg("--rig")
+        .arg(&bvh)
+        .args(["--fps", "60", "--format", "bvh", "--out"])
+        .arg(&out)
+        .args(convert_args));
+    let joints = ["Hips", "LeftFoot", "RightFoot"];
+    Some(Take {
+        source: positions(&py, &bvh, &joints),
+        output: positions(&py, &out.join("take.bvh"), &joints),
+        output_bvh: std::fs::read(out.join("take.bvh")).unwrap(),
+        truth: serde_json::from_slice(&std::fs::read(&truth).unwrap()).unwrap(),
+        sidecar: serde_json::from_slice(&std::fs::read(out.join("take.imubake.json")).unwrap())
+            .unwrap(),
+    })
+}
+
+/// The output frames during the source's motion, each with the source's (fractional) frame.
+fn compared(take: &Take) -> Vec<(usize, f64)> {
+    let t = &take.truth;
+    let start = t["motion_start_s"].as_f64().unwrap();
+    let first = t["first_frame"].as_f64().unwrap();
+    let last = t["last_frame"].as_f64().unwrap();
+    let ft = t["source_frame_time_s"].as_f64().unwrap();
+    (0..take.output.lowest.len())
+        .filter_map(|k| {
+            let time = k as f64 * take.output.frame_time;
+            let f = first + (time - start) / ft;
+            (time >= start && f <= last).then_some((k, f))
+        })
+        .collect()
+}
+
+fn lerp(track: &[Vector3<f64>], f: f64) -> Vector3<f64> {
+    let i = (f.floor() as usize).min(track.len() - 1);
+    let j = (i + 1).min(track.len() - 1);
+    track[i].lerp(&track[j], f - i as f64)
+}
+
+/// A joint's track over the compared frames, source and output, in standing heights.
+fn tracks(take: &Take, joint: &str) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+    let frames = compared(take);
+    let src = &take.source.joints[joint];
+    let out = &take.output.joints[joint];
+    (
+        frames
+            .iter()
+            .map(|(_, f)| lerp(src, *f) / take.source.height)
+            .collect(),
+        frames
+            .iter()
+            .map(|(k, _)| out[*k] / take.output.height)
+            .collect(),
+    )
+}
+
+fn horizontal(v: &Vector3<f64>) -> Vector2<f64> {
+    Vector2::new(v.x, v.z)
+}
+
+/// Foot skate: over the source's stance phases (the foot within 0.02 h of its lowest height and
+/// slower than 0.1 h/s horizontally, for at least 4 frames), how much further the output's foot
+/// travels horizontally than the source's, on average per phase (h).
+fn skate(take: &Take) -> (usize, f64) {
+    let dt = take.output.frame_time;
+    let mut excess = Vec::new();
+    for foot in ["LeftFoot", "RightFoot"] {
+        let (src, out) = tracks(take, foot);
+        let lowest = src.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
+        let stance: Vec<bool> = (0..src.len())
+            .map(|i| {
+                let speed = if i == 0 {
+                    0.0
+                } else {
+                    (horizontal(&src[i]) - horizontal(&src[i - 1])).norm() / dt
+                };
+                src[i].y <= lowest + 0.02 && speed < 0.1
+            })
+            .collect();
+        let mut i = 0;
+        while i < stance.len() {
+            if !stance[i] {
+                i += 1;
+                continue;
+            }
+            let mut j = i;
+            while j < stance.len() && stance[j] {
+                j += 1;
+            }
+            if j - i >= 4 {
+                let travel = |p: &[Vector3<f64>]| {
+                    p.windows(2)
+                        .map(|w| (horizontal(&w[1]) - horizontal(&w[0])).norm())
+                        .sum::<f64>()
+                };
+                excess.push(travel(&out[i..j]) - travel(&src[i..j]));
+            }
+            i = j;
+        }
+    }
+    (
+        excess.len(),
+        excess.iter().sum::<f64>() / excess.len() as f64,
+    )
+}
+
+/// The hips' horizontal path against the source's after one rigid 2-D alignment (Kabsch): RMS
+/// deviation over the distance the source walked.
+fn path_error(take: &Take) -> (f64, f64) {
+    let (src, out) = tracks(take, "Hips");
+    let a: Vec<Vector2<f64>> = src.iter().map(horizontal).collect();
+    let b: Vec<Vector2<f64>> = out.iter().map(horizontal).collect();
+    let n = a.len() as f64;
+    let (ca, cb) = (
+        a.iter().sum::<Vector2<f64>>() / n,
+        b.iter().sum::<Vector2<f64>>() / n,
+    );
+    let mut cov = Matrix2::zeros();
+    for (p, q) in a.iter().zip(&b) {
+        cov += (q - cb) * (p - ca).transpose();
+    }
+    let svd = cov.svd(true, true);
+    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+    let mut d = Matrix2::identity();
+    if (u * vt).determinant() < 0.0 {
+        d[(1, 1)] = -1.0;
+    }
+    let r = (u * d * vt).transpose(); // takes the output's frame onto the source's
+    let rms = (a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (r * (q - cb) - (p - ca)).norm_squared())
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let walked: f64 = a.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    (rms, walked)
+}
+
+/// The output's lowest point above its floor (the rest pose's lowest point), per compared frame, h.
+fn above_floor(take: &Take) -> Vec<f64> {
+    compared(take)
+        .iter()
+        .map(|(k, _)| (take.output.lowest[*k] - take.output.rest_lowest) / take.output.height)
+        .collect()
+}
+
+/// The pymo walk, `--root feet`: no foot skate beyond the source's own (mean excess per stance
+/// phase ≤ 0.006 h), the hips' path within 3 % of the distance walked, the lowest point on the
+/// floor. Measured: skate −0.0017 h, path 0.42 % (9.76 h walked), the floor ±0.
+#[test]
+fn a_walk_walks_without_sliding() {
+    let Some(take) = closed_loop(
+        "bvh/pymo_walk.bvh",
+        "tests/fixtures/mappings/pymo_16imu.json",
+        None,
+        &["--root", "feet"],
+    ) else {
+        return;
+    };
+    let (phases, excess) = skate(&take);
+    let (rms, walked) = path_error(&take);
+    let floor = above_floor(&take);
+    let (lo, hi) = floor
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+            (l.min(*x), h.max(*x))
+        });
+    eprintln!(
+        "pymo walk: {phases} stance phases, skate {excess:.4} h; path RMS {rms:.4} h over {walked:.2} h ({:.2} %); \
+         lowest point {lo:.4}..{hi:.4} h above the floor",
+        100.0 * rms / walked
+    );
+    assert!(phases >= 10, "{phases} stance phases");
+    assert!(excess <= 0.006, "skate {excess:.4} h");
+    assert!(rms <= 0.03 * walked, "path {rms:.4} h over {walked:.2} h");
+    assert!(walked > 5.0, "walked {walked:.2} h");
+    assert!(lo > -0.003 && hi < 0.02, "lowest point {lo:.4}..{hi:.4} h");
+    assert_eq!(take.sidecar["pipeline"]["root"], "feet");
+    let contacts = &take.sidecar["contacts"];
+    for side in ["left", "right"] {
+        assert!(contacts[side].as_array().unwrap().len() >= 5, "{contacts}");
+    }
+    assert_eq!(
+        contacts["airborne"].as_array().unwrap().len(),
+        0,
+        "{contacts}"
+    );
+}
+
+/// `--root ground`: the lowest point on the floor in every frame (±0.003 h), and no horizontal
+/// motion.
+#[test]
+fn ground_keeps_the_lowest_point_on_the_floor() {
+    let Some(take) = closed_loop(
+        "bvh/pymo_walk.bvh",
+        "tests/fixtures/mappings/pymo_16imu.json",
+        None,
+        &["--root", "ground"],
+    ) else {
+        return;
+    };
+    let worst = above_floor(&take)
+        .iter()
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(worst <= 0.003, "lowest point {worst:.4} h off the floor");
+    let (_, out) = tracks(&take, "Hips");
+    let moved = out
+        .iter()
+        .map(|p| (horizontal(p) - horizontal(&out[0])).norm())
+        .fold(0.0, f64::max);
+    assert!(moved < 1e-9, "the hips moved {moved} h horizontally");
+    assert_eq!(take.sidecar["pipeline"]["root"], "ground");
+    assert!(take.sidecar["contacts"].is_null());
+}
+
+/// CMU 01_01 (hops with turns): the path error and airborne frames are reported; the body never
+/// sinks below the floor by more than 0.01 h.
+#[test]
+fn hops_never_sink_below_the_floor() {
+    let Some(take) = closed_loop(
+        "bvh/cmu_01_01.bvh",
+        "tests/fixtures/mappings/cmu_16imu.json",
+        Some("1:"),
+        &[],
+    ) else {
+        return;
+    };
+    let (rms, walked) = path_error(&take);
+    let (phases, excess) = skate(&take);
+    let airborne: u64 = take.sidecar["contacts"]["airborne"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r[1].as_u64().unwrap() - r[0].as_u64().unwrap() + 1)
+        .sum();
+    let lowest = above_floor(&take).into_iter().fold(f64::INFINITY, f64::min);
+    eprintln!(
+        "CMU 01_01: path RMS {rms:.4} h over {walked:.2} h ({:.1} %), skate {excess:.4} h over {phases} phases, \
+         {airborne} airborne frames of {}, lowest point {lowest:.4} h",
+        100.0 * rms / walked,
+        take.sidecar["frames"]
+    );
+    assert_eq!(
+        take.sidecar["pipeline"]["root"], "feet",
+        "auto resolves to feet"
+    );
+    assert!(lowest >= -0.01, "sank {lowest:.4} h below the floor");
+}
+
+/// The real x-IMU3 lower-body take (the devices' own orientations): with `--root feet` the body
+/// stays within 0.02 h of the floor while a foot is planted; its path is reported.
+#[test]
+fn a_real_lower_body_take_stays_on_the_floor() {
+    let (Some(session), Some(py)) = (shared("fullbody/xio_lower_body_7imu"), python()) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    run(Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&session)
+        .arg("--mapping")
+        .arg(repo_file("mappings/xio_lower_body_7imu_mixamo.json"))
+        .args(["--root", "feet", "--fps", "60", "--format", "bvh", "--out"])
+        .arg(&out));
+    let bvh: PathBuf = out.join("xio_lower_body_7imu.bvh");
+    let p = positions(&py, &bvh, &["Hips"]);
+    let sidecar: Value = serde_json::from_slice(
+        &std::fs::read(out.join("xio_lower_body_7imu.imubake.json")).unwrap(),
+    )
+    .unwrap();
+    let contacts = &sidecar["contacts"];
+    let mut planted = vec![false; p.lowest.len()];
+    for side in ["left", "right"] {
+        for r in contacts[side].as_array().unwrap() {
+            for f in r[0].as_u64().unwrap()..=r[1].as_u64().unwrap() {
+                planted[f as usize] = true;
+            }
+        }
+    }
+    let worst = p
+        .lowest
+        .iter()
+        .zip(&planted)
+        .filter(|(_, planted)| **planted)
+        .map(|(y, _)| ((y - p.rest_lowest) / p.height).abs())
+        .fold(0.0, f64::max);
+    let hips = &p.joints["Hips"];
+    let path: f64 = hips
+        .windows(2)
+        .map(|w| (horizontal(&w[1]) - horizontal(&w[0])).norm())
+        .sum::<f64>()
+        / p.height;
+    let reach = hips
+        .iter()
+        .map(|q| (horizontal(q) - horizontal(&hips[0])).norm() / p.height)
+        .fold(0.0, f64::max);
+    eprintln!(
+        "x-IMU3 lower body: {} of {} frames planted, worst {worst:.4} h off the floor; hips walked {path:.2} h, \
+         at most {reach:.2} h from the start",
+        planted.iter().filter(|p| **p).count(),
+        planted.len()
+    );
+    assert!(planted.iter().filter(|p| **p).count() > planted.len() / 2);
+    assert!(worst <= 0.02, "{worst:.4} h off the floor while planted");
+    assert!(reach > 0.3, "the body stayed in place ({reach:.2} h)");
+}
+
+/// `--bind-frame` on the bundled walk: one frame more, frame 0 the rest pose, the take from frame
+/// 1 exactly as without it, contacts one frame on; the GLB's animation carries the contacts per
+/// frame in its `extras` (0/1, as the sidecar's intervals say) and the Khronos validator reports
+/// no error and no warning.
+#[test]
+fn a_bind_frame_and_contact_curves() {
+    let dir = tempfile::tempdir().unwrap();
+    let convert = |out: &str, extra: &[&str]| {
+        let out = convert_walk(dir.path(), out, extra);
+        let sidecar: Value =
+            serde_json::from_slice(&std::fs::read(out.join("walk.imubake.json")).unwrap()).unwrap();
+        let bvh = imubake::bvh::parse(&std::fs::read(out.join("walk.bvh")).unwrap()).unwrap();
+        (sidecar, bvh)
+    };
+    let (plain, plain_bvh) = convert("plain", &[]);
+    let (bound, bound_bvh) = convert("bound", &["--bind-frame"]);
+    let frames = plain["frames"].as_u64().unwrap();
+    assert_eq!(bound["frames"].as_u64().unwrap(), frames + 1);
+    assert_eq!(bound["pipeline"]["bind_frame"], true);
+    assert!(plain["pipeline"].get("bind_frame").is_none());
+    // Frame 0: every joint at rest, the root at its rest offset.
+    let rest = bound_bvh.local_rotations(0);
+    assert!(rest.iter().all(|q| q.angle() < 1e-9));
+    let rig = bound_bvh
+        .to_rig("b", imubake::rig::LengthUnit::Metres)
+        .unwrap();
+    assert!((bound_bvh.joint_translations(0)[0] - rig.joints()[0].offset).norm() < 1e-9);
+    // Then the take, frame for frame.
+    for f in [0, frames as usize / 2, frames as usize - 1] {
+        let a = plain_bvh.local_rotations(f);
+        let b = bound_bvh.local_rotations(f + 1);
+        for (qa, qb) in a.iter().zip(&b) {
+            assert!(qa.angle_to(qb) < 1e-5, "frame {f}");
+        }
+        assert!(
+            (plain_bvh.joint_translations(f)[0] - bound_bvh.joint_translations(f + 1)[0]).norm()
+                < 1e-5
+        );
+    }
+    for side in ["left", "right"] {
+        let p = plain["contacts"][side].as_array().unwrap();
+        let b = bound["contacts"][side].as_array().unwrap();
+        assert!(!p.is_empty());
+        for (p, b) in p.iter().zip(b) {
+            assert_eq!(p[0].as_u64().unwrap() + 1, b[0].as_u64().unwrap());
+            assert_eq!(p[1].as_u64().unwrap() + 1, b[1].as_u64().unwrap());
+        }
+    }
+    // The GLB's contact curves against the sidecar's intervals.
+    let glb = std::fs::read(dir.path().join("plain/walk.glb")).unwrap();
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let doc: Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    let curves = &doc["animations"][0]["extras"]["imubake"]["contacts"];
+    assert_eq!(curves["fps"].as_f64().unwrap(), 30.0);
+    for side in ["left", "right"] {
+        let mut expected = vec![0u64; frames as usize];
+        for r in plain["contacts"][side].as_array().unwrap() {
+            for f in r[0].as_u64().unwrap()..=r[1].as_u64().unwrap() {
+                expected[f as usize] = 1;
+            }
+        }
+        let got: Vec<u64> = curves[side]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        assert_eq!(got, expected, "{side}");
+    }
+    if let Some(modules) = common::node_modules() {
+        for report in common::gltf_validate(
+            &[
+                dir.path().join("plain/walk.glb"),
+                dir.path().join("bound/walk.glb"),
+            ],
+            &modules,
+        ) {
+            assert_eq!(report["errors"], 0, "{report}");
+            assert_eq!(report["warnings"], 0, "{report}");
+        }
+    }
+}
+
+/// `--in-place`: a `root` joint at floor level carries the walk; the hips keep a constant
+/// horizontal place over it, and every joint's world position is the same as without it (the
+/// numpy/scipy FK of both BVHs); the GLB passes the Khronos validator.
+#[test]
+fn in_place_moves_the_walk_onto_a_root_joint() {
+    let Some(py) = python() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (walking, in_place) = (
+        convert_walk(dir.path(), "walking", &[]),
+        convert_walk(dir.path(), "in_place", &["--in-place"]),
+    );
+    let sidecar: Value =
+        serde_json::from_slice(&std::fs::read(in_place.join("walk.imubake.json")).unwrap())
+            .unwrap();
+    assert_eq!(sidecar["pipeline"]["in_place"], true);
+    let joints = ["Hips", "LeftFoot", "RightHand", "Head"];
+    let a = positions(&py, &walking.join("walk.bvh"), &joints);
+    let b = positions(
+        &py,
+        &in_place.join("walk.bvh"),
+        &[&joints[..], &["root"]].concat(),
+    );
+    for j in joints {
+        for (p, q) in a.joints[j].iter().zip(&b.joints[j]) {
+            assert!((p - q).norm() < 1e-5, "{j}: {p} vs {q}");
+        }
+    }
+    // The root on the floor, under the hips; the hips' horizontal place over it constant.
+    let (root, hips) = (&b.joints["root"], &b.joints["Hips"]);
+    let travel = root
+        .iter()
+        .map(|r| (horizontal(r) - horizontal(&root[0])).norm())
+        .fold(0.0, f64::max);
+    assert!(
+        travel > 2.0,
+        "the root went at most {travel} m from its start"
+    );
+    for (r, h) in root.iter().zip(hips) {
+        assert!((r.y - b.rest_lowest).abs() < 1e-9, "root at {r}");
+        assert!(
+            (horizontal(h) - horizontal(r)).norm() < 1e-9,
+            "hips {h} over root {r}"
+        );
+    }
+    let bvh = imubake::bvh::parse(&std::fs::read(in_place.join("walk.bvh")).unwrap()).unwrap();
+    assert_eq!(bvh.joints()[0].name, "root");
+    assert_eq!(bvh.joints()[1].name, "Hips");
+    if let Some(modules) = common::node_modules() {
+        for report in common::gltf_validate(&[in_place.join("walk.glb")], &modules) {
+            assert_eq!(report["errors"], 0, "{report}");
+            assert_eq!(report["warnings"], 0, "{report}");
+        }
+    }
+}
+
+/// Joints between sensors (issue 17): CMU 01_01 onto its own skeleton with the spine sensed only
+/// at the hips and Spine1 (LowerBack and Spine between them) and the head (Neck and Neck1 below
+/// it). The head's and the wrists' positions relative to the hips, against the source's after one
+/// rigid alignment: 0.0474 h with `--unsensed rest`, 0.0329 h interpolated (an even bend), 0.001 h
+/// with every spine joint sensed. The issue asks for half. An independent numpy/scipy script
+/// (`even_bend_floor.py`) gives the floor of an even bend on this motion with perfect sensors —
+/// the true rotations between the sensed joints, shared evenly: 0.0332 h (0.0481 h at rest) —
+/// and the pipeline must reach it: what is left is how this subject's spine bends (its lower back,
+/// a joint at the hips, turns more than the whole chain), which no sensor observes.
+#[test]
+fn unsensed_spine_joints_share_the_bend() {
+    let error = |unsensed: &str| -> Option<f64> {
+        let take = closed_loop(
+            "bvh/cmu_01_01.bvh",
+            "tests/fixtures/mappings/cmu_sparse_spine.json",
+            Some("1:"),
+            &["--root", "fixed", "--unsensed", unsensed],
+        )?;
+        assert_eq!(take.sidecar["pipeline"]["unsensed"], unsensed);
+        let py = python()?;
+        let joints = ["Hips", "Head", "LeftHand", "RightHand"];
+        let bvh = shared("bvh/cmu_01_01.bvh")?;
+        let src = positions(&py, &bvh, &joints);
+        let dir = tempfile::tempdir().unwrap();
+        let out_bvh = dir.path().join("out.bvh");
+        std::fs::write(&out_bvh, &take.output_bvh).unwrap();
+        let out = positions(&py, &out_bvh, &joints);
+        let frames = compared(&take);
+        // Each end's offset from the hips, source and output, in standing heights.
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for j in ["Head", "LeftHand", "RightHand"] {
+            for (k, f) in &frames {
+                a.push((lerp(&src.joints[j], *f) - lerp(&src.joints["Hips"], *f)) / src.height);
+                b.push((out.joints[j][*k] - out.joints["Hips"][*k]) / out.height);
+            }
+        }
+        // One rotation takes the output's world onto the source's (Kabsch).
+        let mut cov = nalgebra::Matrix3::zeros();
+        for (p, q) in a.iter().zip(&b) {
+            cov += q * p.transpose();
+        }
+        let svd = cov.svd(true, true);
+        let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+        let mut d = nalgebra::Matrix3::identity();
+        if (u * vt).determinant() < 0.0 {
+            d[(2, 2)] = -1.0;
+        }
+        let r = (u * d * vt).transpose();
+        let rms = (a
+            .iter()
+            .zip(&b)
+            .map(|(p, q)| (r * q - p).norm_squared())
+            .sum::<f64>()
+            / a.len() as f64)
+            .sqrt();
+        Some(rms)
+    };
+    let (Some(rest), Some(interpolated)) = (error("rest"), error("interpolate")) else {
+        return;
+    };
+    let Some(py) = python() else { return };
+    let bvh = shared("bvh/cmu_01_01.bvh").unwrap();
+    let floor = Command::new(&py)
+        .current_dir(repo_file("tests/python"))
+        .arg("even_bend_floor.py")
+        .arg(&bvh)
+        .arg("Hips:Spine1,Spine1:Head")
+        .arg("Spine1,Head,LeftShoulder,RightShoulder,LeftArm,RightArm,LeftForeArm,RightForeArm,LeftHand,RightHand")
+        .output()
+        .unwrap();
+    assert!(
+        floor.status.success(),
+        "{}",
+        String::from_utf8_lossy(&floor.stderr)
+    );
+    let floor: Value = serde_json::from_slice(&floor.stdout).unwrap();
+    let (floor_rest, floor_even) = (
+        floor["rest"].as_f64().unwrap(),
+        floor["even"].as_f64().unwrap(),
+    );
+    eprintln!(
+        "CMU 01_01, spine sensed at the hips and Spine1: head and wrists {rest:.4} h from the source with rest, \
+         {interpolated:.4} h interpolated; with perfect sensors {floor_rest:.4} h and {floor_even:.4} h"
+    );
+    assert!(
+        interpolated <= 0.75 * rest,
+        "{interpolated:.4} h vs {rest:.4} h"
+    );
+    // At the method's floor (within the simulated sensors' 0.5° of noise).
+    assert!(
+        interpolated <= floor_even + 0.003 && rest <= floor_rest + 0.003,
+        "{interpolated:.4} h vs the floor {floor_even:.4} h; {rest:.4} h vs {floor_rest:.4} h"
+    );
+}

@@ -1,0 +1,19 @@
+//! Readers of every input format against files made by other implementations, real vendor files, damaged and hostile input.
+//!
+//! One test crate per area (issue 46): each file a module, linked once.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod apdm;
+mod bvh_read;
+mod bvh_prop;
+mod damaged_logs;
+mod imubake_csv;
+mod property_readers;
+mod reader_limits;
+mod sou_reader;
+mod vendor_readers;
+mod witmotion;
+mod xsens_mtw_2019;
+mod xsens_mvnx;
