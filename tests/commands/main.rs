@@ -6,12 +6,12 @@
 mod common;
 
 mod batch;
-mod watch;
+mod inspect_cli;
 mod live;
 mod live_hostile;
+mod mapping_errors;
+mod tools;
 mod viewer;
 mod viewer_properties;
 mod viewer_server;
-mod inspect_cli;
-mod mapping_errors;
-mod tools;
+mod watch;

@@ -7,6 +7,7 @@ mod common;
 
 mod anatomy_schemes;
 mod body_model;
+mod broad;
 mod bvh_retarget;
 mod closed_loop;
 mod filters_scipy;
@@ -14,9 +15,8 @@ mod fusion_real;
 mod fusion_reference;
 mod joint_angles;
 mod property_fusion;
+mod real_exports;
 mod root_motion;
 mod sensor_calibration;
 mod smoothing_properties;
 mod stream;
-mod broad;
-mod real_exports;

@@ -5,14 +5,14 @@
 #[path = "../common/mod.rs"]
 mod common;
 
-mod bvh_roundtrip;
-mod bvh_interop;
-mod bvh_blender;
-mod blender_addon;
 mod addon_anatomy;
+mod blender_addon;
+mod bvh_blender;
+mod bvh_interop;
+mod bvh_roundtrip;
 mod convert_outputs;
 mod decimal_format;
 mod euler_mathutils;
 mod gltf_writer;
-mod report_html;
 mod legacy_mode;
+mod report_html;

@@ -6,8 +6,8 @@
 mod common;
 
 mod apdm;
-mod bvh_read;
 mod bvh_prop;
+mod bvh_read;
 mod damaged_logs;
 mod imubake_csv;
 mod property_readers;
