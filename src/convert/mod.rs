@@ -53,7 +53,8 @@ fn convert_unclean(
     out_dir: &Path,
     plan: &Plan,
 ) -> Result<ConvertOutcome, ConvertError> {
-    let (conversion, source, facts) = match plan.mode_for(input) {
+    let mode = plan.mode_for(input);
+    let (conversion, source, facts) = match mode {
         Mode::BvhRetarget => {
             let (conversion, source) = bvh_retarget::convert(input, plan)?;
             let conversion = transforms::apply_all(conversion, &transforms(plan), input)?;
@@ -86,7 +87,7 @@ fn convert_unclean(
             let mut facts = TakeFacts::of(&take);
             let vendor_contacts = take.vendor_contacts().cloned();
             let source_info = take.source().clone();
-            let mut conversion = of_take(input, take, plan)?;
+            let mut conversion = of_take(input, take, mode, plan)?;
             facts.warnings.extend(conversion.warnings.iter().cloned());
             conversion.vendor_contacts = vendor_contacts
                 .as_ref()
@@ -126,9 +127,10 @@ fn transforms(plan: &Plan) -> Vec<OutputTransform> {
     OutputTransform::list(plan.settings())
 }
 
-/// A take read into memory, converted by the plan's mapping mode, then the output transforms.
-fn of_take(input: &Path, take: Take, plan: &Plan) -> Result<Conversion, ConvertError> {
-    let conversion = match plan.mode_for(input) {
+/// A take read into memory, converted in `mode` (the Euler mode or the orientations), then the
+/// output transforms.
+fn of_take(input: &Path, take: Take, mode: Mode, plan: &Plan) -> Result<Conversion, ConvertError> {
+    let conversion = match mode {
         Mode::Euler => euler::convert(input, &take, plan)?,
         _ => orientations::convert(input, take, plan)?,
     };
@@ -138,10 +140,11 @@ fn of_take(input: &Path, take: Take, plan: &Plan) -> Result<Conversion, ConvertE
 /// The animation of one take, as `convert` would write it, without writing anything (for
 /// `imubake angles` and `compare` on a capture).
 pub fn animate(input: &Path, plan: &Plan) -> Result<Animation, ConvertError> {
-    if plan.mode_for(input) == Mode::BvhRetarget {
+    let mode = plan.mode_for(input);
+    if mode == Mode::BvhRetarget {
         let (conversion, _) = bvh_retarget::convert(input, plan)?;
         return Ok(transforms::apply_all(conversion, &transforms(plan), input)?.animation);
     }
     let take = crate::read::read_take(input, plan.read_options())?;
-    Ok(of_take(input, take, plan)?.animation)
+    Ok(of_take(input, take, mode, plan)?.animation)
 }

@@ -15,6 +15,12 @@ use std::path::{Path, PathBuf};
 
 /// The take through the quaternion pipeline onto the plan's rig.
 pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversion, ConvertError> {
+    // Sensors matched to bones by name carry no world of their own.
+    let mapping_world = match plan.mapping() {
+        PlanMapping::Quaternion(m) => m.value.world,
+        PlanMapping::ByName | PlanMapping::Euler(_) => None,
+    };
+    let (world, world_from) = resolve_world(&take, plan, mapping_world);
     let by_name;
     let (mapping, file) = match plan.mapping() {
         PlanMapping::Quaternion(m) => (&m.value, Some(m.path.as_path())),
@@ -40,7 +46,6 @@ pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversio
         Path::to_path_buf,
     );
     let mut options = plan.pipeline().clone();
-    let (world, world_from) = resolve_world(&take, plan, mapping.world);
     options.world = Some(world);
     let converted =
         pipeline::run_owned(take, rig, mapping, &mapping_name, &options).map_err(|source| {

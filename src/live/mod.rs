@@ -39,18 +39,31 @@ pub const DEFAULT_LISTEN: &str = "127.0.0.1:39540";
 pub enum LiveError {
     #[error("{0}")]
     Setup(#[from] ConvertError),
-    #[error("source `{source_name}`: {reason}")]
-    Source { source_name: String, reason: String },
-    #[error("{what} {addr}: {reason}")]
+    #[error("source `{source_name}`: {source}")]
+    Source {
+        source_name: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{what} {addr}: {source}")]
     Network {
         what: &'static str,
         addr: SocketAddr,
-        reason: String,
+        #[source]
+        source: std::io::Error,
     },
-    #[error("--record {path}: {reason}")]
-    Record { path: PathBuf, reason: String },
-    #[error("{0}")]
-    Stream(String),
+    #[error("--record {}: {source}", .path.display())]
+    Record {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A line the stream cannot go on from.
+    #[error(transparent)]
+    Line(#[from] crate::read::ReadError),
+    /// The pose stream cannot be set up.
+    #[error(transparent)]
+    Stream(#[from] crate::pipeline::PipelineError),
     #[error(
         "rig `{0}` has no bones with Unity humanoid names for VMC (no `Hips`); name them in the rig file's `vmc_names:`"
     )]
@@ -255,10 +268,10 @@ pub fn run(
             };
             let socket = UdpSocket::bind(local)
                 .and_then(|s| s.connect(addr).map(|()| s))
-                .map_err(|e| LiveError::Network {
+                .map_err(|source| LiveError::Network {
                     what: "--vmc",
                     addr,
-                    reason: e.to_string(),
+                    source,
                 })?;
             Some((socket, skeleton))
         }
@@ -279,9 +292,9 @@ pub fn run(
         Clock::Source
     });
     if let Some(dir) = &settings.record {
-        for path in record::recover(dir).map_err(|e| LiveError::Record {
+        for path in record::recover(dir).map_err(|source| LiveError::Record {
             path: dir.clone(),
-            reason: e.to_string(),
+            source,
         })? {
             report(Report::Notice(format!(
                 "warning: a recording left by an earlier session that did not end is now {}",
@@ -310,10 +323,10 @@ pub fn run(
         }
     }
     if let Some(addr) = settings.listen {
-        let socket = UdpSocket::bind(addr).map_err(|e| LiveError::Network {
+        let socket = UdpSocket::bind(addr).map_err(|source| LiveError::Network {
             what: "--listen",
             addr,
-            reason: e.to_string(),
+            source,
         })?;
         let _ = socket.set_read_timeout(Some(Duration::from_millis(100)));
         let tx = tx.clone();
@@ -499,10 +512,10 @@ pub fn run(
                     if let Some(dir) = &settings.record {
                         let ext = if f == LineFormat::Sou { "log" } else { "csv" };
                         recorder =
-                            Some(record::Recorder::start(dir, &stamp, ext).map_err(|e| {
+                            Some(record::Recorder::start(dir, &stamp, ext).map_err(|source| {
                                 LiveError::Record {
                                     path: dir.clone(),
-                                    reason: e.to_string(),
+                                    source,
                                 }
                             })?);
                     }
@@ -522,9 +535,7 @@ pub fn run(
                             };
                             r.line(&recorded).map_err(|e| record_error(settings, e))?;
                         }
-                        lines
-                            .push_line(line_no, &l, &mut samples)
-                            .map_err(|e| LiveError::Stream(e.to_string()))?;
+                        lines.push_line(line_no, &l, &mut samples)?;
                     }
                     running = start_running(lines, rig, mapping, mapping_file, &options, settings)?;
                 }
@@ -539,9 +550,7 @@ pub fn run(
                 let Some(run) = &mut running else {
                     continue;
                 };
-                run.lines
-                    .push_line(line_no, &line, &mut samples)
-                    .map_err(|e| LiveError::Stream(e.to_string()))?;
+                run.lines.push_line(line_no, &line, &mut samples)?;
                 let at = batch_at;
                 feed(run, &mut samples, &mut per_sensor, &mut |pose: &Pose| {
                     frames += 1;
@@ -685,10 +694,10 @@ pub fn run(
     })
 }
 
-fn record_error(settings: &LiveSettings, e: std::io::Error) -> LiveError {
+fn record_error(settings: &LiveSettings, source: std::io::Error) -> LiveError {
     LiveError::Record {
         path: settings.record.clone().unwrap_or_default(),
-        reason: e.to_string(),
+        source,
     }
 }
 
@@ -708,8 +717,7 @@ fn start_running(
         .world
         .or(mapping.world)
         .unwrap_or(lines.world());
-    let poses = PoseStream::from_mapping(rig, mapping, mapping_file, world, options)
-        .map_err(|e| LiveError::Stream(e.to_string()))?;
+    let poses = PoseStream::from_mapping(rig, mapping, mapping_file, world, options)?;
     Ok(Some(Running {
         lines,
         poses,

@@ -373,9 +373,9 @@ pub fn start(
     allow: Allow,
 ) -> Result<std::thread::JoinHandle<()>, LiveError> {
     let name = spec.to_string();
-    let io = |e: std::io::Error| LiveError::Source {
+    let io = |source: std::io::Error| LiveError::Source {
         source_name: name.clone(),
-        reason: e.to_string(),
+        source,
     };
     let handle = match spec.clone() {
         SourceSpec::File { path, speed } => {

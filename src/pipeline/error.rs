@@ -50,8 +50,24 @@ pub enum PipelineError {
     },
     #[error(transparent)]
     Fusion(#[from] crate::fusion::FusionError),
-    #[error("`{bone}`: {reason}")]
-    NotCausal { bone: String, reason: String },
+    #[error("`{bone}`: {source}")]
+    NotCausal {
+        bone: String,
+        #[source]
+        source: crate::smooth::NotCausal,
+    },
     #[error(transparent)]
     Animation(#[from] AnimationError),
+}
+
+/// Why a stream cannot calibrate again now ([`super::stream::PoseStream::recalibrate`]).
+#[derive(Debug, thiserror::Error)]
+pub enum RecalibrateError {
+    #[error("the mapping has no calibration window (every mount is fixed)")]
+    NoWindow,
+    #[error("the first calibration is still under way")]
+    FirstUnderWay,
+    /// Boxed: the pipeline's error holds this one.
+    #[error(transparent)]
+    Window(Box<PipelineError>),
 }

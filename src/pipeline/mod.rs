@@ -28,7 +28,7 @@ pub mod smoothing;
 pub mod sources;
 pub mod stream;
 
-pub use error::PipelineError;
+pub use error::{PipelineError, RecalibrateError};
 pub use options::{PipelineOptions, Trim};
 
 use crate::anim::{Animation, AnimationBuilder, Pose};

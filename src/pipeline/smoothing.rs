@@ -430,7 +430,10 @@ struct Grid {
 impl CausalSmoother {
     /// A smoother for `method` (which must be causal: [`Method::to_causal`]); `rate_hz` the
     /// sensor's declared rate, if known.
-    pub fn new(method: &Method, rate_hz: Option<f64>) -> Result<CausalSmoother, String> {
+    pub fn new(
+        method: &Method,
+        rate_hz: Option<f64>,
+    ) -> Result<CausalSmoother, crate::smooth::NotCausal> {
         let method = method.to_causal()?;
         Ok(CausalSmoother {
             method,

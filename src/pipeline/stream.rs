@@ -29,7 +29,7 @@ use super::relative::frame_to_local;
 use super::resample::{DEFAULT_STALE_AFTER_S, FrameResampler};
 use super::root::RootCore;
 use super::smoothing::CausalSmoother;
-use super::{PipelineError, PipelineOptions};
+use super::{PipelineError, PipelineOptions, RecalibrateError};
 use crate::anim::Pose;
 use crate::fps::Fps;
 use crate::fusion::stream::StreamFuser;
@@ -112,10 +112,10 @@ impl PoseStream {
             let bone = &rig.joints()[s.bone].name;
             let method = options.smoothing.for_bone(bone);
             let smoother =
-                CausalSmoother::new(method, options.sensor_rate_hz).map_err(|reason| {
+                CausalSmoother::new(method, options.sensor_rate_hz).map_err(|source| {
                     PipelineError::NotCausal {
                         bone: bone.clone(),
-                        reason,
+                        source,
                     }
                 })?;
             smoothers.push(smoother);
@@ -419,12 +419,12 @@ impl PoseStream {
     /// them. Until the new window has passed, frames go on with the calibration in force.
     /// Refused when the mapping has no calibration window, or the first calibration is not
     /// done yet.
-    pub fn recalibrate(&mut self, t_s: f64) -> Result<f64, String> {
+    pub fn recalibrate(&mut self, t_s: f64) -> Result<f64, RecalibrateError> {
         let Some(window) = self.calibration.window() else {
-            return Err("the mapping has no calibration window (every mount is fixed)".into());
+            return Err(RecalibrateError::NoWindow);
         };
         if self.calibration.result().is_none() {
-            return Err("the first calibration is still under way".into());
+            return Err(RecalibrateError::FirstUnderWay);
         }
         let window = window.starting_at(t_s);
         let end_s = window.end_s();
@@ -434,7 +434,7 @@ impl PoseStream {
             Some(window),
             &self.mapping_file,
         )
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| RecalibrateError::Window(Box::new(e)))?;
         // Samples already in the new window's stretch (a sensor ahead of the others) cannot be
         // given to it any more; the window is measured from what comes.
         self.recalibration = Some(Recalibration {

@@ -3,6 +3,13 @@
 
 use serde::Serialize;
 use std::fmt;
+
+/// A smoothing method that looks ahead in time (Gaussian, FFT) asked to run causally.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("`{method}` looks ahead in time and cannot run causally; use butterworth (causal) or none")]
+pub struct NotCausal {
+    pub method: Method,
+}
 use std::str::FromStr;
 
 /// A smoothing method with its options. Times are seconds, frequencies Hz.
@@ -195,7 +202,7 @@ impl Method {
 
     /// The causal form of the method: Butterworth runs causal; the Gaussian and FFT filters,
     /// which look ahead, have none.
-    pub fn to_causal(&self) -> Result<Method, String> {
+    pub fn to_causal(&self) -> Result<Method, NotCausal> {
         match self {
             Method::None => Ok(Method::None),
             Method::Butterworth {
@@ -205,9 +212,9 @@ impl Method {
                 cutoff_hz: *cutoff_hz,
                 causal: true,
             }),
-            Method::Gaussian { .. } | Method::Fft { .. } => Err(format!(
-                "`{self}` looks ahead in time and cannot run causally; use butterworth (causal) or none"
-            )),
+            Method::Gaussian { .. } | Method::Fft { .. } => Err(NotCausal {
+                method: self.clone(),
+            }),
         }
     }
 

@@ -8,7 +8,7 @@ pub mod fft;
 pub mod gaussian;
 mod method;
 
-pub use method::{DEFAULT, Method};
+pub use method::{DEFAULT, Method, NotCausal};
 
 use serde::Serialize;
 use std::collections::BTreeMap;

@@ -11,7 +11,6 @@ mod bvh_read;
 mod damaged_logs;
 mod imubake_csv;
 mod property_readers;
-mod reader_limits;
 mod sou_reader;
 mod vendor_readers;
 mod witmotion;

@@ -9,7 +9,7 @@
 //! as hundreds of megabytes resident; the bounds are far below that and far above the binary's
 //! own few megabytes.
 
-use crate::common;
+mod common;
 
 use std::io::{self, Read, Write};
 use std::path::Path;
