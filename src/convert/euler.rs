@@ -8,10 +8,10 @@
 use super::error::ConvertError;
 use super::orientations::resolve_world;
 use super::plan::{Mode, Plan, PlanMapping};
-use super::records::pipeline_record;
 use crate::mapping::{LegacyTargetRecord, MappingRecord};
 use crate::pipeline::{self, calibrate::HeadingSource};
 use crate::take::Take;
+use crate::write::sidecar::pipeline_record;
 use crate::write::take::Conversion;
 use std::path::Path;
 
@@ -49,7 +49,7 @@ pub(super) fn convert(input: &Path, take: &Take, plan: &Plan) -> Result<Conversi
             ),
         },
         pipeline: pipeline_record(
-            plan,
+            plan.pipeline(),
             &HeadingSource::None,
             0.0,
             legacy.first_frame,

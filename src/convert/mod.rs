@@ -15,7 +15,6 @@ mod hash;
 mod mvnx_segments;
 mod orientations;
 pub mod plan;
-mod records;
 pub mod settings;
 mod skeleton;
 pub mod transforms;
@@ -31,7 +30,9 @@ pub use crate::read::take_stem;
 use crate::take::Take;
 use crate::write::remove_take_outputs;
 use crate::write::sidecar::SourceRecord;
-use crate::write::take::{Conversion, SubjectFile, TakeFacts, TakeJob, WrittenTake, write_take};
+use crate::write::take::{
+    Conversion, SubjectFile, TakeFacts, TakeJob, WrittenTake, vendor_contacts_record, write_take,
+};
 use std::path::Path;
 
 /// What a conversion wrote: the sidecar and where it is.
@@ -70,7 +71,7 @@ fn convert_unclean(
             conversion.vendor_contacts = mvnx
                 .contacts
                 .as_ref()
-                .map(|v| records::vendor_contacts_record(v, &conversion));
+                .map(|v| vendor_contacts_record(v, &conversion));
             let facts = TakeFacts {
                 warnings: conversion.warnings.clone(),
                 dropped_lines: mvnx.dropped,
@@ -91,7 +92,7 @@ fn convert_unclean(
             facts.warnings.extend(conversion.warnings.iter().cloned());
             conversion.vendor_contacts = vendor_contacts
                 .as_ref()
-                .map(|v| records::vendor_contacts_record(v, &conversion));
+                .map(|v| vendor_contacts_record(v, &conversion));
             let source = SourceRecord {
                 path: input.to_string_lossy().into_owned(),
                 sha256,

@@ -4,12 +4,12 @@
 
 use super::error::ConvertError;
 use super::plan::{Mode, Plan, PlanMapping};
-use super::records::{fusion_record, mapping_record, pipeline_record};
 use crate::mapping::Mapping;
 use crate::pipeline;
 use crate::take::Take;
 use crate::world::{World, WorldFrom};
 use crate::write::sidecar::PipelineRecord;
+use crate::write::sidecar::{FileRecord, fusion_record, mapping_record, pipeline_record};
 use crate::write::take::Conversion;
 use std::path::{Path, PathBuf};
 
@@ -47,6 +47,11 @@ pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversio
     );
     let mut options = plan.pipeline().clone();
     options.world = Some(world);
+    // All the sidecar needs of the plan, taken before the pipeline runs.
+    let calibration_file = plan.sensor_calibration().map(|c| FileRecord {
+        path: c.path.display().to_string(),
+        sha256: c.sha256.clone(),
+    });
     let converted =
         pipeline::run_owned(take, rig, mapping, &mapping_name, &options).map_err(|source| {
             ConvertError::Pipeline {
@@ -59,9 +64,9 @@ pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversio
         euler_deg: None,
         mapping: mapping_record(&converted, rig, mapping, file),
         pipeline: PipelineRecord {
-            fusion: fusion_record(plan, &converted),
+            fusion: fusion_record(&converted, options.fusion.is_some(), calibration_file),
             ..pipeline_record(
-                plan,
+                &options,
                 &heading.heading_source,
                 heading.heading.scaled_axis().y.to_degrees(),
                 converted.first_frame,

@@ -18,43 +18,10 @@ use crate::retarget::BoneMap;
 use crate::rig::file::RigLoadError;
 use crate::rig::subject::Subject;
 use crate::rig::{Rig, builtin_rig, rig_from_bytes};
+pub use crate::write::sidecar::Mode;
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-
-/// How a take becomes an animation: one module of `convert/` each, in the order they are
-/// chosen ([`Plan::mode_for`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Mode {
-    /// A BVH take: its motion retargeted onto the rig (`convert/bvh_retarget.rs`).
-    BvhRetarget,
-    /// `--mvnx-segments`: Xsens's own segment kinematics (`convert/mvnx_segments.rs`).
-    MvnxSegments,
-    /// Paper 002's Euler-channel mode, for a Listing-2 mapping (`convert/euler.rs`).
-    Euler,
-    /// Sensor orientations through the quaternion pipeline (`convert/orientations.rs`).
-    Orientations,
-}
-
-impl Mode {
-    /// Every mode, in the order [`Plan::mode_for`] tries them.
-    pub const ALL: [Mode; 4] = [
-        Mode::BvhRetarget,
-        Mode::MvnxSegments,
-        Mode::Euler,
-        Mode::Orientations,
-    ];
-
-    /// The sidecar's `pipeline.mode`.
-    pub fn label(self) -> &'static str {
-        match self {
-            Mode::BvhRetarget => "bvh-retarget",
-            Mode::MvnxSegments => "mvnx-segments",
-            Mode::Euler => "legacy-euler",
-            Mode::Orientations => "quaternion",
-        }
-    }
-}
 
 /// A file the plan read: its value, its path and the SHA-256 of the bytes parsed.
 #[derive(Debug, Clone)]

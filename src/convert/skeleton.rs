@@ -3,13 +3,13 @@
 
 use super::error::ConvertError;
 use super::plan::{Mode, Plan};
-use super::records::pipeline_record;
 use crate::anim::Animation;
 use crate::mapping::{MappingRecord, SensorRecord};
 use crate::pipeline::calibrate::HeadingSource;
 use crate::pipeline::root::RootMode;
 use crate::retarget::{Reference, SourceMotion};
 use crate::world::{World, WorldFrom};
+use crate::write::sidecar::pipeline_record;
 use crate::write::take::Conversion;
 use std::path::Path;
 
@@ -96,8 +96,14 @@ impl Motion {
                 heading_aligned_by: None,
             })
             .collect();
-        let mut pipeline =
-            pipeline_record(plan, &HeadingSource::None, 0.0, 0, mode, RootMode::Fixed);
+        let mut pipeline = pipeline_record(
+            plan.pipeline(),
+            &HeadingSource::None,
+            0.0,
+            0,
+            mode,
+            RootMode::Fixed,
+        );
         pipeline.root = "source";
         pipeline.smoothing = None;
         pipeline.unsensed = "rest";

@@ -4,8 +4,14 @@
 use crate::fps::Fps;
 use crate::inspect::SensorSummaries;
 use crate::mapping::MappingRecord;
+use crate::mapping::{CalibrationRecord, Mapping, Mount, SensorRecord};
+use crate::pipeline::calibrate::HeadingSource;
+use crate::pipeline::sources::Origin;
+use crate::pipeline::{self, PipelineOptions, root::RootMode};
+use crate::rig::Rig;
 use crate::take::{DroppedLines, LineReport};
 use serde::Serialize;
+use std::path::Path;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Sidecar {
@@ -131,7 +137,7 @@ pub struct PipelineRecord {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub trim: Option<TrimRecord>,
     /// `"quaternion"`, or `"legacy-euler"` for paper 002's Listing-2 mappings.
-    pub mode: &'static str,
+    pub mode: Mode,
     /// Causal mode: the take ran through the stream's stages.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub causal: bool,
@@ -179,6 +185,154 @@ pub struct TrimRecord {
 pub struct OutputRecord {
     pub format: &'static str,
     pub path: String,
+}
+
+/// How a take becomes an animation (the sidecar's `pipeline.mode`): one module of `convert/`
+/// each, in the order `convert::Plan::mode_for` chooses them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// A BVH take: its motion retargeted onto the rig (`convert/bvh_retarget.rs`).
+    BvhRetarget,
+    /// `--mvnx-segments`: Xsens's own segment kinematics (`convert/mvnx_segments.rs`).
+    MvnxSegments,
+    /// Paper 002's Euler-channel mode, for a Listing-2 mapping (`convert/euler.rs`).
+    Euler,
+    /// Sensor orientations through the quaternion pipeline (`convert/orientations.rs`).
+    Orientations,
+}
+
+impl Mode {
+    /// Every mode, in the order `convert::Plan::mode_for` tries them.
+    pub const ALL: [Mode; 4] = [
+        Mode::BvhRetarget,
+        Mode::MvnxSegments,
+        Mode::Euler,
+        Mode::Orientations,
+    ];
+
+    /// The sidecar's `pipeline.mode`.
+    pub fn label(self) -> &'static str {
+        match self {
+            Mode::BvhRetarget => "bvh-retarget",
+            Mode::MvnxSegments => "mvnx-segments",
+            Mode::Euler => "legacy-euler",
+            Mode::Orientations => "quaternion",
+        }
+    }
+}
+
+impl Serialize for Mode {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.label())
+    }
+}
+
+/// The sidecar's `mapping` for the quaternion pipeline: each sensor's bone, mount and source.
+pub fn mapping_record(
+    converted: &pipeline::Converted,
+    rig: &Rig,
+    mapping: &Mapping,
+    file: Option<&Path>,
+) -> MappingRecord {
+    MappingRecord {
+        file: file.map(|f| f.to_string_lossy().into_owned()),
+        rig: rig.name().to_string(),
+        world: converted.world,
+        calibration: converted.window.as_ref().map(|w| CalibrationRecord {
+            pose: w.pose.label(),
+            start_s: w.start_s,
+            duration_s: w.duration_s,
+            second: w.second.as_ref().map(|p| {
+                serde_json::json!({"pose": p.pose.label(), "start_s": p.start_s, "duration_s": p.duration_s})
+            }),
+        }),
+        sensors: converted
+            .sensors
+            .iter()
+            .zip(&converted.calibration.mounts)
+            .zip(converted.origins.iter().zip(&converted.calibration.alignment))
+            .map(|((s, q), (origin, alignment))| SensorRecord {
+                sensor: s.sensor.clone(),
+                bone: rig.joints()[s.bone].name.clone(),
+                mount_source: match s.mount {
+                    Mount::Calibrate => "calibrate",
+                    Mount::Fixed(_) => "fixed",
+                },
+                mount: [q.w, q.i, q.j, q.k],
+                forward: mapping
+                    .sensors
+                    .iter()
+                    .find(|m| m.sensor == s.sensor)
+                    .and_then(|m| m.forward)
+                    .map(|v| [v.x, v.y, v.z]),
+                orientation: match origin {
+                    Origin::Device { .. } => "device",
+                    Origin::Fused(_) => "fused",
+                },
+                world: origin.world(),
+                heading_aligned_by: alignment.label(),
+            })
+            .collect(),
+        legacy: None,
+    }
+}
+
+/// The sidecar's `pipeline.fusion`: `None` when no sensor was fused. `chosen`: the settings
+/// asked for the filter (else the default ran); `sensor_calibration`: the file of corrections.
+pub fn fusion_record(
+    converted: &pipeline::Converted,
+    chosen: bool,
+    sensor_calibration: Option<FileRecord>,
+) -> Option<FusionRecord> {
+    let fusion = converted.fusion.clone()?;
+    let sensors = converted
+        .sensors
+        .iter()
+        .zip(&converted.origins)
+        .filter_map(|(s, origin)| match origin {
+            Origin::Fused(stats) => Some((s.sensor.clone(), stats.clone())),
+            Origin::Device { .. } => None,
+        })
+        .collect();
+    Some(FusionRecord {
+        fusion,
+        chosen_by: if chosen { "settings" } else { "default" },
+        sensor_calibration,
+        sensors,
+    })
+}
+
+/// The sidecar's `pipeline`: what was done, in which mode.
+pub fn pipeline_record(
+    options: &PipelineOptions,
+    heading: &HeadingSource,
+    heading_deg: f64,
+    first_frame: usize,
+    mode: Mode,
+    root: RootMode,
+) -> PipelineRecord {
+    PipelineRecord {
+        fusion: None,
+        smoothing: Some(serde_json::to_value(&options.smoothing).expect("serialisable")),
+        root: root.label(),
+        unsensed: if mode == Mode::Euler {
+            "rest"
+        } else {
+            options.unsensed.label()
+        },
+        heading: heading.label(),
+        heading_sensor: heading.sensor().map(str::to_string),
+        heading_deg,
+        trim: options.trim.map(|t| TrimRecord {
+            start_s: t.start_s,
+            end_s: (t.end_s < f64::MAX).then_some(t.end_s),
+            first_frame,
+        }),
+        mode,
+        causal: options.causal,
+        bind_frame: false,
+        in_place: false,
+    }
 }
 
 #[cfg(test)]

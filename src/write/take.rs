@@ -62,6 +62,35 @@ impl TakeFacts {
     }
 }
 
+/// A capture system's contacts on the written frames: frame n stands at take time
+/// (n − bind + first) / fps, where `first` is the grid frame `--trim` made frame 0 and `bind` is 1
+/// with `--bind-frame` (whose frame 0, the rest pose, has no contact).
+pub fn vendor_contacts_record(
+    v: &crate::take::VendorContacts,
+    conversion: &Conversion,
+) -> VendorContactsRecord {
+    let fps = conversion.animation.fps();
+    let first = conversion
+        .pipeline
+        .trim
+        .as_ref()
+        .map_or(0, |t| t.first_frame);
+    let bind = usize::from(conversion.pipeline.bind_frame);
+    let planted: Vec<[bool; 2]> = (0..conversion.animation.frames())
+        .map(|n| match n.checked_sub(bind) {
+            Some(k) => v.at(fps.frame_time_of((k + first) as u64)),
+            None => [false; 2],
+        })
+        .collect();
+    // Every run, however short: the system's own contacts, as it gave them.
+    let runs = |side: usize| crate::pipeline::root::runs(planted.iter().map(|p| p[side]), 1);
+    VendorContactsRecord {
+        vendor: v.vendor,
+        left: runs(0),
+        right: runs(1),
+    }
+}
+
 /// The subject file a rig was scaled to, for the sidecar.
 #[derive(Debug, Clone, Copy)]
 pub struct SubjectFile<'a> {
