@@ -60,8 +60,8 @@ pub struct Plan {
     /// `--rig`, else the mapping's, else `mixamo`; scaled to the subject.
     rig: Rig,
     rig_from: RigFrom,
-    /// The SHA-256 of a rig file (`None` for a built-in rig).
-    rig_sha256: Option<String>,
+    /// A rig file (`None` for a built-in rig): its path and SHA-256.
+    rig_file: Option<(PathBuf, String)>,
     /// Paper 002's Table 1 (the `sou12` rig), for the Euler mode's parents.
     table1: Option<Rig>,
     subject: Option<Loaded<Subject>>,
@@ -164,7 +164,7 @@ impl Plan {
             (None, Some(name)) => (name, RigFrom::Mapping),
             (None, None) => ("mixamo", RigFrom::Default),
         };
-        let (rig, rig_sha256) = load_rig_hashed(name)?;
+        let (rig, rig_file) = load_rig_hashed(name)?;
         let rig = match &subject {
             Some(s) => s.value.apply(&rig, &s.path)?,
             None => rig,
@@ -181,7 +181,7 @@ impl Plan {
             mapping,
             rig,
             rig_from,
-            rig_sha256,
+            rig_file,
             table1,
             subject,
             sensor_calibration,
@@ -234,7 +234,7 @@ impl Plan {
 
     /// The SHA-256 of the rig file, `None` for a built-in rig.
     pub fn rig_sha256(&self) -> Option<&str> {
-        self.rig_sha256.as_deref()
+        self.rig_file.as_ref().map(|(_, sha)| sha.as_str())
     }
 
     /// Paper 002's Table 1 rig, in the Euler mode.
@@ -267,10 +267,8 @@ impl Plan {
             PlanMapping::Quaternion(m) => Some(m.path.as_path()),
             PlanMapping::Euler(m) => Some(m.path.as_path()),
         };
-        let rig = self
-            .rig_sha256
-            .is_some()
-            .then(|| Path::new(self.settings.rig.as_deref().unwrap_or_default()));
+        // The rig file, whether `--rig` or the mapping named it.
+        let rig = self.rig_file.as_ref().map(|(path, _)| path.as_path());
         mapping
             .into_iter()
             .chain(rig)
@@ -291,8 +289,9 @@ impl Plan {
     }
 }
 
-/// A rig by built-in name or from a file (read once, hashed), as [`crate::rig::load_rig`] does.
-fn load_rig_hashed(name_or_path: &str) -> Result<(Rig, Option<String>), RigLoadError> {
+/// A rig by built-in name or from a file (read once; its path and SHA-256), as
+/// [`crate::rig::load_rig`] does.
+fn load_rig_hashed(name_or_path: &str) -> Result<(Rig, Option<(PathBuf, String)>), RigLoadError> {
     if let Some(rig) = builtin_rig(name_or_path) {
         return Ok((rig?, None));
     }
@@ -304,7 +303,10 @@ fn load_rig_hashed(name_or_path: &str) -> Result<(Rig, Option<String>), RigLoadE
         path: path.to_path_buf(),
         source,
     })?;
-    Ok((rig_from_bytes(path, bytes)?, Some(sha256)))
+    Ok((
+        rig_from_bytes(path, bytes)?,
+        Some((path.to_path_buf(), sha256)),
+    ))
 }
 
 /// Is `input` a BVH take (`--input-format bvh`, else a file whose content is BVH)?
@@ -403,6 +405,32 @@ mod tests {
         let h = plan.rig().standing_height() * plan.rig().units().metres_per_unit();
         assert!((h - 1.62).abs() < 1e-6, "{h}");
         assert_eq!(plan.rig_from(), RigFrom::Settings(Layer::Default));
+        // A rig file the mapping names is read, hashed and watched like the others.
+        let rig_file = dir.path().join("r.yaml");
+        let rig_text = std::fs::read(repo("rigs/mixamo.yaml")).unwrap();
+        std::fs::write(&rig_file, &rig_text).unwrap();
+        let text = String::from_utf8(text).unwrap();
+        assert!(text.contains(r#""rig": "mixamo""#));
+        let named = text.replace(
+            r#""rig": "mixamo""#,
+            &format!("\"rig\": {:?}", rig_file.display().to_string()),
+        );
+        let mapping_naming_rig = dir.path().join("n.json");
+        std::fs::write(&mapping_naming_rig, named).unwrap();
+        let by_mapping = Plan::resolve(ConvertSettings {
+            mapping: Some(mapping_naming_rig.clone()),
+            ..ConvertSettings::default()
+        })
+        .unwrap();
+        assert_eq!(by_mapping.rig_from(), RigFrom::Mapping);
+        assert_eq!(
+            by_mapping.rig_sha256(),
+            Some(hex(&Sha256::digest(&rig_text)).as_str())
+        );
+        assert_eq!(
+            by_mapping.files(),
+            [mapping_naming_rig.as_path(), rig_file.as_path()]
+        );
         // A file that is not what it should be fails the plan, naming the file.
         std::fs::write(&subject, "height: 1.62\n").unwrap();
         let e = Plan::resolve(plan.settings().clone())
