@@ -34,12 +34,10 @@ fn code(text: &str) -> String {
         .join("\n")
 }
 
-#[test]
-fn lower_layers_never_import_higher_ones() {
+/// Every source file under `src/`: its path relative to `src/` and its text.
+fn source_files() -> Vec<(String, String)> {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let path_re = regex::Regex::new(r"crate::([a-z_]+)").unwrap();
-    let mut modules = BTreeMap::new();
-    let mut violations = Vec::new();
+    let mut files = Vec::new();
     let mut stack = vec![src.clone()];
     while let Some(dir) = stack.pop() {
         for entry in std::fs::read_dir(&dir).unwrap() {
@@ -53,26 +51,36 @@ fn lower_layers_never_import_higher_ones() {
                 .unwrap()
                 .to_string_lossy()
                 .into_owned();
-            let top = rel.split(['/', '.']).next().unwrap().to_string();
-            if ["lib", "main", "cli"].contains(&top.as_str()) {
-                continue;
-            }
-            let own = layer_of(&top).unwrap_or_else(|| {
-                panic!("src/{rel}: module `{top}` is in no layer of ARCHITECTURE.md")
-            });
-            modules.insert(top.clone(), own);
-            let text = std::fs::read_to_string(&path).unwrap();
-            for cap in path_re.captures_iter(&code(&text)) {
-                let used = &cap[1];
-                let Some(theirs) = layer_of(used) else {
-                    panic!("src/{rel}: uses `crate::{used}`, which is in no layer");
-                };
-                // Only strictly lower layers (or the module itself): no loops, even in a layer.
-                if used != top && theirs >= own {
-                    violations.push(format!(
-                        "src/{rel} (layer {own}) uses crate::{used} (layer {theirs})"
-                    ));
-                }
+            files.push((rel, std::fs::read_to_string(&path).unwrap()));
+        }
+    }
+    files
+}
+
+#[test]
+fn lower_layers_never_import_higher_ones() {
+    let path_re = regex::Regex::new(r"crate::([a-z_]+)").unwrap();
+    let mut modules = BTreeMap::new();
+    let mut violations = Vec::new();
+    for (rel, text) in source_files() {
+        let top = rel.split(['/', '.']).next().unwrap().to_string();
+        if ["lib", "main", "cli"].contains(&top.as_str()) {
+            continue;
+        }
+        let own = layer_of(&top).unwrap_or_else(|| {
+            panic!("src/{rel}: module `{top}` is in no layer of ARCHITECTURE.md")
+        });
+        modules.insert(top.clone(), own);
+        for cap in path_re.captures_iter(&code(&text)) {
+            let used = &cap[1];
+            let Some(theirs) = layer_of(used) else {
+                panic!("src/{rel}: uses `crate::{used}`, which is in no layer");
+            };
+            // Only strictly lower layers (or the module itself): no loops, even in a layer.
+            if used != top && theirs >= own {
+                violations.push(format!(
+                    "src/{rel} (layer {own}) uses crate::{used} (layer {theirs})"
+                ));
             }
         }
     }
@@ -109,28 +117,13 @@ fn only_the_plan_opens_the_files_settings_name() {
     assert_eq!(file_loads("    let m = load_mapping(path)?;").len(), 1);
     assert_eq!(file_loads("let s = Subject::load(p)?;").len(), 1);
     assert!(file_loads("pub fn load_rig(name: &str) -> Result<Rig, E> {").is_empty());
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut violations = Vec::new();
-    let mut stack = vec![src.clone()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-                continue;
-            }
-            let rel = path
-                .strip_prefix(&src)
-                .unwrap()
-                .to_string_lossy()
-                .into_owned();
-            if rel == "convert/plan.rs" || rel.starts_with("cli/") || rel == "main.rs" {
-                continue;
-            }
-            let text = std::fs::read_to_string(&path).unwrap();
-            for call in file_loads(&code(&text)) {
-                violations.push(format!("src/{rel}: {call}"));
-            }
+    for (rel, text) in source_files() {
+        if rel == "convert/plan.rs" || rel.starts_with("cli/") || rel == "main.rs" {
+            continue;
+        }
+        for call in file_loads(&code(&text)) {
+            violations.push(format!("src/{rel}: {call}"));
         }
     }
     assert!(violations.is_empty(), "{violations:#?}");
