@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! plan ── mode_for(input) ──▶ bvh_retarget │ mvnx_segments │ euler │ orientations ──▶ Conversion
-//!      ──▶ output transforms (--in-place, --bind-frame) ──▶ write::take (outputs, sidecar last)
+//!      ──▶ write::take: output transforms (--in-place, --bind-frame), outputs, sidecar last
 //! ```
 //!
 //! Each mode is a module of its own; every mode yields one [`Conversion`], so there is one
@@ -17,13 +17,12 @@ mod orientations;
 pub mod plan;
 pub mod settings;
 mod skeleton;
-pub mod transforms;
 
+pub use crate::write::transforms::OutputTransform;
 pub use error::ConvertError;
 pub use hash::source_sha256;
 pub use plan::{Mode, Plan};
 pub use settings::{ConvertSettings, Given, Layer, Output, OutputFormat};
-pub use transforms::OutputTransform;
 
 use crate::anim::Animation;
 pub use crate::read::take_stem;
@@ -31,8 +30,9 @@ use crate::take::Take;
 use crate::write::remove_take_outputs;
 use crate::write::sidecar::SourceRecord;
 use crate::write::take::{
-    Conversion, SubjectFile, TakeFacts, TakeJob, WrittenTake, vendor_contacts_record, write_take,
+    Conversion, SubjectFile, TakeError, TakeFacts, TakeJob, WrittenTake, write_take,
 };
+use crate::write::transforms::apply_all;
 use std::path::Path;
 
 /// What a conversion wrote: the sidecar and where it is.
@@ -58,7 +58,6 @@ fn convert_unclean(
     let (conversion, source, facts) = match mode {
         Mode::BvhRetarget => {
             let (conversion, source) = bvh_retarget::convert(input, plan)?;
-            let conversion = transforms::apply_all(conversion, &transforms(plan), input)?;
             let facts = TakeFacts {
                 warnings: conversion.warnings.clone(),
                 ..TakeFacts::default()
@@ -67,11 +66,8 @@ fn convert_unclean(
         }
         Mode::MvnxSegments => {
             let mvnx = mvnx_segments::convert(input, plan)?;
-            let mut conversion = transforms::apply_all(mvnx.conversion, &transforms(plan), input)?;
-            conversion.vendor_contacts = mvnx
-                .contacts
-                .as_ref()
-                .map(|v| vendor_contacts_record(v, &conversion));
+            let mut conversion = mvnx.conversion;
+            conversion.vendor_contacts = mvnx.contacts;
             let facts = TakeFacts {
                 warnings: conversion.warnings.clone(),
                 dropped_lines: mvnx.dropped,
@@ -90,9 +86,7 @@ fn convert_unclean(
             let source_info = take.source().clone();
             let mut conversion = of_take(input, take, mode, plan)?;
             facts.warnings.extend(conversion.warnings.iter().cloned());
-            conversion.vendor_contacts = vendor_contacts
-                .as_ref()
-                .map(|v| vendor_contacts_record(v, &conversion));
+            conversion.vendor_contacts = vendor_contacts;
             let source = SourceRecord {
                 path: input.to_string_lossy().into_owned(),
                 sha256,
@@ -119,33 +113,40 @@ fn convert_unclean(
         }),
         source,
         facts,
+        transforms: plan.transforms(),
     };
-    Ok(write_take(job, conversion)?)
+    write_take(job, conversion).map_err(|e| match e {
+        TakeError::Output(e) => ConvertError::Output(e),
+        TakeError::Transform(source) => transform_error(input, source),
+    })
 }
 
-/// The output transforms the plan asks for.
-fn transforms(plan: &Plan) -> Vec<OutputTransform> {
-    OutputTransform::list(plan.settings())
+fn transform_error(input: &Path, source: crate::anim::AnimationError) -> ConvertError {
+    ConvertError::Pipeline {
+        input: input.to_path_buf(),
+        source: source.into(),
+    }
 }
 
-/// A take read into memory, converted in `mode` (the Euler mode or the orientations), then the
-/// output transforms.
+/// A take read into memory, converted in `mode` (the Euler mode or the orientations).
 fn of_take(input: &Path, take: Take, mode: Mode, plan: &Plan) -> Result<Conversion, ConvertError> {
-    let conversion = match mode {
-        Mode::Euler => euler::convert(input, &take, plan)?,
-        _ => orientations::convert(input, take, plan)?,
-    };
-    transforms::apply_all(conversion, &transforms(plan), input)
+    match mode {
+        Mode::Euler => euler::convert(input, &take, plan),
+        _ => orientations::convert(input, take, plan),
+    }
 }
 
 /// The animation of one take, as `convert` would write it, without writing anything (for
 /// `imubake angles` and `compare` on a capture).
 pub fn animate(input: &Path, plan: &Plan) -> Result<Animation, ConvertError> {
     let mode = plan.mode_for(input);
-    if mode == Mode::BvhRetarget {
-        let (conversion, _) = bvh_retarget::convert(input, plan)?;
-        return Ok(transforms::apply_all(conversion, &transforms(plan), input)?.animation);
-    }
-    let take = crate::read::read_take(input, plan.read_options())?;
-    Ok(of_take(input, take, mode, plan)?.animation)
+    let conversion = if mode == Mode::BvhRetarget {
+        bvh_retarget::convert(input, plan)?.0
+    } else {
+        let take = crate::read::read_take(input, plan.read_options())?;
+        of_take(input, take, mode, plan)?
+    };
+    apply_all(conversion, &plan.transforms())
+        .map(|c| c.animation)
+        .map_err(|e| transform_error(input, e))
 }

@@ -19,6 +19,7 @@ use crate::rig::file::RigLoadError;
 use crate::rig::subject::Subject;
 use crate::rig::{Rig, builtin_rig, rig_from_bytes};
 pub use crate::write::sidecar::Mode;
+use crate::write::transforms::OutputTransform;
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -207,6 +208,18 @@ impl Plan {
 
     pub fn settings(&self) -> &ConvertSettings {
         &self.settings
+    }
+
+    /// The output transforms asked for, in the order they apply.
+    pub fn transforms(&self) -> Vec<OutputTransform> {
+        let mut list = Vec::new();
+        if self.settings.in_place {
+            list.push(OutputTransform::InPlace);
+        }
+        if self.settings.bind_frame {
+            list.push(OutputTransform::BindFrame);
+        }
+        list
     }
 
     pub fn read_options(&self) -> &ReadOptions {

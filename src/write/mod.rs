@@ -10,6 +10,7 @@ pub mod orientation_csv;
 pub mod report;
 pub mod sidecar;
 pub mod take;
+pub mod transforms;
 
 use crate::anim::Animation;
 use crate::rig::LengthUnit;

@@ -5,14 +5,15 @@ use super::report::{ReportInput, bone_series};
 use super::sidecar::{
     PipelineRecord, RigRecord, Sidecar, SourceRecord, SubjectRecord, VendorContactsRecord,
 };
+use super::transforms::{OutputTransform, apply_all};
 use super::{Output, OutputError, OutputFormat, TakeOutputs, write_atomic};
-use crate::anim::Animation;
+use crate::anim::{Animation, AnimationError};
 use crate::inspect::SensorSummaries;
 use crate::mapping::MappingRecord;
 use crate::pipeline::root::Contacts;
 use crate::rig::LengthUnit;
 use crate::rig::subject::Subject;
-use crate::take::{LineReport, Take};
+use crate::take::{LineReport, Take, VendorContacts};
 use crate::world::{World, WorldFrom};
 use nalgebra::UnitQuaternion;
 use rayon::prelude::*;
@@ -35,8 +36,9 @@ pub struct Conversion {
     pub contacts: Option<Contacts>,
     /// The sensors' world, and where it came from.
     pub world: (World, WorldFrom),
-    /// The capture system's own foot contacts on the animation's frames.
-    pub vendor_contacts: Option<VendorContactsRecord>,
+    /// The capture system's own foot contacts, in take time (put on the written frames, after
+    /// the output transforms, by [`write_take`]).
+    pub vendor_contacts: Option<VendorContacts>,
     pub warnings: Vec<String>,
 }
 
@@ -65,10 +67,7 @@ impl TakeFacts {
 /// A capture system's contacts on the written frames: frame n stands at take time
 /// (n − bind + first) / fps, where `first` is the grid frame `--trim` made frame 0 and `bind` is 1
 /// with `--bind-frame` (whose frame 0, the rest pose, has no contact).
-pub fn vendor_contacts_record(
-    v: &crate::take::VendorContacts,
-    conversion: &Conversion,
-) -> VendorContactsRecord {
+fn vendor_contacts_record(v: &VendorContacts, conversion: &Conversion) -> VendorContactsRecord {
     let fps = conversion.animation.fps();
     let first = conversion
         .pipeline
@@ -114,6 +113,18 @@ pub struct TakeJob<'a> {
     pub subject: Option<SubjectFile<'a>>,
     pub source: SourceRecord,
     pub facts: TakeFacts,
+    /// Applied to the conversion, in order, before anything is written.
+    pub transforms: Vec<OutputTransform>,
+}
+
+/// Why a take was not written.
+#[derive(Debug, thiserror::Error)]
+pub enum TakeError {
+    /// An output transform failed; no file was touched.
+    #[error(transparent)]
+    Transform(#[from] AnimationError),
+    #[error(transparent)]
+    Output(#[from] OutputError),
 }
 
 /// What a take's writing left: the sidecar and where it is.
@@ -123,8 +134,9 @@ pub struct WrittenTake {
     pub sidecar_path: PathBuf,
 }
 
-/// Writes each output of `job` as `<out_dir>/<stem>.*`, then the sidecar, last.
-pub fn write_take(job: TakeJob<'_>, conversion: Conversion) -> Result<WrittenTake, OutputError> {
+/// Writes each output of `job` as `<out_dir>/<stem>.*`, then the sidecar, last; the output
+/// transforms first (their failure touches no file).
+pub fn write_take(job: TakeJob<'_>, conversion: Conversion) -> Result<WrittenTake, TakeError> {
     let TakeJob {
         input,
         out_dir,
@@ -134,7 +146,13 @@ pub fn write_take(job: TakeJob<'_>, conversion: Conversion) -> Result<WrittenTak
         subject,
         source,
         facts,
+        transforms,
     } = job;
+    let conversion = apply_all(conversion, &transforms)?;
+    let vendor_contacts = conversion
+        .vendor_contacts
+        .as_ref()
+        .map(|v| vendor_contacts_record(v, &conversion));
     let stem = crate::read::take_stem(input);
     std::fs::create_dir_all(out_dir).map_err(|source| OutputError::Write {
         path: out_dir.to_path_buf(),
@@ -149,7 +167,8 @@ pub fn write_take(job: TakeJob<'_>, conversion: Conversion) -> Result<WrittenTak
         return Err(OutputError::Write {
             path: old_sidecar,
             source,
-        });
+        }
+        .into());
     }
     let TakeFacts {
         sensor_summaries,
@@ -225,7 +244,7 @@ pub fn write_take(job: TakeJob<'_>, conversion: Conversion) -> Result<WrittenTak
         mapping: conversion.mapping,
         pipeline: conversion.pipeline,
         contacts: conversion.contacts,
-        vendor_contacts: conversion.vendor_contacts,
+        vendor_contacts,
         outputs,
         sensors: sensor_summaries,
         dropped_lines,

@@ -1,11 +1,9 @@
-//! The output transforms, applied in order to every mode's [`Conversion`]: `--in-place`, then
-//! `--bind-frame`.
+//! The output transforms, applied in order to every mode's [`Conversion`] as it is written:
+//! `--in-place`, then `--bind-frame`. The plan lists them (`Plan::transforms`).
 
-use super::error::ConvertError;
-use super::settings::ConvertSettings;
-use crate::write::take::Conversion;
+use super::take::Conversion;
+use crate::anim::AnimationError;
 use nalgebra::UnitQuaternion;
-use std::path::Path;
 
 /// One transform of a converted take.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -18,19 +16,7 @@ pub enum OutputTransform {
 }
 
 impl OutputTransform {
-    /// The transforms `settings` ask for, in the order they apply.
-    pub fn list(settings: &ConvertSettings) -> Vec<OutputTransform> {
-        let mut list = Vec::new();
-        if settings.in_place {
-            list.push(OutputTransform::InPlace);
-        }
-        if settings.bind_frame {
-            list.push(OutputTransform::BindFrame);
-        }
-        list
-    }
-
-    fn apply(self, conversion: Conversion) -> Result<Conversion, crate::anim::AnimationError> {
+    fn apply(self, conversion: Conversion) -> Result<Conversion, AnimationError> {
         match self {
             OutputTransform::InPlace => in_place(conversion),
             OutputTransform::BindFrame => Ok(with_bind_frame(conversion)),
@@ -39,22 +25,16 @@ impl OutputTransform {
 }
 
 /// `conversion` through each of `transforms`, in order.
-pub(super) fn apply_all(
+pub fn apply_all(
     conversion: Conversion,
     transforms: &[OutputTransform],
-    input: &Path,
-) -> Result<Conversion, ConvertError> {
-    transforms.iter().try_fold(conversion, |c, t| {
-        t.apply(c).map_err(|source| ConvertError::Pipeline {
-            input: input.to_path_buf(),
-            source: source.into(),
-        })
-    })
+) -> Result<Conversion, AnimationError> {
+    transforms.iter().try_fold(conversion, |c, t| t.apply(c))
 }
 
 /// `--in-place`: the animation gets a `root` joint; the BVH channels (a zero row for the new
 /// joint in paper 002's mode) and the report's unsmoothed rotations get it too.
-fn in_place(mut c: Conversion) -> Result<Conversion, crate::anim::AnimationError> {
+fn in_place(mut c: Conversion) -> Result<Conversion, AnimationError> {
     c.animation = c.animation.in_place()?;
     let frames = c.animation.frames();
     if let Some(euler_deg) = &mut c.euler_deg {
