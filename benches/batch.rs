@@ -42,6 +42,8 @@ fn main() {
         ..ConvertSettings::default()
     };
     settings.pipeline.fps = "60".parse().expect("fps");
+    // The synthetic log spins every sensor from its first sample: no body gives a heading.
+    settings.pipeline.heading = Some(imubake::mapping::HeadingPolicy::Sensors);
     let plan = imubake::convert::Plan::resolve(settings).expect("a plan");
     let library = discover(std::slice::from_ref(&input), DiscoverOptions::default())
         .expect("discover")

@@ -102,6 +102,8 @@ fn main() {
         ..ConvertSettings::default()
     };
     default.pipeline.fps = "60".parse().expect("fps");
+    // The synthetic log spins every sensor from its first sample: no body gives a heading.
+    default.pipeline.heading = Some(imubake::mapping::HeadingPolicy::Sensors);
     let with = |pipeline: PipelineOptions| ConvertSettings {
         pipeline,
         ..default.clone()

@@ -209,6 +209,8 @@ fn main() {
         ..ConvertSettings::default()
     };
     settings.pipeline.fps = "60".parse().expect("fps");
+    // The synthetic log spins every sensor from its first sample: no body gives a heading.
+    settings.pipeline.heading = Some(imubake::mapping::HeadingPolicy::Sensors);
     let time = |input: &Path, fusion: Option<&str>| {
         let out = dir.path().join("out");
         let mut settings = settings.clone();

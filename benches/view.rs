@@ -43,6 +43,8 @@ fn main() {
         ..ConvertSettings::default()
     };
     settings.pipeline.fps = "60".parse().expect("fps");
+    // The synthetic log spins every sensor from its first sample: no body gives a heading.
+    settings.pipeline.heading = Some(imubake::mapping::HeadingPolicy::Sensors);
     let out = dir.path().join("out");
     let plan = imubake::convert::Plan::resolve(settings).expect("a plan");
     let outcome = convert(&input, &out, &plan).expect("convert");

@@ -68,7 +68,9 @@ fn latencies(dir: &Path, data: &[u8], poll: Option<u64>, how: Drop, takes: usize
         .arg("--out")
         .arg(&out)
         .arg("--mapping")
-        .arg(mapping());
+        .arg(mapping())
+        // The synthetic log spins every sensor from its first sample: no body gives a heading.
+        .args(["--heading", "sensors"]);
     if let Some(ms) = poll {
         cmd.args(["--poll", &ms.to_string()]);
     }
@@ -136,6 +138,7 @@ fn main() {
             .arg(&out)
             .arg("--mapping")
             .arg(mapping())
+            .args(["--heading", "sensors"])
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .status()

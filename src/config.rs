@@ -22,6 +22,7 @@
 //! bind_frame: false      # the rest pose as frame 0, the take from frame 1
 //! in_place: false        # a root joint at floor level carries the hips' horizontal motion
 //! unsensed: interpolate  # joints between two sensors share the bend; or rest
+//! heading: estimate      # from the take, refused when unsure; or sensors (keep their north)
 //! sensor_rate_hz: 100    # the sensors' rate, for causal smoothing (else from their first samples)
 //! fusion: offline        # fuse raw readings even where the device gave orientations; or
 //!                        # madgwick:beta=0.1, mahony, trust, gyro, vqf:6d (no magnetometer)
@@ -89,6 +90,8 @@ pub struct Config {
     pub in_place: bool,
     /// What joints without a sensor do: interpolate (default) or rest.
     pub unsensed: Option<crate::pipeline::relative::Unsensed>,
+    /// Where the heading comes from: estimate (the mapping's default) or sensors.
+    pub heading: Option<crate::mapping::HeadingPolicy>,
     /// The sensors' sample rate, Hz, for causal smoothing's grid.
     #[serde(default, deserialize_with = "sensor_rate")]
     pub sensor_rate_hz: Option<f64>,
@@ -289,6 +292,7 @@ impl Config {
             bind_frame: self.bind_frame || below.bind_frame,
             in_place: self.in_place || below.in_place,
             unsensed: self.unsensed.or(below.unsensed),
+            heading: self.heading.or(below.heading),
             sensor_rate_hz: self.sensor_rate_hz.or(below.sensor_rate_hz),
             fusion: self.fusion.or(below.fusion),
             sensor_calibration: self.sensor_calibration.or(below.sensor_calibration),
@@ -341,6 +345,7 @@ impl Config {
         if let Some(u) = self.unsensed {
             s.pipeline.unsensed = u;
         }
+        s.pipeline.heading = self.heading;
         s.pipeline.sensor_rate_hz = self.sensor_rate_hz;
         s.pipeline.fusion = self.fusion.clone();
         s.read.format = self.input_format;

@@ -158,8 +158,10 @@ const RACY_NS: u64 = 2_000_000_000;
 /// sensor's origin and world; 4: filters that do not estimate the gyro bias (madgwick, trust,
 /// gyro) get it from the take's opening stillness; 5: the root mode `auto` is the default (the
 /// body walks when both legs are sensed); 6: joints between two sensed ones share the bend
-/// (`unsensed: interpolate`, the default).
-pub const FINGERPRINT_SCHEMA: u32 = 6;
+/// (`unsensed: interpolate`, the default); 7: a take whose heading is unsure is refused unless
+/// the mapping or `--heading` keeps the sensors' north (takes that converted fail, or convert
+/// with their heading declared).
+pub const FINGERPRINT_SCHEMA: u32 = 7;
 
 /// What decides a conversion's outputs besides the capture, in a stable serialisation: field
 /// names and values, not Rust's `Debug` text; the mapping and rig files by content, not by path.
@@ -187,6 +189,9 @@ struct FingerprintInput<'a> {
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     in_place: bool,
     unsensed: &'static str,
+    /// `--heading` / the config's, when set (the mapping's is in its hash).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    heading: Option<&'static str>,
     #[serde(skip_serializing_if = "Option::is_none")]
     sensor_rate_hz: Option<f64>,
     /// The fusion asked for, as its settings text (every parameter).
@@ -244,6 +249,7 @@ pub fn settings_fingerprint(plan: &Plan) -> String {
         bind_frame: settings.bind_frame,
         in_place: settings.in_place,
         unsensed: p.unsensed.label(),
+        heading: p.heading.map(|h| h.label()),
         sensor_rate_hz: p.sensor_rate_hz,
         fusion: p.fusion.as_ref().map(|f| f.to_string()),
         sensor_calibration: plan.sensor_calibration().map(|c| c.sha256.clone()),

@@ -92,6 +92,12 @@ pub struct SettingsArgs {
     /// between them) or rest (keep the rest rotation) [default: interpolate]
     #[arg(long, value_name = "MODE")]
     unsensed: Option<imubake::pipeline::relative::Unsensed>,
+    /// Where the subject's heading comes from: estimate (a sensor's declared `forward`, a known
+    /// mount, a second pose or walking; a take whose heading is unsure by more than 10° fails) or
+    /// sensors (keep the sensors' own north as the subject's facing, deliberately)
+    /// [default: the mapping's `heading`, else estimate]
+    #[arg(long, value_name = "SOURCE")]
+    heading: Option<imubake::mapping::HeadingPolicy>,
     /// The rig's rest pose as frame 0 and the take from frame 1, as engines retarget from
     #[arg(long)]
     bind_frame: bool,
@@ -186,6 +192,7 @@ impl SettingsArgs {
             bind_frame: self.bind_frame,
             in_place: self.in_place,
             unsensed: self.unsensed,
+            heading: self.heading,
             subject: self.subject.clone(),
             bone_map: self.bone_map.clone(),
             bvh_reference: self.bvh_reference,

@@ -9,7 +9,7 @@ use super::error::ConvertError;
 use super::orientations::resolve_world;
 use super::plan::{Mode, Plan, PlanMapping};
 use crate::mapping::{LegacyTargetRecord, MappingRecord};
-use crate::pipeline::{self, calibrate::HeadingSource};
+use crate::pipeline;
 use crate::take::Take;
 use crate::write::sidecar::pipeline_record;
 use crate::write::take::Conversion;
@@ -50,8 +50,7 @@ pub(super) fn convert(input: &Path, take: &Take, plan: &Plan) -> Result<Conversi
         },
         pipeline: pipeline_record(
             plan.pipeline(),
-            &HeadingSource::None,
-            0.0,
+            None,
             legacy.first_frame,
             Mode::Euler,
             legacy.root_mode,

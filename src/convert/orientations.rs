@@ -59,7 +59,7 @@ pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversio
                 source,
             }
         })?;
-    let heading = &converted.calibration;
+    let policy = options.heading.unwrap_or(mapping.heading);
     Ok(Conversion {
         euler_deg: None,
         mapping: mapping_record(&converted, rig, mapping, file),
@@ -67,8 +67,7 @@ pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversio
             fusion: fusion_record(&converted, options.fusion.is_some(), calibration_file),
             ..pipeline_record(
                 &options,
-                &heading.heading_source,
-                heading.heading.scaled_axis().y.to_degrees(),
+                Some((&converted.calibration, policy)),
                 converted.first_frame,
                 Mode::Orientations,
                 converted.root_mode,

@@ -5,7 +5,6 @@ use super::error::ConvertError;
 use super::plan::{Mode, Plan};
 use crate::anim::Animation;
 use crate::mapping::{MappingRecord, SensorRecord};
-use crate::pipeline::calibrate::HeadingSource;
 use crate::pipeline::root::RootMode;
 use crate::retarget::{Reference, SourceMotion};
 use crate::world::{World, WorldFrom};
@@ -96,14 +95,7 @@ impl Motion {
                 heading_aligned_by: None,
             })
             .collect();
-        let mut pipeline = pipeline_record(
-            plan.pipeline(),
-            &HeadingSource::None,
-            0.0,
-            0,
-            mode,
-            RootMode::Fixed,
-        );
+        let mut pipeline = pipeline_record(plan.pipeline(), None, 0, mode, RootMode::Fixed);
         pipeline.root = "source";
         pipeline.smoothing = None;
         pipeline.unsensed = "rest";

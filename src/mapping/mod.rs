@@ -128,11 +128,49 @@ pub struct SensorMapping {
     pub forward: Option<Vector3<f64>>,
 }
 
+/// Where the subject's heading comes from (the mapping's `heading`, `--heading`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HeadingPolicy {
+    /// From the take (a declared `forward`, a known mount, a second pose, walking); a take whose
+    /// heading is unsure is refused ([`crate::pipeline::calibrate`]).
+    #[default]
+    Estimate,
+    /// The sensors' own north is kept as the subject's facing, deliberately: for hardware whose
+    /// north is the subject's (a suit calibrated facing a known way) or when the axes of the turns
+    /// do not matter.
+    Sensors,
+}
+
+impl std::str::FromStr for HeadingPolicy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "estimate" => Ok(HeadingPolicy::Estimate),
+            "sensors" => Ok(HeadingPolicy::Sensors),
+            _ => Err(format!(
+                "`{s}`: expected `estimate` (from the take; refused when unsure) or `sensors` (keep the sensors' north)"
+            )),
+        }
+    }
+}
+
+impl HeadingPolicy {
+    pub fn label(self) -> &'static str {
+        match self {
+            HeadingPolicy::Estimate => "estimate",
+            HeadingPolicy::Sensors => "sensors",
+        }
+    }
+}
+
 /// A quaternion-mode mapping.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mapping {
     pub rig: Option<String>,
     pub world: Option<World>,
+    /// Where the heading comes from.
+    pub heading: HeadingPolicy,
     pub calibration: Option<CalibrationWindow>,
     /// In file order.
     pub sensors: Vec<SensorMapping>,
@@ -243,6 +281,11 @@ struct RawMapping {
     world: Option<String>,
     #[serde(default)]
     calibration: Option<RawCalibration>,
+    #[serde(default)]
+    heading: Option<String>,
+    /// Free text for people (why the heading is kept, which suit); not read.
+    #[serde(default, rename = "comment")]
+    _comment: Option<String>,
     sensors: OrderedMap<RawSensor>,
 }
 
@@ -387,7 +430,7 @@ pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingErro
         MappingError::new(
             file,
             "",
-            format!("{e}; expected {{\"rig\", \"world\", \"calibration\", \"sensors\": {{id: {{\"bone\", \"mount\", \"forward\"}}}}}}"),
+            format!("{e}; expected {{\"rig\", \"world\", \"calibration\", \"heading\", \"comment\", \"sensors\": {{id: {{\"bone\", \"mount\", \"forward\"}}}}}}"),
         )
     })?;
     let world = match raw.world {
@@ -471,9 +514,16 @@ pub fn parse_mapping(text: &str, file: &Path) -> Result<MappingFile, MappingErro
             format!("no sensors mapped; {}", what_to_write()),
         ));
     }
+    let heading = match &raw.heading {
+        None => HeadingPolicy::Estimate,
+        Some(h) => h
+            .parse()
+            .map_err(|e: String| MappingError::new(file, "heading", e))?,
+    };
     Ok(MappingFile::Quaternion(Mapping {
         rig: raw.rig,
         world,
+        heading,
         calibration,
         sensors,
     }))
@@ -540,6 +590,7 @@ impl Mapping {
         (!sensors.is_empty()).then(|| Mapping {
             rig: Some(rig.name().to_string()),
             world: None,
+            heading: HeadingPolicy::Estimate,
             calibration: Some(CalibrationWindow::default()),
             sensors,
         })

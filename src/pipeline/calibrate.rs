@@ -10,8 +10,25 @@
 //! A static pose cannot tell the subject's heading apart from unknown mounts, so the heading comes
 //! from what can tell it: a sensor whose forward axis is declared (that axis points where the body
 //! faces), else a sensor whose mount is known (its bone's pose orientation says where the body
-//! faces), else the direction of travel when the take starts by walking (read off the knees, see
+//! faces), else a second pose (each bone's turn between the poses, seen through its sensor), else
+//! the direction of travel when the take starts by walking (read off the knees, see
 //! [`heading_from_knees`]), else none (the sensors' own heading is kept: north → +Z).
+//!
+//! Every source comes with an estimated uncertainty `u` (degrees, about one standard deviation),
+//! and so does each sensor's alignment below. A heading that is off turns every calibrated bone's
+//! turns about wrong axes (a rotation since calibration is conjugated by the error, which scores
+//! "since calibration" cannot see), so [`Calibration::axes_uncertainty_deg`] above
+//! [`MAX_HEADING_UNCERTAINTY_DEG`] is refused by the pipeline unless the mapping keeps the
+//! sensors' north deliberately (`heading: sensors`). The estimates:
+//! - declared forward: `u = FORWARD_AXIS_DEG / f` (how well a strapped sensor's axis follows the
+//!   body's facing, divided by `f`, the horizontal fraction of the axis during the pose);
+//! - known mount: `u = KNOWN_MOUNT_DEG / f` (`f` of the bone's facing seen through the sensor);
+//! - second pose: per sensor `KNOWN_MOUNT_DEG / f` with `f` the smaller horizontal fraction of the
+//!   two turn axes; over several sensors the circular spread of their estimates `δ` over `√n`,
+//!   never below the best single one;
+//! - travel: `max(KNEE_AXIS_DEG, δ / √n, d / 2)`, `δ` the circular spread of the knees' flexion
+//!   axes (weighted by angle), `n` one independent look per leg per second of walk, `d` the angle
+//!   between the left and the right leg's estimates.
 //!
 //! Sensors without a heading of their own (fused without a magnetometer, "6D") each sit in a world
 //! turned about the vertical by an unknown `A_i⁻¹`, which a mount cannot absorb: it would turn
@@ -28,7 +45,7 @@
 
 use super::PipelineError;
 use super::sources::Sources;
-use crate::mapping::{CalibrationWindow, Mapping, Mount, PoseRef, ResolvedSensor};
+use crate::mapping::{CalibrationWindow, HeadingPolicy, Mapping, Mount, PoseRef, ResolvedSensor};
 use crate::rig::Rig;
 use crate::take::Track;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -42,6 +59,8 @@ pub enum HeadingSource {
     KnownMount {
         sensor: String,
     },
+    /// The bones' turns between two calibration poses, seen through their sensors.
+    SecondPose,
     /// Walking after calibration: the knees' flexion axis points to the subject's left.
     Travel,
     /// No sensor has a heading of its own: each was aligned to the pose on its own.
@@ -54,6 +73,7 @@ impl HeadingSource {
         match self {
             HeadingSource::DeclaredForward { .. } => "declared-forward",
             HeadingSource::KnownMount { .. } => "mounts",
+            HeadingSource::SecondPose => "second-pose",
             HeadingSource::Travel => "travel",
             HeadingSource::Aligned => "per-sensor",
             HeadingSource::None => "none",
@@ -66,7 +86,10 @@ impl HeadingSource {
             HeadingSource::DeclaredForward { sensor } | HeadingSource::KnownMount { sensor } => {
                 Some(sensor)
             }
-            HeadingSource::Travel | HeadingSource::Aligned | HeadingSource::None => None,
+            HeadingSource::SecondPose
+            | HeadingSource::Travel
+            | HeadingSource::Aligned
+            | HeadingSource::None => None,
         }
     }
 }
@@ -102,6 +125,12 @@ pub struct Calibration {
     /// Rotation about +Y applied to every sensor (rig world).
     pub heading: UnitQuaternion<f64>,
     pub heading_source: HeadingSource,
+    /// The heading's estimated uncertainty, degrees (module docs); infinite when it is unknown.
+    pub heading_uncertainty_deg: f64,
+    /// Per mapped sensor: how far about the vertical its bone's turn axes may be off, degrees —
+    /// the heading's uncertainty for a `calibrate` mount on a sensor with north, its alignment's
+    /// for a sensor without (infinite when unaligned), 0 for a known mount with north.
+    pub axes_uncertainty_deg: Vec<f64>,
     /// `q_bone_sensor` per mapped sensor, in mapping order.
     pub mounts: Vec<UnitQuaternion<f64>>,
     /// `A_i` per mapped sensor: the turn about +Y that aligns a sensor without a heading of its
@@ -112,6 +141,39 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// `Err` when a bone's axes are less sure than [`MAX_HEADING_UNCERTAINTY_DEG`] and `policy`
+    /// does not keep the sensors' north deliberately.
+    pub fn check_heading(
+        &self,
+        sensors: &[ResolvedSensor],
+        policy: HeadingPolicy,
+        mapping_file: &str,
+    ) -> Result<(), PipelineError> {
+        match self.least_sure(sensors) {
+            Some((sensor, u))
+                if policy == HeadingPolicy::Estimate && !(u <= MAX_HEADING_UNCERTAINTY_DEG) =>
+            {
+                Err(PipelineError::HeadingUnsure {
+                    file: mapping_file.to_string(),
+                    heading: self.heading_source.label(),
+                    uncertainty_deg: u,
+                    sensor: sensor.to_string(),
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// The sensor whose bone's axes are least sure, and how unsure (degrees); `None` without
+    /// sensors.
+    pub fn least_sure<'a>(&self, sensors: &'a [ResolvedSensor]) -> Option<(&'a str, f64)> {
+        sensors
+            .iter()
+            .zip(&self.axes_uncertainty_deg)
+            .map(|(s, u)| (s.sensor.as_str(), *u))
+            .reduce(|a, b| if b.1 > a.1 { b } else { a })
+    }
+
     /// `q_world_bone = H ⊗ A_i ⊗ q_rig_sensor ⊗ q_bone_sensor⁻¹` for sensor `i`.
     pub fn bone_world(&self, i: usize, q_rig_sensor: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
         self.heading * self.align[i] * q_rig_sensor * self.mounts[i].inverse()
@@ -174,7 +236,18 @@ pub fn calibrate(
             pose_world: pose_world(rig, sensors, &p.pose, mapping_file)?,
         }),
     };
-    let travel = heading_from_knees(&knee_samples(rig, sensors, tracks, &first.held, w));
+    let pose_local = rig
+        .pose(&w.pose.label())
+        .map(|p| p.local)
+        .unwrap_or_default();
+    let travel = heading_from_knees(&knee_samples(
+        rig,
+        &pose_local,
+        sensors,
+        tracks,
+        &first.held,
+        w,
+    ));
     let calibration = solve(sensors, &first, second.as_ref(), travel);
     warnings.extend(calibration.warnings.iter().cloned());
     Ok(calibration)
@@ -196,6 +269,13 @@ fn without_window(sensors: &[ResolvedSensor]) -> Calibration {
     Calibration {
         heading: UnitQuaternion::identity(),
         heading_source: HeadingSource::None,
+        heading_uncertainty_deg: f64::INFINITY,
+        // Every mount is known (a `calibrate` one would have made a window): a sensor with north
+        // has its bone's axes right; one without is unaligned.
+        axes_uncertainty_deg: sensors
+            .iter()
+            .map(|s| if s.own_heading { f64::INFINITY } else { 0.0 })
+            .collect(),
         mounts: sensors
             .iter()
             .map(|s| match s.mount {
@@ -474,40 +554,74 @@ fn held_over(
     mean_rotation(&inside)
 }
 
+/// A heading (or a sensor's alignment) less sure than this is refused (module docs), degrees.
+pub const MAX_HEADING_UNCERTAINTY_DEG: f64 = 10.0;
+/// How well a strapped sensor's declared `forward` axis follows the body's facing, degrees.
+pub const FORWARD_AXIS_DEG: f64 = 5.0;
+/// How well a known mount (a sensor fixed in a housing) is known, degrees.
+pub const KNOWN_MOUNT_DEG: f64 = 3.0;
+/// How close the knee's flexion axis is to the body's left–right axis, degrees.
+pub const KNEE_AXIS_DEG: f64 = 3.0;
+
 /// A sensor turning further than this from its mean during the calibration window is reported.
 pub const MOVED_DURING_CALIBRATION_DEG: f64 = 5.0;
 
 /// How long after the calibration window the walk is read for the heading from travel.
 pub const TRAVEL_WINDOW_S: f64 = 4.0;
 
-/// A joint whose own offset and whose child (or end site) both point down at rest: a shank
-/// standing at rest, as the heading from travel's knee hinge needs.
-fn stands_down(rig: &Rig, joint: usize) -> bool {
-    let down = |v: &nalgebra::Vector3<f64>| v.norm() > 0.0 && -v.y > 0.8 * v.norm();
+/// A shank standing in the calibration pose, as the heading from travel's knee hinge needs: in
+/// the pose's world (`pose_positions`, the joints' positions with the pose held), the knee is
+/// above the shank's joint below it (or its end site) and the shank points mostly down. Read in
+/// the pose, not in the rig's zero pose, which need not stand.
+fn stands_down(
+    rig: &Rig,
+    pose_positions: &[Vector3<f64>],
+    pose_world: &[UnitQuaternion<f64>],
+    joint: usize,
+) -> bool {
     let j = &rig.joints()[joint];
+    if j.parent.is_none() {
+        return false;
+    }
     let below = rig
         .children(joint)
-        .map(|c| rig.joints()[c].offset)
-        .chain(j.end_site);
-    j.parent.is_some() && down(&j.offset) && below.into_iter().any(|v| down(&v))
+        .map(|c| pose_positions[c])
+        .chain(
+            j.end_site
+                .map(|e| pose_positions[joint] + pose_world[joint] * e),
+        )
+        .next();
+    let Some(below) = below else {
+        return false;
+    };
+    let v = below - pose_positions[joint];
+    v.norm() > 0.0 && -v.y > 0.8 * v.norm()
 }
 
-/// For every mapped thigh–shank pair whose sensors both have a heading of their own, both
-/// sensors' rotations since calibration (rig world) at the shank's samples in the seconds after
-/// the window.
+/// One leg's samples for the heading from travel: at each of the shank's samples in the seconds
+/// after the window, the time (s) and the thigh's and the shank's rotations since calibration
+/// (rig world).
+pub type KneeSamples = Vec<(f64, UnitQuaternion<f64>, UnitQuaternion<f64>)>;
+
+/// For every mapped thigh–shank pair whose sensors both have a heading of their own and whose
+/// shank stands in the calibration pose (`pose_local`, the pose's local rotations), the leg's
+/// [`KneeSamples`].
 fn knee_samples(
     rig: &Rig,
+    pose_local: &[UnitQuaternion<f64>],
     sensors: &[ResolvedSensor],
     tracks: &[Track<UnitQuaternion<f64>>],
     held: &[UnitQuaternion<f64>],
     window: &CalibrationWindow,
-) -> Vec<Vec<(UnitQuaternion<f64>, UnitQuaternion<f64>)>> {
+) -> Vec<KneeSamples> {
     let start = window.end_s();
     let end = start + TRAVEL_WINDOW_S;
     let mut legs = Vec::new();
     let anatomy = crate::rig::anatomy::Anatomy::of(rig);
+    let pose_world = rig.world_rotations(pose_local);
+    let pose_positions = rig.world_positions(pose_local, Vector3::zeros());
     for (s, shank) in sensors.iter().enumerate() {
-        // The rig's shanks and thighs are its anatomy's; the leg must stand at rest.
+        // The rig's shanks and thighs are its anatomy's; the leg must stand in the pose.
         let Some(side) = crate::rig::anatomy::Side::BOTH
             .into_iter()
             .find(|&side| anatomy.limb(side, crate::rig::anatomy::Limb::Shank) == Some(shank.bone))
@@ -520,7 +634,10 @@ fn knee_samples(
         let Some(t) = sensors.iter().position(|o| o.bone == thigh) else {
             continue;
         };
-        if !stands_down(rig, shank.bone) || shank.own_heading || sensors[t].own_heading {
+        if !stands_down(rig, &pose_positions, &pose_world, shank.bone)
+            || shank.own_heading
+            || sensors[t].own_heading
+        {
             continue;
         }
         let leg = tracks[s]
@@ -528,7 +645,7 @@ fn knee_samples(
             .filter(|(time, _)| *time > start && *time <= end)
             .map(|(time, q)| {
                 let thigh = tracks[t].sample_at(time);
-                (thigh * held[t].inverse(), q * held[s].inverse())
+                (time, thigh * held[t].inverse(), q * held[s].inverse())
             })
             .collect();
         legs.push(leg);
@@ -558,29 +675,95 @@ pub fn heading_towards_plus_z(d: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
     Some(UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -psi))
 }
 
-/// The heading from walking: a knee flexes about the subject's left axis whatever the mounts, so
-/// the mean rotation vector of each shank relative to its thigh (both as world-frame rotations
-/// since calibration) points left; forward = left × up. `knees` holds, per leg, the thigh's and
-/// the shank's rotations since calibration at common instants during the walk (rig world).
-/// `None` when the knees barely bend (under 10° on average): not walking.
-pub fn heading_from_knees(
-    knees: &[Vec<(UnitQuaternion<f64>, UnitQuaternion<f64>)>],
-) -> Option<UnitQuaternion<f64>> {
+/// The heading from walking, and its uncertainty in degrees (module docs): a knee flexes about
+/// the subject's left axis whatever the mounts, so the mean rotation vector of each shank relative
+/// to its thigh (both as world-frame rotations since calibration) points left; forward =
+/// left × up. `None` when the knees barely bend (under 10° on average): not walking.
+pub fn heading_from_knees(knees: &[KneeSamples]) -> Option<(UnitQuaternion<f64>, f64)> {
     let mut sum = Vector3::zeros();
+    let mut lengths = 0.0;
     let mut count = 0usize;
+    let mut looks = 0.0;
+    let mut per_leg = Vec::new();
     for leg in knees {
-        for (thigh, shank) in leg {
-            let knee = shank * thigh.inverse();
-            let v = knee.scaled_axis();
-            sum += Vector3::new(v.x, 0.0, v.z);
+        let mut leg_sum = Vector3::zeros();
+        for (_, thigh, shank) in leg {
+            let v = (shank * thigh.inverse()).scaled_axis();
+            let v = Vector3::new(v.x, 0.0, v.z);
+            leg_sum += v;
+            lengths += v.norm();
             count += 1;
+        }
+        sum += leg_sum;
+        if let (Some(first), Some(last)) = (leg.first(), leg.last()) {
+            // One independent look per leg per second (about a stride).
+            looks += (last.0 - first.0).max(1.0);
+        }
+        if leg_sum.norm() > 0.0 {
+            per_leg.push(leg_sum);
         }
     }
     if count == 0 || (sum.norm() / count as f64).to_degrees() < 10.0 {
         return None;
     }
     let left = sum.normalize();
-    heading_towards_plus_z(&left.cross(&Vector3::y()))
+    let heading = heading_towards_plus_z(&left.cross(&Vector3::y()))?;
+    // The weighted mean resultant length R gives the circular spread sqrt(-2 ln R).
+    let resultant = (sum.norm() / lengths).clamp(1e-12, 1.0);
+    let spread_deg = (-2.0 * resultant.ln()).sqrt().to_degrees();
+    let legs_apart_deg = match per_leg.as_slice() {
+        [a, b] => a.angle(b).to_degrees(),
+        _ => 0.0,
+    };
+    let uncertainty = KNEE_AXIS_DEG
+        .max(spread_deg / looks.max(1.0).sqrt())
+        .max(legs_apart_deg / 2.0);
+    Some((heading, uncertainty))
+}
+
+/// The horizontal fraction of `d` (1 when horizontal, 0 when vertical).
+fn horizontal_fraction(d: &Vector3<f64>) -> f64 {
+    let n = d.norm();
+    if n == 0.0 {
+        0.0
+    } else {
+        (d.x * d.x + d.z * d.z).sqrt() / n
+    }
+}
+
+/// The heading from a second pose: for each sensor with a heading of its own whose bone turns
+/// about a horizontal enough axis between the poses, the turn about +Y taking the sensor's turn
+/// onto the bone's ([`yaw_between`]); their circular mean, and its uncertainty (module docs).
+fn heading_from_second_pose(
+    sensors: &[ResolvedSensor],
+    first: &Held,
+    second: &Held,
+) -> Option<(UnitQuaternion<f64>, f64)> {
+    let turn = |a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>| (b * a.inverse()).scaled_axis();
+    let mut looks = Vec::new();
+    for (i, s) in sensors.iter().enumerate() {
+        if s.own_heading {
+            continue;
+        }
+        let sensor_turn = turn(&first.held[i], &second.held[i]);
+        let bone_turn = turn(&first.pose_world[i], &second.pose_world[i]);
+        if let Some(y) = yaw_between(&sensor_turn, &bone_turn) {
+            let f = horizontal_fraction(&sensor_turn).min(horizontal_fraction(&bone_turn));
+            looks.push((y.scaled_axis().y, KNOWN_MOUNT_DEG / f));
+        }
+    }
+    let best = looks.iter().map(|l| l.1).fold(f64::INFINITY, f64::min);
+    let (sin, cos) = looks
+        .iter()
+        .fold((0.0, 0.0), |(s, c), (a, _)| (s + a.sin(), c + a.cos()));
+    if looks.is_empty() {
+        return None;
+    }
+    let n = looks.len() as f64;
+    let resultant = ((sin * sin + cos * cos).sqrt() / n).clamp(1e-12, 1.0);
+    let spread_deg = (-2.0 * resultant.ln()).sqrt().to_degrees();
+    let heading = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), sin.atan2(cos));
+    Some((heading, best.max(spread_deg / n.sqrt())))
 }
 
 /// Solves heading, alignments and mounts.
@@ -595,7 +778,7 @@ pub fn solve(
     sensors: &[ResolvedSensor],
     first: &Held,
     second: Option<&Held>,
-    travel: Option<UnitQuaternion<f64>>,
+    travel: Option<(UnitQuaternion<f64>, f64)>,
 ) -> Calibration {
     let (held, pose_world) = (&first.held, &first.pose_world);
     let mut warnings = Vec::new();
@@ -608,7 +791,8 @@ pub fn solve(
         let facing = held[i] * axis;
         match heading_towards_plus_z(&facing) {
             Some(h) => {
-                heading = Some((h, HeadingSource::DeclaredForward { sensor: s.sensor.clone() }));
+                let u = FORWARD_AXIS_DEG / horizontal_fraction(&facing);
+                heading = Some((h, HeadingSource::DeclaredForward { sensor: s.sensor.clone() }, u));
                 break;
             }
             None => warnings.push(format!(
@@ -629,33 +813,51 @@ pub fn solve(
             let bone_world_unturned = held[i] * mount.inverse();
             let facing = bone_world_unturned * (pose_world[i].inverse() * Vector3::z());
             if let Some(h) = heading_towards_plus_z(&facing) {
+                let u = KNOWN_MOUNT_DEG / horizontal_fraction(&facing);
                 heading = Some((
                     h,
                     HeadingSource::KnownMount {
                         sensor: s.sensor.clone(),
                     },
+                    u,
                 ));
                 break;
             }
         }
     }
-    let heading = heading.or_else(|| travel.map(|h| (h, HeadingSource::Travel)));
-    let (heading, heading_source) =
-        heading.unwrap_or((UnitQuaternion::identity(), HeadingSource::None));
+    // 3. A second pose, 4. the direction of travel.
+    let heading = heading
+        .or_else(|| {
+            second
+                .and_then(|p| heading_from_second_pose(sensors, first, p))
+                .map(|(h, u)| (h, HeadingSource::SecondPose, u))
+        })
+        .or_else(|| travel.map(|(h, u)| (h, HeadingSource::Travel, u)));
+    let (heading, heading_source, heading_uncertainty_deg) = heading.unwrap_or((
+        UnitQuaternion::identity(),
+        HeadingSource::None,
+        f64::INFINITY,
+    ));
 
-    // 3. Sensors without a heading of their own, each aligned by Y_i = H ⊗ A_i.
+    // 5. Sensors without a heading of their own, each aligned by Y_i = H ⊗ A_i.
     let mut align = vec![UnitQuaternion::identity(); sensors.len()];
     let mut alignment = vec![Alignment::OwnHeading; sensors.len()];
+    let mut aligned_within = vec![f64::INFINITY; sensors.len()];
     for (i, s) in sensors.iter().enumerate().filter(|(_, s)| s.own_heading) {
         let by_mount = match s.mount {
             Mount::Fixed(mount) => {
-                Some(twist_about_y(&(pose_world[i] * mount * held[i].inverse())))
+                let y = twist_about_y(&(pose_world[i] * mount * held[i].inverse()));
+                let facing = held[i] * mount.inverse() * (pose_world[i].inverse() * Vector3::z());
+                Some((y, KNOWN_MOUNT_DEG / horizontal_fraction(&facing)))
             }
             Mount::Calibrate => None,
         };
         let by_forward = || {
-            s.forward
-                .and_then(|axis| heading_towards_plus_z(&(held[i] * axis)))
+            s.forward.and_then(|axis| {
+                let facing = held[i] * axis;
+                heading_towards_plus_z(&facing)
+                    .map(|y| (y, FORWARD_AXIS_DEG / horizontal_fraction(&facing)))
+            })
         };
         let mut by_second_pose = || {
             second.and_then(|p| {
@@ -672,7 +874,8 @@ pub fn solve(
                         bone_turn.norm().to_degrees(),
                     ));
                 }
-                y
+                let f = horizontal_fraction(&sensor_turn).min(horizontal_fraction(&bone_turn));
+                y.map(|y| (y, KNOWN_MOUNT_DEG / f))
             })
         };
         let (y, how) = if let Some(y) = by_mount {
@@ -684,20 +887,31 @@ pub fn solve(
         } else {
             (None, Alignment::None)
         };
-        if let Some(y) = y {
+        if let Some((y, u)) = y {
             align[i] = heading.inverse() * y;
+            aligned_within[i] = u;
         }
         alignment[i] = how;
     }
     warnings.extend(unaligned_warning(sensors, &alignment, second.is_some()));
-    let heading_source = if heading_source == HeadingSource::None
+    let all_aligned = heading_source == HeadingSource::None
         && sensors.iter().all(|s| s.own_heading)
-        && alignment.iter().any(|a| *a != Alignment::None)
-    {
-        HeadingSource::Aligned
+        && alignment.iter().any(|a| *a != Alignment::None);
+    let (heading_source, heading_uncertainty_deg) = if all_aligned {
+        let worst = aligned_within.iter().copied().fold(0.0, f64::max);
+        (HeadingSource::Aligned, worst)
     } else {
-        heading_source
+        (heading_source, heading_uncertainty_deg)
     };
+    let axes_uncertainty_deg = sensors
+        .iter()
+        .zip(&aligned_within)
+        .map(|(s, within)| match (s.own_heading, &s.mount) {
+            (true, _) => *within,
+            (false, Mount::Calibrate) => heading_uncertainty_deg,
+            (false, Mount::Fixed(_)) => 0.0,
+        })
+        .collect();
     let mounts = sensors
         .iter()
         .enumerate()
@@ -709,6 +923,8 @@ pub fn solve(
     Calibration {
         heading,
         heading_source,
+        heading_uncertainty_deg,
+        axes_uncertainty_deg,
         mounts,
         align,
         alignment,

@@ -32,6 +32,16 @@ pub enum PipelineError {
         pose: String,
         known: String,
     },
+    #[error("{file}: {}", heading_unsure_message(.heading, *.uncertainty_deg, .sensor))]
+    HeadingUnsure {
+        file: String,
+        /// Where the heading came from (`none` when nothing gave one).
+        heading: &'static str,
+        /// Degrees; infinite when unknown.
+        uncertainty_deg: f64,
+        /// The sensor whose bone's axes are least sure.
+        sensor: String,
+    },
     #[error("--trim {trim} keeps no frame of the take (frames run from 0 s to {end_take_s:.3} s)")]
     EmptyTrim { trim: Trim, end_take_s: f64 },
     #[error(
@@ -70,4 +80,22 @@ pub enum RecalibrateError {
     /// Boxed: the pipeline's error holds this one.
     #[error(transparent)]
     Window(Box<PipelineError>),
+}
+
+/// The refusal of an unsure heading, naming the ways out.
+pub fn heading_unsure_message(heading: &str, uncertainty_deg: f64, sensor: &str) -> String {
+    let how = if uncertainty_deg.is_finite() {
+        format!("unsure by about {uncertainty_deg:.0}° (from `{heading}`)")
+    } else if heading == "none" {
+        "unknown: no sensor declares `forward`, no mount is known, there is no second pose and the take does not start by walking".to_string()
+    } else {
+        format!("unknown for some sensors (`{heading}`)")
+    };
+    format!(
+        "the subject's heading is {how}, so bones would turn about wrong axes (sensor `{sensor}` is the least sure; more than {max}° is refused). \
+         Ways out: declare `forward` on one sensor (the sensor axis that points where the body faces in the calibration pose, e.g. `\"forward\": \"+y\"` on the pelvis sensor); \
+         hold a second calibration pose (`calibration.second`, e.g. `skiing` after `npose`); \
+         or keep the sensors' own north as the subject's facing deliberately: `\"heading\": \"sensors\"` in the mapping, `heading: sensors` in the config, or `--heading sensors`",
+        max = super::calibrate::MAX_HEADING_UNCERTAINTY_DEG
+    )
 }

@@ -32,7 +32,7 @@ pub use error::{PipelineError, RecalibrateError};
 pub use options::{PipelineOptions, Trim};
 
 use crate::anim::{Animation, AnimationBuilder, Pose};
-use crate::mapping::{CalibrationWindow, Mapping, ResolvedSensor};
+use crate::mapping::{CalibrationWindow, HeadingPolicy, Mapping, ResolvedSensor};
 use crate::rig::Rig;
 use crate::take::Take;
 use crate::take::Track;
@@ -119,16 +119,17 @@ fn run_on(
         return run_causal(input.take(), rig, mapping, mapping_file, options);
     }
     let (file, w) = (mapping_file.display().to_string(), &mut Vec::new());
-    // What stage 1 may take away from an owned take.
+    // What stage 1 may take away from an owned take, and where the heading may come from.
     let take = (
         input.take().last_time_s(),
         input.take().recalibrations_s().to_vec(),
+        options.heading.unwrap_or(mapping.heading),
     );
     let (world, sources, window) = stage(debug_span!("sources"), || {
         sources_and_window(input, rig, mapping, mapping_file, options, w)
     })?;
     let (calibration, later) = stage(debug_span!("calibrate"), || {
-        calibrations(rig, &sources, window.as_ref(), (take.0, &take.1), &file, w)
+        calibrations(rig, &sources, window.as_ref(), take, &file, w)
     })?;
     let Sources {
         sensors,
@@ -175,19 +176,21 @@ fn stage<R>(span: tracing::Span, f: impl FnOnce() -> R) -> R {
 
 /// Stage 2: the calibration from the window, and a live session's recalibrations — the same
 /// pose held again, each solved on its own window and applying from the window's end (`take`:
-/// the take's last time and its recalibration times, seconds).
+/// the take's last time and its recalibration times, seconds, and the heading policy). Each is
+/// refused when its heading is unsure ([`Calibration::check_heading`]).
 fn calibrations(
     rig: &Rig,
     sources: &Sources,
     window: Option<&CalibrationWindow>,
-    take: (f64, &[f64]),
+    take: (f64, Vec<f64>, HeadingPolicy),
     file: &str,
     warnings: &mut Vec<String>,
 ) -> Result<(Calibration, Vec<(f64, Calibration)>), PipelineError> {
-    let (take_last_s, recalibrations_s) = take;
+    let (take_last_s, recalibrations_s, policy) = take;
     let calibration = calibrate::calibrate(rig, sources, window, take_last_s, file, warnings)?;
+    calibration.check_heading(&sources.sensors, policy, file)?;
     let mut later = Vec::new();
-    for &t in recalibrations_s {
+    for t in recalibrations_s {
         let Some(again) = window.map(|w| w.starting_at(t)) else {
             break;
         };
@@ -198,6 +201,7 @@ fn calibrations(
             continue;
         }
         let c = calibrate::calibrate(rig, sources, Some(&again), take_last_s, file, warnings)?;
+        c.check_heading(&sources.sensors, policy, file)?;
         later.push((again.end_s(), c));
     }
     Ok((calibration, later))
@@ -435,6 +439,8 @@ fn run_causal(
         animated[s.bone] = true;
     }
     let calibration = stream.calibration().cloned().expect("solved at the end");
+    let policy = options.heading.unwrap_or(mapping.heading);
+    calibration.check_heading(&sources.sensors, policy, &file)?;
     let root_mode = stream.root_mode();
     drop(stream);
     let held = calibrate::held_pose(rig, window.as_ref());

@@ -78,6 +78,9 @@ pub struct PipelineOptions {
     pub unsensed: relative::Unsensed,
     /// Corrections of raw readings before fusion, per sensor id (`--sensor-calibration`).
     pub sensor_calibration: Option<std::sync::Arc<crate::intrinsics::SensorCalibration>>,
+    /// Where the heading comes from when the user set it (`--heading`, the config file): over
+    /// the mapping's.
+    pub heading: Option<crate::mapping::HeadingPolicy>,
 }
 
 impl Default for PipelineOptions {
@@ -95,6 +98,7 @@ impl Default for PipelineOptions {
             fusion: None,
             unsensed: relative::Unsensed::Interpolate,
             sensor_calibration: None,
+            heading: None,
         }
     }
 }

@@ -3,9 +3,10 @@
 
 use crate::fps::Fps;
 use crate::inspect::SensorSummaries;
+use crate::mapping::HeadingPolicy;
 use crate::mapping::MappingRecord;
 use crate::mapping::{CalibrationRecord, Mapping, Mount, SensorRecord};
-use crate::pipeline::calibrate::HeadingSource;
+use crate::pipeline::calibrate::Calibration;
 use crate::pipeline::sources::Origin;
 use crate::pipeline::{self, PipelineOptions, root::RootMode};
 use crate::rig::Rig;
@@ -134,6 +135,12 @@ pub struct PipelineRecord {
     pub heading_sensor: Option<String>,
     /// Heading applied about +Y, degrees.
     pub heading_deg: f64,
+    /// The heading's estimated uncertainty, degrees; `null` when it is unknown
+    /// (`crate::pipeline::calibrate`'s module docs give the estimates).
+    pub heading_uncertainty_deg: Option<f64>,
+    /// `estimate` (from the take, refused when unsure) or `sensors` (the sensors' north kept
+    /// deliberately).
+    pub heading_policy: &'static str,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub trim: Option<TrimRecord>,
     /// `"quaternion"`, or `"legacy-euler"` for paper 002's Listing-2 mappings.
@@ -303,10 +310,10 @@ pub fn fusion_record(
 }
 
 /// The sidecar's `pipeline`: what was done, in which mode.
+/// `heading`: the calibration's, `None` for modes without one (the sidecar says `none`).
 pub fn pipeline_record(
     options: &PipelineOptions,
-    heading: &HeadingSource,
-    heading_deg: f64,
+    heading: Option<(&Calibration, HeadingPolicy)>,
     first_frame: usize,
     mode: Mode,
     root: RootMode,
@@ -320,9 +327,13 @@ pub fn pipeline_record(
         } else {
             options.unsensed.label()
         },
-        heading: heading.label(),
-        heading_sensor: heading.sensor().map(str::to_string),
-        heading_deg,
+        heading: heading.map_or("none", |(c, _)| c.heading_source.label()),
+        heading_sensor: heading.and_then(|(c, _)| c.heading_source.sensor().map(str::to_string)),
+        heading_deg: heading.map_or(0.0, |(c, _)| c.heading.scaled_axis().y.to_degrees()),
+        heading_uncertainty_deg: heading
+            .map(|(c, _)| c.heading_uncertainty_deg)
+            .filter(|u| u.is_finite()),
+        heading_policy: heading.map_or("none", |(_, p)| p.label()),
         trim: options.trim.map(|t| TrimRecord {
             start_s: t.start_s,
             end_s: (t.end_s < f64::MAX).then_some(t.end_s),
