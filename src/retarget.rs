@@ -17,9 +17,12 @@
 //! L_j = W_parent(j)⁻¹ ⊗ W_j.
 //!
 //! The root position is the source root's, scaled by the ratio of hip heights, k = h_target /
-//! h_source (h: the root's rest height above the rest pose's lowest point, end sites included),
-//! on the target's floor: p(t) = k · p_s(t) + (0, floor_target, 0). The source's floor is taken
-//! as its world's y = 0 (BVH's convention, and Blender's import).
+//! h_source, and stood on the target's floor: p(t) = k · (p_s(t) − (0, floor_source, 0)) +
+//! (0, floor_target, 0). The source's hip height and floor are read in a standing frame — the
+//! reference frame (`--bvh-reference frame:N`), else the first — as the root's height above that
+//! frame's lowest point (end sites included) and that lowest point: never in its zero pose,
+//! which need not stand (a skeleton whose bones lie along +X, a root below its feet), nor from
+//! its world's y = 0. The target's are its rest pose's.
 //!
 //! Frames are resampled to the output rate: frame n at n / fps reads the source at t · fps_source,
 //! between two frames by slerp (rotations) and linear interpolation (the root).
@@ -177,16 +180,15 @@ pub struct SourceMotion {
     pub fps: Fps,
     /// `world[frame][joint]`: q_world_joint.
     pub world: Vec<Vec<UnitQuaternion<f64>>>,
-    /// The root joint's position per frame, source units; the floor is y = 0.
+    /// The root joint's position per frame, source units (the floor where a standing frame's
+    /// lowest point is: [`SourceMotion::standing`]).
     pub roots: Vec<Vector3<f64>>,
-    pub hip_height: f64,
 }
 
 impl SourceMotion {
     /// A BVH file's motion (its forward kinematics), at `fps` (its `Frame Time`'s rate).
     pub fn of_bvh(bvh: &Bvh, fps: Fps) -> SourceMotion {
-        let (rest, lowest) = rest_heights(bvh);
-        let root_y = rest.first().map_or(0.0, |r| r.y);
+        let rest = rest_positions(bvh);
         let mut world = Vec::with_capacity(bvh.frame_count());
         let mut roots = Vec::with_capacity(bvh.frame_count());
         for n in 0..bvh.frame_count() {
@@ -205,7 +207,6 @@ impl SourceMotion {
             fps,
             world,
             roots,
-            hip_height: root_y - lowest,
         }
     }
 
@@ -222,12 +223,31 @@ impl SourceMotion {
                 .map(|n| rig.world_rotations(&anim.pose_at(n)))
                 .collect(),
             roots: anim.root_positions().to_vec(),
-            hip_height: rig.root_height(),
         }
     }
 }
 
 impl SourceMotion {
+    /// Frame `n`'s lowest point (joints and End Sites) and the root's height above it, source
+    /// units: the floor and the hip height of a standing frame.
+    pub fn standing(&self, n: usize) -> (f64, f64) {
+        let world = &self.world[n];
+        let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(self.names.len());
+        let mut low = f64::INFINITY;
+        for (j, parent) in self.parents.iter().enumerate() {
+            let p = match parent {
+                Some(p) => pos[*p] + world[*p] * (self.rest[j] - self.rest[*p]),
+                None => self.roots[n],
+            };
+            low = low.min(p.y);
+            if let Some(e) = self.end_sites[j] {
+                low = low.min((p + world[j] * e).y);
+            }
+            pos.push(p);
+        }
+        (low, self.roots[n].y - low)
+    }
+
     /// The source skeleton's anatomy.
     pub fn anatomy(&self) -> Anatomy {
         Anatomy::resolve(&Skeleton {
@@ -403,20 +423,13 @@ pub fn coverage_warnings(
     warnings
 }
 
-/// Each joint's rest position (every channel zero; the root at its OFFSET), file units, and the
-/// lowest point of the rest pose (end sites included).
-fn rest_heights(bvh: &Bvh) -> (Vec<Vector3<f64>>, f64) {
+/// Each joint's rest position (every channel zero; the root at its OFFSET), file units.
+fn rest_positions(bvh: &Bvh) -> Vec<Vector3<f64>> {
     let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(bvh.joints().len());
-    let mut lowest = f64::INFINITY;
     for j in bvh.joints() {
-        let p = j.parent.map_or(Vector3::zeros(), |p| pos[p]) + j.offset;
-        lowest = lowest.min(p.y);
-        if let Some(end) = j.end_site {
-            lowest = lowest.min(p.y + end.y);
-        }
-        pos.push(p);
+        pos.push(j.parent.map_or(Vector3::zeros(), |p| pos[p]) + j.offset);
     }
-    (pos, lowest)
+    pos
 }
 
 /// The source's motion on `target` at `fps` (see the module documentation).
@@ -455,8 +468,13 @@ pub fn retarget(
         .collect();
 
     let h_target = target.root_height();
-    let k = if source.hip_height > 1e-9 && h_target > 0.0 {
-        h_target / source.hip_height
+    let standing = match reference {
+        Reference::Frame(n) => n,
+        Reference::Rest => 0,
+    };
+    let (floor_source, hip_height) = source.standing(standing);
+    let k = if hip_height > 1e-9 && h_target > 0.0 {
+        h_target / hip_height
     } else {
         1.0
     };
@@ -489,7 +507,8 @@ pub fn retarget(
             };
             local[j].push(parent.inverse() * w[j]);
         }
-        let p = source.roots[i].lerp(&source.roots[i1], a) * k;
+        let p = source.roots[i].lerp(&source.roots[i1], a);
+        let p = Vector3::new(p.x, p.y - floor_source, p.z) * k;
         root_positions.push(Vector3::new(p.x, p.y + floor, p.z));
     }
     let animated = (0..bones.len()).map(|j| source_of[j].is_some()).collect();
@@ -644,7 +663,6 @@ mod tests {
             fps: Fps::new(30, 1).unwrap(),
             world: Vec::new(),
             roots: Vec::new(),
-            hip_height: 1.0,
         };
         let spine1 = rig.joint_index("Spine1").unwrap();
         let spine2 = rig.joint_index("Spine2").unwrap();

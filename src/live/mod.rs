@@ -596,6 +596,12 @@ pub fn run(
                 && last_ok.elapsed() >= Duration::from_secs(1)
             {
                 let state = match running.as_ref().map(|r| r.poses.status()) {
+                    // A heading too unsure to trust: calibrated, but waiting for a better one.
+                    Some(StreamStatus::Running { .. })
+                        if running.as_ref().is_some_and(|r| r.poses.heading_unsure()) =>
+                    {
+                        vmc::CalibrationState::WaitingForCalibrating
+                    }
                     Some(StreamStatus::Running { .. }) => vmc::CalibrationState::Calibrated,
                     Some(StreamStatus::Calibrating { .. }) => vmc::CalibrationState::Calibrating,
                     None => vmc::CalibrationState::WaitingForCalibrating,

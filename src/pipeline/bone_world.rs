@@ -74,6 +74,8 @@ mod tests {
         let calibration = Calibration {
             heading,
             heading_source: HeadingSource::None,
+            heading_uncertainty_deg: f64::INFINITY,
+            axes_uncertainty_deg: vec![0.0],
             mounts: vec![mount],
             align: vec![UnitQuaternion::identity()],
             alignment: vec![crate::pipeline::calibrate::Alignment::OwnHeading],

@@ -26,9 +26,10 @@
 //! - second pose: per sensor `KNOWN_MOUNT_DEG / f` with `f` the smaller horizontal fraction of the
 //!   two turn axes; over several sensors the circular spread of their estimates `δ` over `√n`,
 //!   never below the best single one;
-//! - travel: `max(KNEE_AXIS_DEG, δ / √n, d / 2)`, `δ` the circular spread of the knees' flexion
-//!   axes (weighted by angle), `n` one independent look per leg per second of walk, `d` the angle
-//!   between the left and the right leg's estimates.
+//! - travel: `max(KNEE_AXIS_DEG, δ / √n)`, `δ` the circular spread of each knee's flexion axes
+//!   about its own mean (weighted by angle, pooled over the legs), `n` one independent look per
+//!   leg per second of walk; with one leg, at least `ONE_LEG_DEG` (a leg turned out turns its
+//!   knee's axis, which the other leg's mirror turn cancels in the two legs' bisector).
 //!
 //! Sensors without a heading of their own (fused without a magnetometer, "6D") each sit in a world
 //! turned about the vertical by an unknown `A_i⁻¹`, which a mount cannot absorb: it would turn
@@ -562,6 +563,9 @@ pub const FORWARD_AXIS_DEG: f64 = 5.0;
 pub const KNOWN_MOUNT_DEG: f64 = 3.0;
 /// How close the knee's flexion axis is to the body's left–right axis, degrees.
 pub const KNEE_AXIS_DEG: f64 = 3.0;
+/// How far one leg's knee axis may turn from the body's left–right axis by the leg turning out
+/// (toe-out and hip rotation in gait, about 5–10°), degrees: what one leg alone cannot cancel.
+pub const ONE_LEG_DEG: f64 = 8.0;
 
 /// A sensor turning further than this from its mean during the calibration window is reported.
 pub const MOVED_DURING_CALIBRATION_DEG: f64 = 5.0;
@@ -678,46 +682,56 @@ pub fn heading_towards_plus_z(d: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
 /// The heading from walking, and its uncertainty in degrees (module docs): a knee flexes about
 /// the subject's left axis whatever the mounts, so the mean rotation vector of each shank relative
 /// to its thigh (both as world-frame rotations since calibration) points left; forward =
-/// left × up. `None` when the knees barely bend (under 10° on average): not walking.
+/// left × up. With both legs, the bisector of the two legs' mean axes: a leg turned out (toe-out,
+/// hip rotation) turns its knee axis one way and the other leg's the mirror way, which the
+/// bisector cancels. `None` when the knees barely bend (under 10° on average): not walking.
 pub fn heading_from_knees(knees: &[KneeSamples]) -> Option<(UnitQuaternion<f64>, f64)> {
-    let mut sum = Vector3::zeros();
-    let mut lengths = 0.0;
+    let mut flexion = 0.0;
     let mut count = 0usize;
     let mut looks = 0.0;
-    let mut per_leg = Vec::new();
+    let mut left = Vector3::zeros();
+    // Each leg's axes' spread about its own mean (squared, radians), weighted by its samples.
+    let mut spread_sq = 0.0;
+    let mut legs = 0usize;
     for leg in knees {
-        let mut leg_sum = Vector3::zeros();
+        let (mut sum, mut lengths) = (Vector3::zeros(), 0.0);
         for (_, thigh, shank) in leg {
             let v = (shank * thigh.inverse()).scaled_axis();
             let v = Vector3::new(v.x, 0.0, v.z);
-            leg_sum += v;
+            sum += v;
             lengths += v.norm();
-            count += 1;
         }
-        sum += leg_sum;
+        flexion += sum.norm();
+        count += leg.len();
+        if sum.norm() == 0.0 {
+            continue;
+        }
+        // The weighted mean resultant length R gives the circular spread sqrt(-2 ln R).
+        let resultant = (sum.norm() / lengths).clamp(1e-12, 1.0);
+        spread_sq += -2.0 * resultant.ln() * leg.len() as f64;
+        left += sum.normalize();
+        legs += 1;
         if let (Some(first), Some(last)) = (leg.first(), leg.last()) {
             // One independent look per leg per second (about a stride).
             looks += (last.0 - first.0).max(1.0);
         }
-        if leg_sum.norm() > 0.0 {
-            per_leg.push(leg_sum);
-        }
     }
-    if count == 0 || (sum.norm() / count as f64).to_degrees() < 10.0 {
+    if count == 0 || legs == 0 || (flexion / count as f64).to_degrees() < 10.0 {
         return None;
     }
-    let left = sum.normalize();
-    let heading = heading_towards_plus_z(&left.cross(&Vector3::y()))?;
-    // The weighted mean resultant length R gives the circular spread sqrt(-2 ln R).
-    let resultant = (sum.norm() / lengths).clamp(1e-12, 1.0);
-    let spread_deg = (-2.0 * resultant.ln()).sqrt().to_degrees();
-    let legs_apart_deg = match per_leg.as_slice() {
-        [a, b] => a.angle(b).to_degrees(),
-        _ => 0.0,
-    };
+    let heading = heading_towards_plus_z(&left.normalize().cross(&Vector3::y()))?;
+    let spread_deg = (spread_sq / count as f64).sqrt().to_degrees();
+    let one_leg = if legs == 1 { ONE_LEG_DEG } else { 0.0 };
     let uncertainty = KNEE_AXIS_DEG
         .max(spread_deg / looks.max(1.0).sqrt())
-        .max(legs_apart_deg / 2.0);
+        .max(one_leg);
+    tracing::debug!(
+        spread_deg,
+        looks,
+        legs,
+        uncertainty,
+        "the heading from walking"
+    );
     Some((heading, uncertainty))
 }
 
@@ -1061,14 +1075,134 @@ mod tests {
                     turn * rot(Vector3::x(), -20.0 * (i as f64 * 0.2).sin()) * turn.inverse();
                 let flex =
                     turn * rot(Vector3::x(), 30.0 + 20.0 * (i as f64 * 0.2).sin()) * turn.inverse();
-                (thigh, flex * thigh)
+                (i as f64 * 0.08, thigh, flex * thigh)
             })
             .collect();
-        let h = heading_from_knees(&[leg]).unwrap();
+        let (h, u) = heading_from_knees(std::slice::from_ref(&leg)).unwrap();
         assert!((h * turn * Vector3::z() - Vector3::z()).norm() < 1e-9);
         // Straight knees: not walking.
-        let still = vec![(UnitQuaternion::identity(), rot(Vector3::x(), 2.0)); 10];
+        let still = vec![(0.0, UnitQuaternion::identity(), rot(Vector3::x(), 2.0)); 10];
         assert!(heading_from_knees(&[still]).is_none());
+        // One leg alone: it may be turned out.
+        assert!((u - ONE_LEG_DEG).abs() < 1e-9, "{u}");
+        // Both legs turned out by 12°, mirror-wise (toe-out): their bisector still faces +Z,
+        // and each leg's axis holds still, so only the knee axis's own spread is left.
+        let turned = |deg: f64| {
+            let out = rot(Vector3::y(), deg);
+            leg.iter()
+                .map(|(t, a, b)| (*t, out * a * out.inverse(), out * b * out.inverse()))
+                .collect::<Vec<_>>()
+        };
+        let (h, u) = heading_from_knees(&[turned(12.0), turned(-12.0)]).unwrap();
+        assert!((h * turn * Vector3::z() - Vector3::z()).norm() < 1e-9);
+        assert!((u - KNEE_AXIS_DEG).abs() < 1e-9, "{u}");
+        // A knee whose axis wobbles ±30° through the stride: the spread over √(legs × seconds).
+        let wobbly: Vec<_> = leg
+            .iter()
+            .enumerate()
+            .map(|(i, (t, a, b))| {
+                let w = rot(Vector3::y(), if i % 2 == 0 { 30.0 } else { -30.0 });
+                (*t, w * a * w.inverse(), w * b * w.inverse())
+            })
+            .collect();
+        let (_, u) = heading_from_knees(&[wobbly.clone(), wobbly]).unwrap();
+        assert!(u > KNEE_AXIS_DEG && u < 30.0, "{u}");
+    }
+
+    #[test]
+    fn a_second_pose_gives_the_heading_of_sensors_with_north() {
+        // The subject faces +X (rig world, before heading): H must turn +X to +Z. Two sensors
+        // with unknown mounts on bones that turn 60° about the subject's left (−Z here, +X once
+        // faced to +Z) from the first pose to the second.
+        let h_true = rot(Vector3::y(), -90.0);
+        let mounts = [
+            rot(Vector3::new(1.0, 2.0, 3.0), 70.0),
+            rot(Vector3::new(-2.0, 1.0, 0.5), 130.0),
+        ];
+        let pose1 = [rot(Vector3::y(), 0.0), rot(Vector3::x(), 10.0)];
+        let pose2: Vec<_> = pose1.iter().map(|p| rot(Vector3::x(), 60.0) * p).collect();
+        // What the sensors read (rig world before heading): H⁻¹ ⊗ P ⊗ m.
+        let read = |p: &UnitQuaternion<f64>, m: &UnitQuaternion<f64>| h_true.inverse() * p * m;
+        let first = Held {
+            held: pose1.iter().zip(&mounts).map(|(p, m)| read(p, m)).collect(),
+            pose_world: pose1.to_vec(),
+        };
+        let second = Held {
+            held: pose2.iter().zip(&mounts).map(|(p, m)| read(p, m)).collect(),
+            pose_world: pose2.clone(),
+        };
+        let sensors = vec![
+            sensor(Mount::Calibrate, None),
+            sensor(Mount::Calibrate, None),
+        ];
+        let cal = solve(&sensors, &first, Some(&second), None);
+        assert_eq!(cal.heading_source, HeadingSource::SecondPose);
+        assert!(cal.heading.angle_to(&h_true) < 1e-9);
+        // Both turns about a horizontal axis: the known-mount accuracy, agreeing exactly.
+        assert!((cal.heading_uncertainty_deg - KNOWN_MOUNT_DEG).abs() < 1e-6);
+        for (i, m) in mounts.iter().enumerate() {
+            assert!(cal.mounts[i].angle_to(m) < 1e-9);
+        }
+        assert!(
+            cal.check_heading(&sensors, HeadingPolicy::Estimate, "m.json")
+                .is_ok()
+        );
+    }
+
+    #[test]
+    fn an_unknown_heading_is_refused_unless_the_sensors_north_is_kept() {
+        let held = rot(Vector3::new(0.3, 1.0, 0.2), 50.0);
+        let sensors = vec![sensor(Mount::Calibrate, None)];
+        let cal = solve(
+            &sensors,
+            &self::held(held, UnitQuaternion::identity()),
+            None,
+            None,
+        );
+        assert_eq!(cal.heading_source, HeadingSource::None);
+        assert!(cal.heading_uncertainty_deg.is_infinite());
+        let e = cal
+            .check_heading(&sensors, HeadingPolicy::Estimate, "m.json")
+            .unwrap_err()
+            .to_string();
+        for way_out in [
+            "`forward`",
+            "calibration.second",
+            "\"heading\": \"sensors\"",
+            "--heading sensors",
+        ] {
+            assert!(e.contains(way_out), "{e}");
+        }
+        assert!(
+            cal.check_heading(&sensors, HeadingPolicy::Sensors, "m.json")
+                .is_ok()
+        );
+        // A declared forward axis tilted 59° from the horizontal: 5° / cos 59° = 9.7°, kept.
+        let tilted = Vector3::new(0.0, 59f64.to_radians().sin(), 59f64.to_radians().cos());
+        let s = vec![sensor(Mount::Calibrate, Some(tilted))];
+        let cal = solve(
+            &s,
+            &self::held(UnitQuaternion::identity(), UnitQuaternion::identity()),
+            None,
+            None,
+        );
+        assert!((cal.heading_uncertainty_deg - 5.0 / 59f64.to_radians().cos()).abs() < 1e-9);
+        assert!(
+            cal.check_heading(&s, HeadingPolicy::Estimate, "m.json")
+                .is_ok()
+        );
+        let steeper = Vector3::new(0.0, 62f64.to_radians().sin(), 62f64.to_radians().cos());
+        let s = vec![sensor(Mount::Calibrate, Some(steeper))];
+        let cal = solve(
+            &s,
+            &self::held(UnitQuaternion::identity(), UnitQuaternion::identity()),
+            None,
+            None,
+        );
+        assert!(
+            cal.check_heading(&s, HeadingPolicy::Estimate, "m.json")
+                .is_err()
+        );
     }
 
     #[test]

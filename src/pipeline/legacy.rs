@@ -388,8 +388,13 @@ pub fn run(
         super::root::RootMode::Auto => super::root::RootMode::Fixed,
         mode => mode,
     };
-    let (roots, contacts) =
-        super::root::root_positions(&rig, root_mode, &local, options.fps.frame_time_s());
+    let (roots, contacts) = super::root::root_positions(
+        &rig,
+        root_mode,
+        &local,
+        options.fps.frame_time_s(),
+        &vec![nalgebra::UnitQuaternion::identity(); rig.len()],
+    );
     let mut animation = Animation::new(rig, options.fps, local, animated, roots)?;
     if let Some(c) = &contacts {
         animation = animation.with_contacts(c.per_frame.clone())?;

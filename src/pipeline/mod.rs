@@ -323,7 +323,7 @@ fn root_stage(
 ) -> Result<(Animation, RootMode, Option<root::Contacts>), PipelineError> {
     let root_mode = root::resolve(options.root, rig, animated);
     let (roots, contacts) =
-        root::root_positions(rig, root_mode, &local, options.fps.frame_time_s());
+        root::root_positions(rig, root_mode, &local, options.fps.frame_time_s(), held);
     let moving = relative::moving(rig, animated, options.unsensed, held);
     let mut animation = Animation::new(rig.clone(), options.fps, local, moving, roots)?;
     if let Some(c) = &contacts {

@@ -19,8 +19,13 @@
 //! at calibration (identity for the rest pose; a BVH rig's `frame:N` may bend the spine), since
 //! that is the one moment the sensors say how the body stood. Between two sensors the chain then
 //! shares the change from that pose: with `H = h_1 ⊗ … ⊗ h_k ⊗ h_D` the pose's rotation from `A`
-//! to `D` and `E = H⁻¹ ⊗ R`, `q_local_i = h_i ⊗ exp(f_i · log E)`; `D` keeps the remainder, so at
-//! calibration (`R = H`) every joint is exactly in the pose.
+//! to `D`, the change `M = R ⊗ H⁻¹` (in `A`'s frame) and `P_i = h_1 ⊗ … ⊗ h_i` the pose's rotation
+//! from `A` to `u_i`, `q_local_i = exp(f_i · log(P_{i−1}⁻¹ ⊗ M ⊗ P_{i−1})) ⊗ h_i`: each joint turns
+//! by its share of `M` about the same axis of the body, seen in its parent's frame, so the
+//! product down the chain is `exp(F_k · log M) ⊗ P_k` whatever the joints' own frames are (a rig
+//! and its bone-along-X twin bend alike). `D` keeps the remainder, so at calibration (`R = H`)
+//! every joint is exactly in the pose; with the rest pose held (`h = 1`) this is
+//! `exp(f_i · log R)`.
 
 use crate::rig::Rig;
 use nalgebra::UnitQuaternion;
@@ -69,6 +74,8 @@ pub struct Between {
     pub fraction: f64,
     pub held: UnitQuaternion<f64>,
     pub span_held_inverse: UnitQuaternion<f64>,
+    /// `P_{i−1}`: the held pose's rotation from the ancestor to this joint's parent.
+    pub parent_held: UnitQuaternion<f64>,
 }
 
 /// How each joint turns when it has no sensor: its share of the bend between two sensed joints
@@ -138,6 +145,8 @@ pub fn plan(rig: &Rig, sensed: &[bool], mode: Unsensed, held: &[UnitQuaternion<f
                 fraction,
                 held: held[u],
                 span_held_inverse: held_world[d].inverse() * held_world[a],
+                parent_held: held_world[a].inverse()
+                    * joints[u].parent.map_or(held_world[a], |p| held_world[p]),
             });
         }
     }
@@ -271,12 +280,11 @@ pub fn frame_to_local(
                     .flatten()
                     .and_then(|b| {
                         let d = world(b.descendant)?;
-                        let change = b.span_held_inverse * frame_world[b.ancestor].inverse() * d;
+                        let change = frame_world[b.ancestor].inverse() * d * b.span_held_inverse;
+                        let seen = b.parent_held.inverse() * change * b.parent_held;
                         Some(
-                            b.held
-                                * UnitQuaternion::from_scaled_axis(
-                                    change.scaled_axis() * b.fraction,
-                                ),
+                            UnitQuaternion::from_scaled_axis(seen.scaled_axis() * b.fraction)
+                                * b.held,
                         )
                     })
                     .unwrap_or(plan.held[j]);

@@ -286,9 +286,16 @@ fn smooth(x: f64) -> f64 {
 
 impl RootCore {
     /// A core for `rig` at `fps`, in `mode` (resolved with [`resolve`] first; `auto` acts as
-    /// `feet` here).
-    pub fn new(rig: &Rig, mode: RootMode, frame_time_s: f64) -> RootCore {
-        let (low, high) = rig.rest_extent();
+    /// `feet` here). `reference`: the local rotations of the pose the subject calibrated in (the
+    /// rest pose's identities without one): the floor and the standing height `h` are that pose's,
+    /// with the hips at the rig's root offset, not the zero pose's, which need not stand.
+    pub fn new(
+        rig: &Rig,
+        mode: RootMode,
+        frame_time_s: f64,
+        reference: &[UnitQuaternion<f64>],
+    ) -> RootCore {
+        let (low, high) = rig.extent_in(reference);
         let mode = if mode == RootMode::Auto {
             RootMode::Feet
         } else {
@@ -576,9 +583,10 @@ pub fn root_positions(
     mode: RootMode,
     local: &[Vec<UnitQuaternion<f64>>],
     frame_time_s: f64,
+    reference: &[UnitQuaternion<f64>],
 ) -> (Vec<Vector3<f64>>, Option<Contacts>) {
     let frames = local.first().map_or(0, Vec::len);
-    let mut core = RootCore::new(rig, mode, frame_time_s);
+    let mut core = RootCore::new(rig, mode, frame_time_s, reference);
     if core.mode() == RootMode::Fixed {
         return (vec![rig.joints()[0].offset; frames], None);
     }
@@ -713,7 +721,7 @@ mod tests {
         let rig = load_rig("mixamo").unwrap();
         let rest = vec![UnitQuaternion::identity(); rig.len()];
         for mode in [RootMode::Fixed, RootMode::Ground, RootMode::Feet] {
-            let mut core = RootCore::new(&rig, mode, 1.0 / 60.0);
+            let mut core = RootCore::new(&rig, mode, 1.0 / 60.0, &rest);
             for _ in 0..30 {
                 let f = core.push(&rest);
                 assert!(

@@ -59,6 +59,10 @@ pub struct PoseStream {
     sensors: Vec<ResolvedSensor>,
     calibration: CalibrationCore,
     mapping_file: String,
+    /// Where the heading comes from ([`Calibration::check_heading`]).
+    heading_policy: crate::mapping::HeadingPolicy,
+    /// The calibration in force has a heading too unsure to trust (said in the warnings).
+    heading_unsure: bool,
     /// Samples (sensor, time, `q_rig_sensor`) kept until the calibration is solved.
     pending: Vec<(usize, f64, UnitQuaternion<f64>)>,
     smoothers: Vec<CausalSmoother>,
@@ -137,11 +141,14 @@ impl PoseStream {
                 rig,
                 super::root::resolve(options.root, rig, &sensed),
                 options.fps.frame_time_s(),
+                &held,
             ),
             to_rig: world.to_rig(),
             sensors,
             calibration,
             mapping_file: mapping_file.to_string(),
+            heading_policy: options.heading.unwrap_or_default(),
+            heading_unsure: false,
             pending: Vec::new(),
             smoothers,
             resampler,
@@ -193,7 +200,33 @@ impl PoseStream {
             &mapping_file.display().to_string(),
         )?;
         stream.warnings = warnings;
+        stream.heading_policy = options.heading.unwrap_or(mapping.heading);
         Ok(stream)
+    }
+
+    /// Whether the calibration in force has a heading too unsure to trust: the stream goes on
+    /// with the sensors' own north (a live subject cannot be refused), and says so.
+    pub fn heading_unsure(&self) -> bool {
+        self.heading_unsure
+    }
+
+    /// After a calibration is solved: a heading unsure beyond the limit is said loudly, with the
+    /// ways out, and kept in [`PoseStream::heading_unsure`].
+    fn note_heading(&mut self) {
+        let Some(c) = self.calibration.result() else {
+            return;
+        };
+        match c.check_heading(&self.sensors, self.heading_policy, &self.mapping_file) {
+            Ok(()) => self.heading_unsure = false,
+            Err(e) => {
+                self.heading_unsure = true;
+                self.warnings.push(format!(
+                    "HEADING UNKNOWN: {e}. Streaming with the sensors' own north meanwhile; with a \
+                     second pose in the mapping (`calibration.second`), hold both poses again \
+                     (`c`, or a calibration request) to fix it"
+                ));
+            }
+        }
     }
 
     /// The index [`PoseStream::push`] takes for the sensor with this id, if it drives a bone.
@@ -403,6 +436,7 @@ impl PoseStream {
 
     /// Sends the samples kept during calibration on through the stages.
     fn replay(&mut self, on_pose: &mut impl FnMut(&Pose)) {
+        self.note_heading();
         let pending = std::mem::take(&mut self.pending);
         for &(sensor, t, q) in &pending {
             self.feed(sensor, t, q);
@@ -479,6 +513,7 @@ impl PoseStream {
     fn take_over(&mut self) {
         let r = self.recalibration.take().expect("under way");
         self.calibration = r.core;
+        self.note_heading();
         for (sensor, t, q) in r.waiting {
             self.feed(sensor, t, q);
         }

@@ -197,8 +197,9 @@ pub fn parse_rig(text: &str, path: &Path) -> Result<Rig, RigLoadError> {
     })
 }
 
-/// A BVH file's hierarchy as a rig, its frames as poses `frame:N`. BVH has no unit: a rig taller
-/// than 3 units at rest is taken to be in centimetres, else metres.
+/// A BVH file's hierarchy as a rig, its frames as poses `frame:N`. BVH has no unit: a rig whose
+/// zero pose spans more than 3 units along any axis is taken to be in centimetres, else metres
+/// (any axis: a zero pose need not stand).
 pub fn bvh_rig(bytes: &[u8], path: &Path) -> Result<Rig, RigLoadError> {
     let bvh = crate::bvh::parse(bytes).map_err(|e| RigLoadError::Parse {
         path: path.to_path_buf(),
@@ -212,10 +213,14 @@ pub fn bvh_rig(bytes: &[u8], path: &Path) -> Result<Rig, RigLoadError> {
         source,
     };
     let probe = bvh.to_rig(&name, LengthUnit::Metres).map_err(invalid)?;
-    let heights: Vec<f64> = probe.rest_positions().iter().map(|p| p.y).collect();
-    let height = heights.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
-        - heights.iter().cloned().fold(f64::INFINITY, f64::min);
-    let units = if height > 3.0 {
+    let rest = probe.rest_positions();
+    let span = (0..3)
+        .map(|axis| {
+            let along = rest.iter().map(|p| p[axis]);
+            along.clone().fold(f64::NEG_INFINITY, f64::max) - along.fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max);
+    let units = if span > 3.0 {
         LengthUnit::Centimetres
     } else {
         LengthUnit::Metres

@@ -335,10 +335,19 @@ impl Rig {
     /// The rest pose's lowest and highest points' heights (joints and End Sites), rig units, the
     /// root at its offset.
     pub fn rest_extent(&self) -> (f64, f64) {
-        let rest = self.rest_positions();
+        self.extent_in(&vec![UnitQuaternion::identity(); self.joints.len()])
+    }
+
+    /// A pose's lowest and highest points' heights (joints and End Sites), rig units, the root at
+    /// its offset; `local`: the pose's local rotations. In the pose a subject calibrates in, this
+    /// is the floor and the standing height, whether or not the rig's zero pose stands.
+    pub fn extent_in(&self, local: &[UnitQuaternion<f64>]) -> (f64, f64) {
+        let world = self.world_rotations(local);
+        let pos = self.world_positions(local, self.joints[0].offset);
         let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
         for (i, j) in self.joints.iter().enumerate() {
-            for y in std::iter::once(rest[i].y).chain(j.end_site.map(|e| rest[i].y + e.y)) {
+            let end = j.end_site.map(|e| (pos[i] + world[i] * e).y);
+            for y in std::iter::once(pos[i].y).chain(end) {
                 low = low.min(y);
                 high = high.max(y);
             }

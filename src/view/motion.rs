@@ -368,20 +368,20 @@ fn sidecar_beside(path: &Path) -> Option<(PathBuf, Sidecar)> {
 /// A BVH without a sidecar: centimetres when its rest pose is taller than 3 units (no body is 3 m
 /// tall, every body is taller than 3 cm), else metres.
 fn guess_units(bvh: &Bvh) -> LengthUnit {
-    let rest: Vec<f64> = {
-        let mut y = Vec::with_capacity(bvh.joints().len());
-        for j in bvh.joints() {
-            let parent = j.parent.map_or(0.0, |p| y[p]);
-            y.push(parent + j.offset.y);
-        }
-        y
-    };
-    let (lo, hi) = rest
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &y| {
-            (lo.min(y), hi.max(y))
-        });
-    if hi - lo > 3.0 {
+    // The zero pose's joints (offsets summed down the tree): its largest span along any axis, as
+    // a zero pose need not stand.
+    let mut rest: Vec<nalgebra::Vector3<f64>> = Vec::with_capacity(bvh.joints().len());
+    for j in bvh.joints() {
+        let parent = j.parent.map_or(nalgebra::Vector3::zeros(), |p| rest[p]);
+        rest.push(parent + j.offset);
+    }
+    let span = (0..3)
+        .map(|axis| {
+            let along = rest.iter().map(|p| p[axis]);
+            along.clone().fold(f64::NEG_INFINITY, f64::max) - along.fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max);
+    if span > 3.0 {
         LengthUnit::Centimetres
     } else {
         LengthUnit::Metres

@@ -6,6 +6,7 @@
 mod common;
 
 mod anatomy_schemes;
+mod any_rig;
 mod body_model;
 mod broad;
 mod bvh_retarget;

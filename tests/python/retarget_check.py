@@ -3,7 +3,9 @@
 (tests/blender_addon/bvh_reference.py): for each (source joint, target bone) pair, the angle
 between the target bone's world rotation (its rest is the identity) and the source joint's world
 rotation since the reference pose, D = S(t) · S(ref)ᵀ; and the hips' position against the source
-root's scaled by the hip heights, k · p_s(t) + (0, floor, 0).
+root's scaled by the hip heights and stood on the target's floor, k · (p_s(t) − (0, floor_s, 0)) +
+(0, floor, 0), the source's hip height and floor read in a standing frame (the reference frame,
+else the first), the target's in its rest pose.
 
     python retarget_check.py SOURCE.bvh TARGET.bvh PAIRS.json STEP REF
 
@@ -32,14 +34,25 @@ def rest_heights(bvh):
     return pos, lowest
 
 
+def standing(bvh, frame):
+    """A standing frame's lowest point (joints and end sites) and the root's height above it."""
+    w = bvh.world(frame)
+    ys = [p[1] for _, p in w.values()]
+    for j in bvh.joints:
+        if j["name"] is None:
+            r, p = w[bvh.joints[j["parent"]]["name"]]
+            ys.append((p + r @ j["offset"])[1])
+    low = min(ys)
+    return low, w[bvh.names[0]][1][1] - low
+
+
 def main():
     src, tgt = Bvh(sys.argv[1]), Bvh(sys.argv[2])
     pairs = json.load(open(sys.argv[3]))
     step, ref = int(sys.argv[4]), sys.argv[5]
     ref_world = None if ref == "rest" else src.world(int(ref))
-    src_rest, src_low = rest_heights(src)
+    floor_src, h_src = standing(src, 0 if ref == "rest" else int(ref))
     tgt_rest, tgt_low = rest_heights(tgt)
-    h_src = src_rest[0][1] - src_low
     h_tgt = tgt_rest[0][1] - tgt_low
     k = h_tgt / h_src
     floor = tgt_low
@@ -57,7 +70,7 @@ def main():
             d = sw[s][0] if ref_world is None else sw[s][0] @ ref_world[s][0].T
             key = f"{s}->{t}"
             per_pair[key] = max(per_pair[key], angle_deg(tw[t][0], d))
-        expected = k * sw[root_src][1] + np.array([0.0, floor, 0.0])
+        expected = k * (sw[root_src][1] - np.array([0.0, floor_src, 0.0])) + np.array([0.0, floor, 0.0])
         worst_root = max(worst_root, float(np.linalg.norm(tw[root_tgt][1] - expected)))
     json.dump({"worst_deg": max(per_pair.values()), "per_pair": per_pair,
                "worst_root_m": worst_root, "frames": frames, "k": k}, sys.stdout)
