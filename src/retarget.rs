@@ -18,11 +18,14 @@
 //!
 //! The root position is the source root's, scaled by the ratio of hip heights, k = h_target /
 //! h_source, and stood on the target's floor: p(t) = k · (p_s(t) − (0, floor_source, 0)) +
-//! (0, floor_target, 0). The source's hip height and floor are read in a standing frame — the
-//! reference frame (`--bvh-reference frame:N`), else the first — as the root's height above that
-//! frame's lowest point (end sites included) and that lowest point: never in its zero pose,
-//! which need not stand (a skeleton whose bones lie along +X, a root below its feet), nor from
-//! its world's y = 0. The target's are its rest pose's.
+//! (0, floor_target, 0). Both hip heights are read in one standing frame — the reference frame
+//! (`--bvh-reference frame:N`), else the first — as the root's height above that frame's lowest
+//! point (end sites included): the source's in its own pose, the target's in the pose it takes
+//! there, so that the target's feet stand on its floor in that frame whatever the two skeletons'
+//! proportions. Never in a zero pose, which need not stand (a skeleton whose bones lie along +X,
+//! a root below its feet), nor from the source world's y = 0. The target's floor is its rest
+//! pose's lowest point, and no frame goes below it: where the pose's lowest point (joints and end
+//! sites) would, the root rises by the difference.
 //!
 //! Frames are resampled to the output rate: frame n at n / fps reads the source at t · fps_source,
 //! between two frames by slerp (rotations) and linear interpolation (the root).
@@ -467,28 +470,42 @@ pub fn retarget(
         })
         .collect();
 
-    let h_target = target.root_height();
     let standing = match reference {
         Reference::Frame(n) => n,
         Reference::Rest => 0,
     };
+    let bones = target.joints();
+    let mut source_of = vec![None; bones.len()];
+    for (i, &(_, t)) in pairs.iter().enumerate() {
+        source_of[t] = Some(i);
+    }
+    // The target in the standing frame's pose: its hips' height above its lowest point there.
+    let standing_local = {
+        let mut w = vec![UnitQuaternion::identity(); bones.len()];
+        let mut local = Vec::with_capacity(bones.len());
+        for (j, bone) in bones.iter().enumerate() {
+            let parent = bone.parent.map_or(UnitQuaternion::identity(), |p| w[p]);
+            w[j] = source_of[j].map_or(parent, |m: usize| change[standing][m]);
+            local.push(parent.inverse() * w[j]);
+        }
+        local
+    };
+    let (low_target, _) = target.extent_in(&standing_local);
+    let h_target = bones[0].offset.y - low_target;
     let (floor_source, hip_height) = source.standing(standing);
     let k = if hip_height > 1e-9 && h_target > 0.0 {
         h_target / hip_height
     } else {
         1.0
     };
-    let floor = target.joints()[0].offset.y - h_target;
+    // The target's floor is its rest pose's.
+    let floor = bones[0].offset.y - target.root_height();
     let duration = source.fps.frame_time_of(frames as u64 - 1);
     let out_frames = fps.frame_count(duration) as usize;
-    let bones = target.joints();
-    let mut source_of = vec![None; bones.len()];
-    for (i, &(_, t)) in pairs.iter().enumerate() {
-        source_of[t] = Some(i);
-    }
     let mut local = vec![Vec::with_capacity(out_frames); bones.len()];
     let mut root_positions = Vec::with_capacity(out_frames);
     let mut w = vec![UnitQuaternion::identity(); bones.len()];
+    let mut pose = vec![UnitQuaternion::identity(); bones.len()];
     for n in 0..out_frames {
         // Where frame n falls in the source: between frames i and i + 1, a of the way.
         let u = fps.frame_time_of(n as u64) * source.fps.as_f64();
@@ -505,11 +522,16 @@ pub fn retarget(
                 Some(m) => slerp_shortest(&change[i][m], &change[i1][m], a),
                 None => parent,
             };
-            local[j].push(parent.inverse() * w[j]);
+            pose[j] = parent.inverse() * w[j];
+            local[j].push(pose[j]);
         }
         let p = source.roots[i].lerp(&source.roots[i1], a);
         let p = Vector3::new(p.x, p.y - floor_source, p.z) * k;
-        root_positions.push(Vector3::new(p.x, p.y + floor, p.z));
+        // Never below the floor: a source's own markers dip under its ground, and the target's
+        // limbs, of other proportions, reach lower; the hips rise by what would go under.
+        let (low, _) = target.extent_in(&pose);
+        let under = floor - (p.y + floor + low - bones[0].offset.y);
+        root_positions.push(Vector3::new(p.x, p.y + floor + under.max(0.0), p.z));
     }
     let animated = (0..bones.len()).map(|j| source_of[j].is_some()).collect();
     Ok(Animation::new(

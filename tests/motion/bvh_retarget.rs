@@ -263,3 +263,55 @@ fn a_moving_joint_that_is_no_body_part_is_warned_of() {
         assert!(!stderr.contains("is no body part") || expect, "{stderr}");
     }
 }
+
+/// Every shared BVH onto mixamo (issue 47): the source's scale and floor come from a standing
+/// frame, never from a zero pose that need not stand, so no joint of any frame goes more than
+/// 0.02 h below the target's floor (h its standing height) — the bone-along-X CMU twin, whose
+/// zero pose lies down, included. Measured by the independent numpy reader
+/// (tests/python/bvh_positions.py): the lowest joint or End Site of every frame.
+#[test]
+fn no_retargeted_take_goes_below_the_floor() {
+    let Some(py) = python() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for name in [
+        "cmu_01_01",
+        "cmu_01_01_boneaxis_x",
+        "cmu_03_02_uneven_terrain",
+        "pymo_walk",
+        "mixamo_rig_freebvh",
+        "mocapbank_crlf",
+    ] {
+        let Some(bvh) = shared(&format!("bvh/{name}.bvh")) else {
+            return;
+        };
+        let out = dir.path().join(name);
+        convert(&bvh, &out, &["--fps", "30"]);
+        let result = run(Command::new(&py)
+            .arg(repo_file("tests/python/bvh_positions.py"))
+            .arg(out.join(format!("{name}.bvh")))
+            .arg("Hips"));
+        let p: Value = serde_json::from_slice(&result.stdout).unwrap();
+        let (floor, top) = (
+            p["rest_lowest"].as_f64().unwrap(),
+            p["rest_highest"].as_f64().unwrap(),
+        );
+        let h = top - floor;
+        let lowest = p["lowest"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|y| y.as_f64().unwrap())
+            .fold(f64::INFINITY, f64::min);
+        eprintln!(
+            "{name}: lowest {:.4} h from the floor",
+            (lowest - floor) / h
+        );
+        assert!(
+            lowest >= floor - 0.02 * h,
+            "{name}: a joint {:.3} h below the floor",
+            (floor - lowest) / h
+        );
+    }
+}

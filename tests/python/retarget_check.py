@@ -4,8 +4,10 @@
 between the target bone's world rotation (its rest is the identity) and the source joint's world
 rotation since the reference pose, D = S(t) · S(ref)ᵀ; and the hips' position against the source
 root's scaled by the hip heights and stood on the target's floor, k · (p_s(t) − (0, floor_s, 0)) +
-(0, floor, 0), the source's hip height and floor read in a standing frame (the reference frame,
-else the first), the target's in its rest pose.
+(0, floor, 0): both hip heights read in a standing frame (the reference frame, else the first),
+each skeleton in its own pose there (the root's height above the lowest joint or end site), the
+source's floor that frame's lowest point, the target's its rest pose's; where the target's pose
+would go under its floor, the root rises by the difference.
 
     python retarget_check.py SOURCE.bvh TARGET.bvh PAIRS.json STEP REF
 
@@ -51,9 +53,12 @@ def main():
     pairs = json.load(open(sys.argv[3]))
     step, ref = int(sys.argv[4]), sys.argv[5]
     ref_world = None if ref == "rest" else src.world(int(ref))
-    floor_src, h_src = standing(src, 0 if ref == "rest" else int(ref))
+    standing_frame = 0 if ref == "rest" else int(ref)
+    assert standing_frame % step == 0, "the standing frame must be a target frame"
+    floor_src, h_src = standing(src, standing_frame)
+    # The target's hip height in the pose it takes in the standing frame (its rotations alone).
+    _, h_tgt = standing(tgt, standing_frame // step)
     tgt_rest, tgt_low = rest_heights(tgt)
-    h_tgt = tgt_rest[0][1] - tgt_low
     k = h_tgt / h_src
     floor = tgt_low
     root_src, root_tgt = src.names[0], tgt.names[0]
@@ -71,6 +76,9 @@ def main():
             key = f"{s}->{t}"
             per_pair[key] = max(per_pair[key], angle_deg(tw[t][0], d))
         expected = k * (sw[root_src][1] - np.array([0.0, floor_src, 0.0])) + np.array([0.0, floor, 0.0])
+        # Never below the floor: the root rises by what of the target's pose would go under.
+        _, hip_above_lowest = standing(tgt, m)
+        expected[1] = max(expected[1], floor + hip_above_lowest)
         worst_root = max(worst_root, float(np.linalg.norm(tw[root_tgt][1] - expected)))
     json.dump({"worst_deg": max(per_pair.values()), "per_pair": per_pair,
                "worst_root_m": worst_root, "frames": frames, "k": k}, sys.stdout)
