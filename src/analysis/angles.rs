@@ -116,18 +116,36 @@ pub fn xzy(r: &Rotation3<f64>) -> (f64, f64, f64) {
 }
 
 impl JointAngles {
-    /// The joints of `rig` whose segments it has ([`Segments::of`]).
+    /// The joints of `rig` whose segments it has ([`Segments::of`]), measured from its rest pose.
     pub fn new(rig: &Rig) -> Result<JointAngles, AnalysisError> {
-        let seg = Segments::of(rig)?;
-        let rest = rig.rest_positions();
-        let point = |p: Point| p.position(rig, &rest, &vec![UnitQuaternion::identity(); rig.len()]);
+        JointAngles::in_pose(rig, &vec![UnitQuaternion::identity(); rig.len()])
+    }
+
+    /// The same, the anatomical frames read in a standing reference pose (`pose`: local
+    /// rotations, e.g. the calibration pose) and carried by their bones ([`Segments::in_pose`]):
+    /// a frame `F_P` built in the pose's world rides on its joint as `W_P⁻¹ ⊗ F_P`, so a rig
+    /// whose joints' frames differ (a bone-along-X twin) measures the same angles.
+    pub fn in_pose(rig: &Rig, pose: &[UnitQuaternion<f64>]) -> Result<JointAngles, AnalysisError> {
+        let seg = Segments::in_pose(rig, pose)?;
+        let rest = rig.world_positions(pose, rig.joints()[0].offset);
+        let turned = rig.world_rotations(pose);
+        let point = |p: Point| p.position(rig, &rest, &turned);
+        // A frame or vector in the pose's world, as its joint carries it.
+        let on = |joint: usize| turned[joint].inverse().to_rotation_matrix();
         let forward = seg.body.column(0).into_owned();
         let body = Rotation3::from_matrix_unchecked(seg.body);
-        let fixed = |j: Option<usize>| j.map(|joint| Segment { joint, rest: body });
+        let fixed = |j: Option<usize>| {
+            j.map(|joint| Segment {
+                joint,
+                rest: on(joint) * body,
+            })
+        };
         let limb = |joint: Option<usize>, distal: Option<Point>, reference: Vector3<f64>| {
             let (joint, distal) = (joint?, distal?);
-            Segments::limb_frame(rest[joint], point(distal), reference)
-                .map(|rest| Segment { joint, rest })
+            Segments::limb_frame(rest[joint], point(distal), reference).map(|frame| Segment {
+                joint,
+                rest: on(joint) * frame,
+            })
         };
         // The segment of `joint`, from it to `to`, turned by `by` (the joint itself but for the
         // trunk).
@@ -135,7 +153,7 @@ impl JointAngles {
             let (joint, to, by) = (joint?, to?, by?);
             Some(Vector {
                 joint: by,
-                rest: point(to) - rest[joint],
+                rest: on(by) * (point(to) - rest[joint]),
             })
         };
         let joint_point = |j: Option<usize>| j.map(Point::Joint);
@@ -157,7 +175,7 @@ impl JointAngles {
                     let (neck, pelvis, by) = (seg.neck?, seg.pelvis?, by?);
                     Some(Vector {
                         joint: by,
-                        rest: rest[pelvis] - point(neck),
+                        rest: on(by) * (rest[pelvis] - point(neck)),
                     })
                 };
                 let upper_arm_v = vector(l.upper_arm, joint_point(l.forearm), l.upper_arm);
@@ -255,10 +273,17 @@ pub fn of_bvh(bvh: &Bvh, name: &str) -> Result<AngleTable, AnalysisError> {
     angles.table(time_s, rows)
 }
 
-/// The angles of every frame of an animation (time `n / fps`).
-pub fn of_animation(animation: &Animation) -> Result<AngleTable, AnalysisError> {
+/// The angles of every frame of an animation (time `n / fps`), measured from the standing pose
+/// `reference` (local rotations: the pose the subject calibrated in; `None`: the rig's rest).
+pub fn of_animation(
+    animation: &Animation,
+    reference: Option<&[UnitQuaternion<f64>]>,
+) -> Result<AngleTable, AnalysisError> {
     let rig = animation.rig();
-    let angles = JointAngles::new(rig)?;
+    let angles = match reference {
+        Some(pose) => JointAngles::in_pose(rig, pose)?,
+        None => JointAngles::new(rig)?,
+    };
     let fps = animation.fps();
     let time_s = (0..animation.frames())
         .map(|n| fps.frame_time_of(n as u64))

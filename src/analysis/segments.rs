@@ -119,7 +119,9 @@ fn is_below(rig: &Rig, joint: usize, ancestor: usize) -> bool {
 
 struct Finder<'a> {
     rig: &'a Rig,
+    /// Every joint's position and world rotation in the reference pose.
     rest: Vec<Vector3<f64>>,
+    rotations: Vec<UnitQuaternion<f64>>,
 }
 
 impl Finder<'_> {
@@ -180,7 +182,7 @@ impl Finder<'_> {
                 Some(c) => j = c,
                 None => {
                     let e = self.rig.joints()[j].end_site?;
-                    let p = self.rest[j] + e;
+                    let p = self.rest[j] + self.rotations[j] * e;
                     return ((p - self.rest[of]).norm() > eps).then_some(Point::EndSite(j));
                 }
             }
@@ -263,12 +265,20 @@ fn no_sides(rig: &Rig, anatomy: &Anatomy) -> AnalysisError {
 }
 
 impl Segments {
-    /// The rig's segments (see the module's docs).
+    /// The rig's segments (see the module's docs), in its rest pose.
     pub fn of(rig: &Rig) -> Result<Segments, AnalysisError> {
+        Segments::in_pose(rig, &vec![UnitQuaternion::identity(); rig.len()])
+    }
+
+    /// The rig's segments with their frames in a standing reference pose (`pose`: its local
+    /// rotations, e.g. the calibration pose), not the zero pose, which need not stand: the body
+    /// frame, the palms' direction and the segments' ends are read where the pose puts them.
+    pub fn in_pose(rig: &Rig, pose: &[UnitQuaternion<f64>]) -> Result<Segments, AnalysisError> {
         let anatomy = Anatomy::of(rig);
         let f = Finder {
             rig,
-            rest: rig.rest_positions(),
+            rest: rig.world_positions(pose, rig.joints()[0].offset),
+            rotations: rig.world_rotations(pose),
         };
         let sides = [
             limbs(&f, &anatomy, Side::Left)?,

@@ -102,8 +102,10 @@ pub fn load(input: &Path, plan: &mut LazyPlan<'_>) -> anyhow::Result<AngleTable>
     if is_angle_table(input) {
         return Ok(AngleTable::read_csv(input)?);
     }
-    let animation = imubake::convert::animate(input, plan.get()?)?;
-    angles::of_animation(&animation).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))
+    let plan = plan.get()?;
+    let animation = imubake::convert::animate(input, plan)?;
+    angles::of_animation(&animation, plan.calibration_pose().as_deref())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))
 }
 
 pub fn run(args: AnglesArgs) -> anyhow::Result<ExitCode> {

@@ -210,6 +210,17 @@ impl Plan {
         &self.settings
     }
 
+    /// The local rotations of the pose the subject calibrates in (the mapping's
+    /// `calibration.pose` on the plan's rig), `None` for the rest pose or without one: the
+    /// standing reference joint angles are measured from.
+    pub fn calibration_pose(&self) -> Option<Vec<nalgebra::UnitQuaternion<f64>>> {
+        let PlanMapping::Quaternion(m) = &self.mapping else {
+            return None;
+        };
+        let pose = &m.value.calibration.as_ref()?.pose;
+        self.rig().pose(&pose.label()).map(|p| p.local)
+    }
+
     /// The output transforms asked for, in the order they apply.
     pub fn transforms(&self) -> Vec<OutputTransform> {
         let mut list = Vec::new();

@@ -152,7 +152,8 @@ impl Calibration {
     ) -> Result<(), PipelineError> {
         match self.least_sure(sensors) {
             Some((sensor, u))
-                if policy == HeadingPolicy::Estimate && !(u <= MAX_HEADING_UNCERTAINTY_DEG) =>
+                if policy == HeadingPolicy::Estimate
+                    && (u.is_nan() || u > MAX_HEADING_UNCERTAINTY_DEG) =>
             {
                 Err(PipelineError::HeadingUnsure {
                     file: mapping_file.to_string(),

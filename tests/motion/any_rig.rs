@@ -1,7 +1,8 @@
 //! Any rig (issue 47): a rig and its bone-along-X twin (`common::twin`) are the same body, so a
 //! capture converted onto either gives the same joint positions at every frame, in every root
-//! mode — calibration, the heading, the floor, the standing height and the feet's contacts all
-//! read the calibration pose, never the rig's zero pose. The capture is `simulate`d from CMU
+//! mode, and the same joint angles — calibration, the heading, the floor, the standing height,
+//! the feet's contacts and the segments' frames all read the calibration pose, never the rig's
+//! zero pose. The capture is `simulate`d from CMU
 //! 01_01 (real optical motion) with unknown mounts calibrated in the take's first frame.
 
 use crate::common;
@@ -101,6 +102,49 @@ fn a_rig_and_its_bone_along_x_twin_give_the_same_joint_positions() {
     let mut rigs = vec![original.clone(), mine];
     if let Some(theirs) = shared("bvh/cmu_01_01_boneaxis_x.bvh") {
         rigs.push(theirs);
+    }
+    // `angles`: the same joint angles on every rig, the segments' frames read in the
+    // calibration pose (frame 0) and carried by their bones.
+    let angles: Vec<serde_json::Value> = rigs
+        .iter()
+        .map(|rig| {
+            let out = run(Command::new(imubake_bin())
+                .arg("angles")
+                .arg(&capture)
+                .arg("--mapping")
+                .arg(&mapping)
+                .arg("--rig")
+                .arg(rig)
+                .args(["--fps", "60", "--json"]));
+            serde_json::from_slice(&out.stdout).unwrap()
+        })
+        .collect();
+    for (k, other) in angles.iter().enumerate().skip(1) {
+        let (a, b) = (
+            angles[0]["angles"].as_object().unwrap(),
+            other["angles"].as_object().unwrap(),
+        );
+        assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+        assert!(a.len() >= 20, "{} angles", a.len());
+        for (name, series) in a {
+            for (x, y) in series
+                .as_array()
+                .unwrap()
+                .iter()
+                .zip(b[name].as_array().unwrap())
+            {
+                let (Some(x), Some(y)) = (x.as_f64(), y.as_f64()) else {
+                    assert_eq!(x.is_null(), y.is_null(), "{name}");
+                    continue;
+                };
+                let d = ((x - y + 180.0).rem_euclid(360.0) - 180.0).abs();
+                assert!(
+                    d < 1e-3,
+                    "angles on {}: {name} {x}° vs {y}°",
+                    rigs[k].display()
+                );
+            }
+        }
     }
     // Offline, and through the stream's incremental cores as `live` runs them (`--causal`).
     for (root, causal) in [

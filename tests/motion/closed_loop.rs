@@ -260,7 +260,7 @@ fn position_error_h(
         return f64::NAN;
     };
     let names: Vec<&str> = pairs.iter().map(|p| p.1).collect();
-    let out = Command::new(&py)
+    let out = Command::new(py)
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/bvh_positions.py"))
         .arg(bvh)
         .arg(names.join(","))

@@ -846,7 +846,8 @@ fn frames_end_at_the_last_sample_of_a_mapped_sensor() {
     // N1_0 and N1_1 end at 19.966 s, the take at 19.998 s (N0_0): 1198 frames at 60 fps, not
     // 1200; t = 0 stays at the take's earliest sample.
     let dir = scratch("mapped_end");
-    let text = r#"{"rig": "mixamo", "world": "ned",
+    // An arm alone gives no heading: the sensors' north is kept (issue 47).
+    let text = r#"{"rig": "mixamo", "world": "ned", "heading": "sensors",
         "calibration": {"pose": "rest", "start_s": 0.5, "duration_s": 2.0},
         "sensors": {"N1_0": {"bone": "RightArm"}, "N1_1": {"bone": "RightForeArm"}}}"#;
     let (mapping, out) = convert_with_mapping(&dir, "arm.json", text, &["--fps", "60"]);
@@ -890,7 +891,13 @@ fn trim_2_to_5_at_30_fps_keeps_91_frames_and_is_recorded() {
 #[test]
 fn rig_sou12_without_a_mapping_matches_sensors_to_bones_by_name() {
     let dir = scratch("sou12");
-    let out = ok(convert(&[&repo_file(SOU)], None, &dir, &["--rig", "sou12"]));
+    // Sensors matched by name declare no heading: the sensors' north, deliberately.
+    let out = ok(convert(
+        &[&repo_file(SOU)],
+        None,
+        &dir,
+        &["--rig", "sou12", "--heading", "sensors"],
+    ));
     let sidecar = read_json(&dir.join("sou_wave.imubake.json"));
     assert_eq!(sidecar["rig"]["name"], "sou12");
     assert_eq!(sidecar["rig"]["bones"], 12);
