@@ -25,8 +25,11 @@ struct Loop {
     facing_error_deg: f64,
     /// The hands' and feet's (and a sensed head's) places relative to the hips against the
     /// source's, each over its skeleton's standing height h, after one best turn about the
-    /// vertical: the mean distance, in h. A wrong heading, which rotations "since calibration"
-    /// cannot see, shows here.
+    /// vertical: the mean distance, in h (printed, not bounded). A wrong heading, which rotations
+    /// "since calibration" cannot see, adds to it; but so does the two skeletons' own geometry
+    /// (CMU's zero pose splays the legs ~20° where mixamo's hang straight: ~0.14 h on the CMU
+    /// loops against ~0.04 h on pymo's), so the position checks that bound a number are
+    /// `any_rig.rs`'s, on one body.
     position_error_h: f64,
     heading_deg: f64,
     /// The conversion's sidecar.

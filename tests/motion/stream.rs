@@ -58,15 +58,15 @@ fn shuffled(lines: Vec<(f64, String)>, within_s: f64, seed: u64) -> Vec<String> 
     keyed.into_iter().map(|(_, l)| l).collect()
 }
 
-/// The frames a stream of `header` then `rows` gives, one line at a time, and what it said while
-/// calibrating.
+/// The frames a stream of `header` then `rows` gives, one line at a time, what it said while
+/// calibrating, and the stream at its end.
 fn stream_frames(
     format: LineFormat,
     header: &[String],
     rows: &[String],
     mapping_path: &Path,
     options: &PipelineOptions,
-) -> (Vec<Pose>, Vec<StreamStatus>) {
+) -> (Vec<Pose>, Vec<StreamStatus>, PoseStream) {
     let mapping = mapping(mapping_path);
     let rig = load_rig(mapping.rig.as_deref().unwrap_or("mixamo")).unwrap();
     let mut lines = LineStream::new(format, "stream", None);
@@ -111,7 +111,7 @@ fn stream_frames(
     poses
         .finish(&mut |p: &Pose| frames.push(p.clone()))
         .unwrap();
-    (frames, statuses)
+    (frames, statuses, poses)
 }
 
 fn whole_take(take: &Take, mapping_path: &Path, options: &PipelineOptions) -> Animation {
@@ -172,7 +172,7 @@ fn the_walk_sample_streamed_row_by_row_equals_the_whole_take() {
         l.split(',').next().and_then(|t| t.parse::<f64>().ok())
     });
     let rows = shuffled(rows, 0.1, 2026);
-    let (frames, statuses) = stream_frames(
+    let (frames, statuses, _) = stream_frames(
         LineFormat::ImubakeCsv,
         &header,
         &rows,
@@ -212,7 +212,7 @@ fn the_sou_sample_streamed_row_by_row_equals_the_whole_take() {
             .map(|(ms, _, _)| ms as f64 / 1000.0)
     });
     let rows = shuffled(rows, 0.1, 7);
-    let (frames, _) = stream_frames(LineFormat::Sou, &header, &rows, &mapping_path, &options);
+    let (frames, _, _) = stream_frames(LineFormat::Sou, &header, &rows, &mapping_path, &options);
     assert_same(&frames, &whole);
 }
 
@@ -267,7 +267,7 @@ fn a_real_take_streamed_row_by_row_equals_the_whole_take() {
         &options,
     );
     let rows = shuffled(rows, 0.1, 99);
-    let (frames, _) = stream_frames(
+    let (frames, _, _) = stream_frames(
         LineFormat::ImubakeCsv,
         &header,
         &rows,
@@ -275,4 +275,45 @@ fn a_real_take_streamed_row_by_row_equals_the_whole_take() {
         &options,
     );
     assert_same(&frames, &whole);
+}
+
+/// Live cannot refuse a subject standing in front of it (issue 47): the walk streamed with a
+/// mapping that declares no forward axis — nothing gives the heading before the first frame,
+/// since a stream does not wait for the walk — keeps streaming with the sensors' north, says so
+/// loudly with the ways out, and says it is unsure (`live` then keeps VMC's status at "waiting
+/// for calibration"); the shipped mapping, whose pelvis declares its forward axis, is sure.
+#[test]
+fn a_stream_with_an_unknown_heading_goes_on_and_says_so() {
+    let path = repo("samples/walk.csv");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let (header, rows) = split_lines(&text, |l| {
+        l.split(',').next().and_then(|t| t.parse::<f64>().ok())
+    });
+    let rows: Vec<String> = rows.into_iter().map(|(_, line)| line).collect();
+    let declared = repo("mappings/paper000_16imu_mixamo.json");
+    let dir = tempfile::tempdir().unwrap();
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&declared).unwrap()).unwrap();
+    json["sensors"]["pelvis"]
+        .as_object_mut()
+        .unwrap()
+        .remove("forward");
+    let undeclared = dir.path().join("no_forward.json");
+    std::fs::write(&undeclared, json.to_string()).unwrap();
+    let options = causal_options("60");
+    let stream = |m: &Path| stream_frames(LineFormat::ImubakeCsv, &header, &rows, m, &options);
+    let (frames, _, sure) = stream(&declared);
+    assert!(!sure.heading_unsure());
+    let (unsure_frames, statuses, unsure) = stream(&undeclared);
+    assert!(unsure.heading_unsure());
+    assert_eq!(unsure_frames.len(), frames.len());
+    assert!(matches!(
+        statuses.last(),
+        Some(StreamStatus::Running { .. })
+    ));
+    let said = unsure.warnings().join("\n");
+    assert!(
+        said.contains("HEADING UNKNOWN") && said.contains("calibration.second"),
+        "{said}"
+    );
 }
