@@ -238,10 +238,7 @@ pub fn calibrate(
             pose_world: pose_world(rig, sensors, &p.pose, mapping_file)?,
         }),
     };
-    let pose_local = rig
-        .pose(&w.pose.label())
-        .map(|p| p.local)
-        .unwrap_or_default();
+    let pose_local = held_pose(rig, Some(w));
     let travel = heading_from_knees(&knee_samples(
         rig,
         &pose_local,
