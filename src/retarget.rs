@@ -480,16 +480,15 @@ pub fn retarget(
         source_of[t] = Some(i);
     }
     // The target in the standing frame's pose: its hips' height above its lowest point there.
-    let standing_local = {
-        let mut w = vec![UnitQuaternion::identity(); bones.len()];
-        let mut local = Vec::with_capacity(bones.len());
-        for (j, bone) in bones.iter().enumerate() {
-            let parent = bone.parent.map_or(UnitQuaternion::identity(), |p| w[p]);
-            w[j] = source_of[j].map_or(parent, |m: usize| change[standing][m]);
-            local.push(parent.inverse() * w[j]);
-        }
-        local
-    };
+    let mut w = vec![UnitQuaternion::identity(); bones.len()];
+    let mut standing_local = vec![UnitQuaternion::identity(); bones.len()];
+    target_pose(
+        target,
+        &source_of,
+        |m| change[standing][m],
+        &mut w,
+        &mut standing_local,
+    );
     let (low_target, _) = target.extent_in(&standing_local);
     let h_target = bones[0].offset.y - low_target;
     let (floor_source, hip_height) = source.standing(standing);
@@ -504,7 +503,6 @@ pub fn retarget(
     let out_frames = fps.frame_count(duration) as usize;
     let mut local = vec![Vec::with_capacity(out_frames); bones.len()];
     let mut root_positions = Vec::with_capacity(out_frames);
-    let mut w = vec![UnitQuaternion::identity(); bones.len()];
     let mut pose = vec![UnitQuaternion::identity(); bones.len()];
     for n in 0..out_frames {
         // Where frame n falls in the source: between frames i and i + 1, a of the way.
@@ -516,14 +514,15 @@ pub fn retarget(
         } else {
             0.0
         };
-        for (j, bone) in bones.iter().enumerate() {
-            let parent = bone.parent.map_or(UnitQuaternion::identity(), |p| w[p]);
-            w[j] = match source_of[j] {
-                Some(m) => slerp_shortest(&change[i][m], &change[i1][m], a),
-                None => parent,
-            };
-            pose[j] = parent.inverse() * w[j];
-            local[j].push(pose[j]);
+        target_pose(
+            target,
+            &source_of,
+            |m| slerp_shortest(&change[i][m], &change[i1][m], a),
+            &mut w,
+            &mut pose,
+        );
+        for (track, q) in local.iter_mut().zip(&pose) {
+            track.push(*q);
         }
         let p = source.roots[i].lerp(&source.roots[i1], a);
         let p = Vector3::new(p.x, p.y - floor_source, p.z) * k;
@@ -541,6 +540,23 @@ pub fn retarget(
         animated,
         root_positions,
     )?)
+}
+
+/// The target's pose: each bone with a source (`source_of[j]`, an index of the pairs) turned to
+/// `driven(m)` in the world, the others keeping their rest rotation relative to their parent
+/// (`world` is scratch, one per bone); the local rotations into `local`.
+fn target_pose(
+    target: &Rig,
+    source_of: &[Option<usize>],
+    driven: impl Fn(usize) -> UnitQuaternion<f64>,
+    world: &mut [UnitQuaternion<f64>],
+    local: &mut [UnitQuaternion<f64>],
+) {
+    for (j, bone) in target.joints().iter().enumerate() {
+        let parent = bone.parent.map_or(UnitQuaternion::identity(), |p| world[p]);
+        world[j] = source_of[j].map_or(parent, &driven);
+        local[j] = parent.inverse() * world[j];
+    }
 }
 
 /// MVN's 23 body segments and each one's parent: the skeleton an MVNX file's segments form.

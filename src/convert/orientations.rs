@@ -59,7 +59,7 @@ pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversio
                 source,
             }
         })?;
-    let policy = options.heading.unwrap_or(mapping.heading);
+    let policy = options.heading_policy(mapping);
     Ok(Conversion {
         euler_deg: None,
         mapping: mapping_record(&converted, rig, mapping, file),

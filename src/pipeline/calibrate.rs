@@ -743,6 +743,31 @@ fn horizontal_fraction(d: &Vector3<f64>) -> f64 {
     }
 }
 
+/// What sensor `i`'s turn between the two poses says: the sensor's and its bone's turns
+/// (rotation vectors, world frame) and, when both turn about horizontal enough axes, the turn about
+/// +Y taking the first onto the second ([`yaw_between`]) with its uncertainty, `KNOWN_MOUNT_DEG`
+/// over the smaller horizontal fraction of the two axes.
+struct SecondPoseLook {
+    sensor_turn: Vector3<f64>,
+    bone_turn: Vector3<f64>,
+    yaw: Option<(UnitQuaternion<f64>, f64)>,
+}
+
+fn second_pose_look(first: &Held, second: &Held, i: usize) -> SecondPoseLook {
+    let turn = |a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>| (b * a.inverse()).scaled_axis();
+    let sensor_turn = turn(&first.held[i], &second.held[i]);
+    let bone_turn = turn(&first.pose_world[i], &second.pose_world[i]);
+    let yaw = yaw_between(&sensor_turn, &bone_turn).map(|y| {
+        let f = horizontal_fraction(&sensor_turn).min(horizontal_fraction(&bone_turn));
+        (y, KNOWN_MOUNT_DEG / f)
+    });
+    SecondPoseLook {
+        sensor_turn,
+        bone_turn,
+        yaw,
+    }
+}
+
 /// The heading from a second pose: for each sensor with a heading of its own whose bone turns
 /// about a horizontal enough axis between the poses, the turn about +Y taking the sensor's turn
 /// onto the bone's ([`yaw_between`]); their circular mean, and its uncertainty (module docs).
@@ -751,19 +776,13 @@ fn heading_from_second_pose(
     first: &Held,
     second: &Held,
 ) -> Option<(UnitQuaternion<f64>, f64)> {
-    let turn = |a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>| (b * a.inverse()).scaled_axis();
-    let mut looks = Vec::new();
-    for (i, s) in sensors.iter().enumerate() {
-        if s.own_heading {
-            continue;
-        }
-        let sensor_turn = turn(&first.held[i], &second.held[i]);
-        let bone_turn = turn(&first.pose_world[i], &second.pose_world[i]);
-        if let Some(y) = yaw_between(&sensor_turn, &bone_turn) {
-            let f = horizontal_fraction(&sensor_turn).min(horizontal_fraction(&bone_turn));
-            looks.push((y.scaled_axis().y, KNOWN_MOUNT_DEG / f));
-        }
-    }
+    let looks: Vec<(f64, f64)> = sensors
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| !s.own_heading)
+        .filter_map(|(i, _)| second_pose_look(first, second, i).yaw)
+        .map(|(y, u)| (y.scaled_axis().y, u))
+        .collect();
     let best = looks.iter().map(|l| l.1).fold(f64::INFINITY, f64::min);
     let (sin, cos) = looks
         .iter()
@@ -873,21 +892,17 @@ pub fn solve(
         };
         let mut by_second_pose = || {
             second.and_then(|p| {
-                let turn = |a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>| (b * a.inverse()).scaled_axis();
-                let sensor_turn = turn(&held[i], &p.held[i]);
-                let bone_turn = turn(&pose_world[i], &p.pose_world[i]);
-                let y = yaw_between(&sensor_turn, &bone_turn);
-                if y.is_none() {
+                let look = second_pose_look(first, p, i);
+                if look.yaw.is_none() {
                     warnings.push(format!(
                         "sensor `{}`: between the two calibration poses it turned {:.0}° and its bone \
                          should turn {:.0}°, about axes too close to vertical (or too little) to align its heading",
                         s.sensor,
-                        sensor_turn.norm().to_degrees(),
-                        bone_turn.norm().to_degrees(),
+                        look.sensor_turn.norm().to_degrees(),
+                        look.bone_turn.norm().to_degrees(),
                     ));
                 }
-                let f = horizontal_fraction(&sensor_turn).min(horizontal_fraction(&bone_turn));
-                y.map(|y| (y, KNOWN_MOUNT_DEG / f))
+                look.yaw
             })
         };
         let (y, how) = if let Some(y) = by_mount {

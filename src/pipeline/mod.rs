@@ -123,7 +123,7 @@ fn run_on(
     let take = (
         input.take().last_time_s(),
         input.take().recalibrations_s().to_vec(),
-        options.heading.unwrap_or(mapping.heading),
+        options.heading_policy(mapping),
     );
     let (world, sources, window) = stage(debug_span!("sources"), || {
         sources_and_window(input, rig, mapping, mapping_file, options, w)
@@ -439,7 +439,7 @@ fn run_causal(
         animated[s.bone] = true;
     }
     let calibration = stream.calibration().cloned().expect("solved at the end");
-    let policy = options.heading.unwrap_or(mapping.heading);
+    let policy = options.heading_policy(mapping);
     calibration.check_heading(&sources.sensors, policy, &file)?;
     let root_mode = stream.root_mode();
     drop(stream);

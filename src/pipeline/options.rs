@@ -83,6 +83,16 @@ pub struct PipelineOptions {
     pub heading: Option<crate::mapping::HeadingPolicy>,
 }
 
+impl PipelineOptions {
+    /// Where the heading comes from: `--heading` (or the config's) over the mapping's.
+    pub fn heading_policy(
+        &self,
+        mapping: &crate::mapping::Mapping,
+    ) -> crate::mapping::HeadingPolicy {
+        self.heading.unwrap_or(mapping.heading)
+    }
+}
+
 impl Default for PipelineOptions {
     fn default() -> Self {
         PipelineOptions {

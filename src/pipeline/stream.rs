@@ -200,7 +200,7 @@ impl PoseStream {
             &mapping_file.display().to_string(),
         )?;
         stream.warnings = warnings;
-        stream.heading_policy = options.heading.unwrap_or(mapping.heading);
+        stream.heading_policy = options.heading_policy(mapping);
         Ok(stream)
     }
 

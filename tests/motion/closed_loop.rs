@@ -173,18 +173,11 @@ fn closed_loop_args(
         .collect();
     let frame_list: Vec<String> = compared.iter().map(|(_, f)| format!("{f:.9}")).collect();
     let script = root.join("tests/python/bvh_world_rotations.py");
-    let out = Command::new(&py)
+    let out = run(Command::new(&py)
         .arg(script)
         .arg(&bvh)
         .arg(joints.join(","))
-        .arg(frame_list.join(","))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+        .arg(frame_list.join(",")));
     let expected: Value = serde_json::from_slice(&out.stdout).unwrap();
 
     // The calibration reference: the mean over the middle of the 2 s hold.
@@ -263,17 +256,10 @@ fn position_error_h(
         return f64::NAN;
     };
     let names: Vec<&str> = pairs.iter().map(|p| p.1).collect();
-    let out = Command::new(py)
+    let out = run(Command::new(py)
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/bvh_positions.py"))
         .arg(bvh)
-        .arg(names.join(","))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+        .arg(names.join(",")));
     let source: Value = serde_json::from_slice(&out.stdout).unwrap();
     let h_source =
         source["rest_highest"].as_f64().unwrap() - source["rest_lowest"].as_f64().unwrap();
