@@ -865,8 +865,39 @@ fn completed_paths(event: &notify::Event) -> Vec<PathBuf> {
     }
 }
 
+/// Whether an event is a change to look at. Opening, reading and closing a file unwritten
+/// (inotify's `IN_OPEN`, which `notify` watches) and an access-time update are not: the scan
+/// itself opens every take (discovery sniffs its format, the ledger hashes it), so waking on
+/// them would rescan forever, each scan's reads waking the next.
+fn is_change(event: &notify::Event) -> bool {
+    use notify::event::MetadataKind;
+    match event.kind {
+        EventKind::Access(AccessKind::Close(AccessMode::Write)) => true,
+        EventKind::Access(_) => false,
+        EventKind::Modify(ModifyKind::Metadata(MetadataKind::AccessTime)) => false,
+        _ => true,
+    }
+}
+
 /// What the debouncer tells the loop: something changed, and these paths are complete.
 type Wake = Vec<PathBuf>;
+
+/// The wake a batch of debounced events gives: none when nothing in it changed anything.
+fn wake_of(res: DebounceEventResult) -> Option<Wake> {
+    match res {
+        Ok(events) => events
+            .iter()
+            .any(|e| is_change(e))
+            .then(|| events.iter().flat_map(|e| completed_paths(e)).collect()),
+        Err(errors) => {
+            // Dropped events and the like: the rescan this wake causes finds the takes.
+            for e in errors {
+                warn!("file-system events: {e}");
+            }
+            Some(Vec::new())
+        }
+    }
+}
 
 /// Converts the inbox's backlog, then (unless `once`) follows it until `stop` is set, finishing
 /// the take in progress. `load_plan` resolves the plan of a config file (or none); it is
@@ -917,17 +948,9 @@ pub fn run(
     let debouncer = if opts.poll.is_none() {
         let tx = tx.clone();
         let mut debouncer = new_debouncer(DEBOUNCE, None, move |res: DebounceEventResult| {
-            let wake = match res {
-                Ok(events) => events.iter().flat_map(|e| completed_paths(e)).collect(),
-                Err(errors) => {
-                    // Dropped events and the like: the rescan this wake causes finds the takes.
-                    for e in errors {
-                        warn!("file-system events: {e}");
-                    }
-                    Vec::new()
-                }
-            };
-            let _ = tx.send(wake);
+            if let Some(wake) = wake_of(res) {
+                let _ = tx.send(wake);
+            }
         })
         .map_err(io::Error::other)?;
         debouncer
@@ -1018,8 +1041,9 @@ mod tests {
         fs::create_dir_all(&elsewhere).unwrap();
         let (tx, rx) = mpsc::channel::<Wake>();
         let mut debouncer = new_debouncer(DEBOUNCE, None, move |res: DebounceEventResult| {
-            let events = res.unwrap();
-            let _ = tx.send(events.iter().flat_map(|e| completed_paths(e)).collect());
+            if let Some(wake) = wake_of(res) {
+                let _ = tx.send(wake);
+            }
         })
         .unwrap();
         debouncer.watch(&inbox, RecursiveMode::Recursive).unwrap();
@@ -1054,6 +1078,26 @@ mod tests {
         for name in ["slow.log", "moved.log", "open.log"] {
             assert!(seen.contains(&inbox.join(name)), "{name}: {seen:?}");
         }
+
+        // Reading the takes (as every scan does) wakes nothing: no rescan feeds the next.
+        for name in [
+            "closed.log",
+            "quick.log",
+            "slow.log",
+            "moved.log",
+            "open.log",
+        ] {
+            let mut text = String::new();
+            fs::File::open(inbox.join(name))
+                .unwrap()
+                .read_to_string(&mut text)
+                .unwrap();
+        }
+        let _ = fs::read_dir(&inbox).unwrap().count();
+        assert!(
+            rx.recv_timeout(quiet).is_err(),
+            "reading the inbox woke the loop"
+        );
         debouncer.stop();
     }
 

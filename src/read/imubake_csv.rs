@@ -316,7 +316,7 @@ impl Layout {
 
 /// True when the first non-comment line is an imubake CSV header.
 pub fn looks_like(head: &[u8]) -> bool {
-    let mut reader = LineReader::new(head);
+    let mut reader = LineReader::over(head);
     while let Ok(Some((_, line))) = reader.next_line() {
         let t = line.trim_ascii();
         if t.is_empty() || t.starts_with(b"#") {

@@ -29,18 +29,25 @@ pub struct LineReader<R> {
     eof: bool,
     line_no: u64,
     bytes_consumed: u64,
+    /// How much the buffer grows by when it runs low.
+    chunk: usize,
 }
 
 impl<R: Read> LineReader<R> {
     pub fn new(reader: R) -> Self {
+        Self::with_chunk(reader, CHUNK_BYTES)
+    }
+
+    fn with_chunk(reader: R, chunk: usize) -> Self {
         LineReader {
             reader,
-            buf: vec![0; CHUNK_BYTES],
+            buf: Vec::new(),
             start: 0,
             end: 0,
             eof: false,
             line_no: 0,
             bytes_consumed: 0,
+            chunk,
         }
     }
 
@@ -100,8 +107,8 @@ impl<R: Read> LineReader<R> {
         self.buf.copy_within(self.start..self.end, 0);
         self.start = 0;
         self.end = pending;
-        if self.buf.len() - self.end < CHUNK_BYTES / 2 {
-            self.buf.resize(self.buf.len() + CHUNK_BYTES, 0);
+        if self.buf.len() - self.end < self.chunk / 2 {
+            self.buf.resize(self.buf.len() + self.chunk, 0);
         }
         loop {
             match self.reader.read(&mut self.buf[self.end..]) {
@@ -117,6 +124,15 @@ impl<R: Read> LineReader<R> {
                 Err(e) => return Err(e.into()),
             }
         }
+    }
+}
+
+impl<'a> LineReader<&'a [u8]> {
+    /// The lines of bytes already in memory (a file's head, sniffed for its format): the buffer
+    /// is sized to them, where a file's reader starts with a 1 MiB one — zeroing that for each
+    /// format tried made sniffing a folder of takes cost more than reading their heads.
+    pub fn over(bytes: &'a [u8]) -> Self {
+        Self::with_chunk(bytes, bytes.len() + 1)
     }
 }
 

@@ -39,7 +39,7 @@ const MAX_HEADER_LINES: u64 = 10_000;
 
 /// True when the first lines hold an OpenSim `endheader` line.
 pub fn looks_like(head: &[u8]) -> bool {
-    let mut reader = LineReader::new(head);
+    let mut reader = LineReader::over(head);
     let mut seen = 0;
     while let Ok(Some((_, line))) = reader.next_line() {
         if line.trim_ascii().eq_ignore_ascii_case(b"endheader") {

@@ -53,7 +53,7 @@ pub fn format_problem(line: &[u8]) -> Option<String> {
 
 /// True when the first lines look like a SOU log (debug text before the data is allowed).
 pub fn looks_like(head: &[u8]) -> bool {
-    let mut reader = LineReader::new(head);
+    let mut reader = LineReader::over(head);
     let mut matching = 0;
     let mut seen = 0;
     while let Ok(Some((_, line))) = reader.next_line() {

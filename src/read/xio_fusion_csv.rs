@@ -54,7 +54,7 @@ fn header_columns(line: &[u8]) -> Option<usize> {
 
 /// True when the first line is the Fusion CSV header.
 pub fn looks_like(head: &[u8]) -> bool {
-    let mut reader = LineReader::new(head);
+    let mut reader = LineReader::over(head);
     matches!(reader.next_line(), Ok(Some((_, line))) if header_columns(line).is_some())
 }
 

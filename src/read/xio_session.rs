@@ -130,7 +130,7 @@ fn device_id_with_serial(folder_name: &str) -> String {
 
 /// True when the first line is a Quaternion.csv, Inertial.csv or Magnetometer.csv header.
 pub fn looks_like(head: &[u8]) -> bool {
-    let mut reader = LineReader::new(head);
+    let mut reader = LineReader::over(head);
     match reader.next_line() {
         Ok(Some((_, line))) => XioFile::ALL.iter().any(|k| k.matches_header(line)),
         _ => false,

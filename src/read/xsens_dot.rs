@@ -163,7 +163,7 @@ fn is_header(line: &[u8]) -> bool {
 /// True when the first lines hold a DOT header row (comma-separated, `SampleTimeFine` and
 /// quaternion, Euler or raw inertial columns).
 pub fn looks_like(head: &[u8]) -> bool {
-    let mut reader = LineReader::new(head);
+    let mut reader = LineReader::over(head);
     let mut seen = 0;
     while let Ok(Some((_, line))) = reader.next_line() {
         if is_header(line) {

@@ -164,7 +164,7 @@ fn update_rate(comment: &[u8]) -> Option<Option<f64>> {
 /// True when the first lines are an MT Manager export: a `// Update Rate:` comment, or a column
 /// row with `PacketCounter` and Xsens orientation columns (or tab-separated).
 pub fn looks_like(head: &[u8]) -> bool {
-    let mut reader = LineReader::new(head);
+    let mut reader = LineReader::over(head);
     let mut seen = 0;
     while let Ok(Some((_, line))) = reader.next_line() {
         seen += 1;

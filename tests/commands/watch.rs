@@ -56,6 +56,18 @@ fn spawn(inbox: &Path, out: &Path, extra: &[&str]) -> Child {
         .expect("spawn imubake watch")
 }
 
+/// The CPU time (user + system, seconds) a process has used so far, from `/proc/<pid>/stat`
+/// (fields 14 and 15, in clock ticks; `getconf CLK_TCK` per second).
+fn cpu_seconds(pid: u32) -> f64 {
+    let stat = fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    // The command name (field 2) is in parentheses and may hold spaces: count after it.
+    let fields: Vec<&str> = stat[stat.rfind(')').unwrap() + 2..].split(' ').collect();
+    let ticks: f64 = fields[11].parse::<f64>().unwrap() + fields[12].parse::<f64>().unwrap();
+    let tck = Command::new("getconf").arg("CLK_TCK").output().unwrap();
+    let per_second: f64 = String::from_utf8_lossy(&tck.stdout).trim().parse().unwrap();
+    ticks / per_second
+}
+
 /// SIGINT, then the exit code (within 10 s).
 fn interrupt(mut child: Child) -> i32 {
     let status = Command::new("kill")
@@ -369,11 +381,7 @@ fn drop_300(extra: &[&str]) {
         .args(["--smooth", "none", "--format", "bvh,glb", "--mapping"])
         .arg(repo("samples/sou_wave.mapping.json"))
         .args(extra);
-    let child = cmd
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("spawn imubake watch");
+    let mut child = Running::spawn(cmd.stdout(Stdio::null()).stderr(Stdio::null()));
     std::thread::sleep(Duration::from_millis(500));
 
     let data = sample();
@@ -417,10 +425,18 @@ fn drop_300(extra: &[&str]) {
         if extra.is_empty() { "events" } else { "--poll" },
         started.elapsed().as_secs_f64()
     );
-    // Long enough for a second conversion to show.
-    std::thread::sleep(Duration::from_millis(1000));
+    // Long enough for a second conversion to show; and with nothing left to do the watcher
+    // idles (its own reads of the inbox once woke it into rescanning without end).
+    let cpu_before = cpu_seconds(child.id());
+    std::thread::sleep(Duration::from_millis(2000));
+    let busy = cpu_seconds(child.id()) - cpu_before;
+    eprintln!("idle watcher: {busy:.2} s of CPU in 2 s");
+    assert!(
+        busy < 0.25,
+        "an idle watcher used {busy:.2} s of CPU in 2 s (at most 0.25 s)"
+    );
     assert_no_partial_outputs(&out, &mut seen);
-    assert_eq!(interrupt(child), 0);
+    assert_eq!(interrupt(child.take()), 0);
 
     let mut expected: Vec<String> = good
         .iter()
