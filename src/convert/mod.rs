@@ -54,6 +54,20 @@ fn convert_unclean(
     out_dir: &Path,
     plan: &Plan,
 ) -> Result<ConvertOutcome, ConvertError> {
+    // All the writing needs of the plan, taken before the conversion: the settings go down
+    // once, and nothing comes back up for them afterwards.
+    let settings = plan.settings();
+    let outputs = settings.outputs();
+    let (units, smoothing, transforms) = (
+        settings.units,
+        plan.pipeline().smoothing.describe(),
+        plan.transforms(),
+    );
+    let subject = plan.subject().map(|s| SubjectFile {
+        path: &s.path,
+        sha256: &s.sha256,
+        subject: &s.value,
+    });
     let mode = plan.mode_for(input);
     let (conversion, source, facts) = match mode {
         Mode::BvhRetarget => {
@@ -98,22 +112,16 @@ fn convert_unclean(
             (conversion, source, facts)
         }
     };
-    let settings = plan.settings();
-    let outputs = settings.outputs();
     let job = TakeJob {
         input,
         out_dir,
         outputs: &outputs,
-        units: settings.units,
-        smoothing: plan.pipeline().smoothing.describe(),
-        subject: plan.subject().map(|s| SubjectFile {
-            path: &s.path,
-            sha256: &s.sha256,
-            subject: &s.value,
-        }),
+        units,
+        smoothing,
+        subject,
         source,
         facts,
-        transforms: plan.transforms(),
+        transforms,
     };
     write_take(job, conversion).map_err(|e| match e {
         TakeError::Output(e) => ConvertError::Output(e),
