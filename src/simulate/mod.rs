@@ -2,13 +2,16 @@
 //! the capture the mapping's sensors would have recorded.
 //!
 //! The simulated body: bone `b` driven by source joint `J` has the world orientation
-//! `B_b(t) = W_J(t) ⊗ P_b` (rig world), where `W_J(t)` is the source joint's world rotation
-//! relative to the source's rest pose and `P_b` the bone's orientation in the mapping's
-//! calibration pose. So the subject holds the calibration pose while the source is at rest, and
-//! every bone's rotation since the calibration pose is the source joint's rotation since rest.
+//! `B_b(t) = W_J(t) ⊗ R_J⁻¹ ⊗ P_b` (rig world), where `W_J(t)` is the source joint's world
+//! rotation, `R_J` its world rotation in the source's reference pose — its rest (every channel
+//! zero), or frame N when the calibration pose is `frame:N` — and `P_b` the bone's orientation in
+//! the mapping's calibration pose. So the subject holds the calibration pose while the source is
+//! in its reference, and every bone's rotation since the calibration pose is the source joint's
+//! rotation since the reference: a BVH played on its own skeleton, calibrated in its frame N, has
+//! its own rotations (`P_b = R_J`), whatever its frame N looks like.
 //!
-//! Timeline: the calibration pose held for `hold_s`, a blend over `blend_s` from rest into the
-//! first source frame, then the source frames. When the mapping names a second calibration pose
+//! Timeline: the calibration pose held for `hold_s`, a blend over `blend_s` from the reference
+//! into the first source frame, then the source frames. When the mapping names a second calibration pose
 //! (`calibration.second`), each bone also turns in the world by `S_b(t)`, from the first pose into
 //! the second over the second before its window, held through it, and back over the second after
 //! (`B_b = S_b ⊗ W_J ⊗ P_b`); the hold lasts until half a second after that. The sensors' positions
@@ -197,6 +200,9 @@ impl Rng {
 struct Source {
     /// Local rotations of every frame in range, `[frame][joint]` (frames before `first` empty).
     locals: Vec<Vec<UnitQuaternion<f64>>>,
+    /// The local rotations of the reference pose (module docs), and the world rotations.
+    reference: Vec<UnitQuaternion<f64>>,
+    reference_world: Vec<UnitQuaternion<f64>>,
     /// Each joint's translation from its parent (the root's: its position) per frame in range,
     /// source units (empty unless raw readings are simulated).
     translations: Vec<Vec<Vector3<f64>>>,
@@ -295,7 +301,7 @@ struct RawInputs<'a> {
 
 impl RawInputs<'_> {
     /// Every joint's local rotation and translation at take time `t` (source units), on the
-    /// timeline [`simulate`] plays: rest during the hold, blended into the first frame, then the
+    /// timeline [`simulate`] plays: the reference pose during the hold, blended into the first frame, then the
     /// frames (rotations slerped, translations interpolated linearly).
     fn locals_at(&self, t: f64, blend_s: f64) -> (Vec<UnitQuaternion<f64>>, Vec<Vector3<f64>>) {
         let src = self.source;
@@ -306,7 +312,8 @@ impl RawInputs<'_> {
             let u = x * x * (3.0 - 2.0 * x);
             let locals = src.locals[first]
                 .iter()
-                .map(|q| slerp_shortest(&UnitQuaternion::identity(), q, u))
+                .zip(&src.reference)
+                .map(|(q, r)| slerp_shortest(r, q, u))
                 .collect();
             // The root starts moving as the rotations blend in: its speed ramps up from rest to
             // the first frame's (smoothstep), so position and velocity are continuous — no jolt
@@ -526,7 +533,14 @@ pub fn simulate(
             frames,
         });
     }
-    let source = Source {
+    // The source's reference: frame N for a calibration pose `frame:N`, else its rest.
+    let reference = match mapping.calibration.as_ref().map(|c| &c.pose) {
+        Some(crate::mapping::PoseRef::BvhFrame(n)) if *n < frames => bvh.local_rotations(*n),
+        _ => vec![UnitQuaternion::identity(); bvh.local_rotations(0).len()],
+    };
+    let mut source = Source {
+        reference: Vec::new(),
+        reference_world: Vec::new(),
         locals: (0..=last)
             .map(|f| {
                 if f < options.first_frame {
@@ -555,6 +569,10 @@ pub fn simulate(
         first: options.first_frame,
         last,
     };
+    source.reference_world = (0..reference.len())
+        .map(|j| source.chain(j, |k| reference[k]))
+        .collect();
+    source.reference = reference;
     let mut rng = Rng(options.seed);
     let world = match (options.format, &options.raw) {
         (CaptureFormat::Sou, Some(_)) => {
@@ -660,22 +678,23 @@ pub fn simulate(
     let motion_start = hold_s + options.blend_s;
     let end_s = motion_start + (last - options.first_frame) as f64 * frame_time;
     let first_local = &source.locals[options.first_frame];
-    // World rotation of a source joint at take time t.
+    // A source joint's world rotation at take time t since the reference, W_J(t) ⊗ R_J⁻¹.
     let world_at = |joint: usize, t: f64| -> UnitQuaternion<f64> {
-        if t < hold_s {
-            UnitQuaternion::identity()
+        let world = if t < hold_s {
+            source.reference_world[joint]
         } else if t < motion_start {
             let u = (t - hold_s) / options.blend_s;
             let u = u * u * (3.0 - 2.0 * u); // smoothstep: no jerk at either end
             source.chain(joint, |j| {
-                slerp_shortest(&UnitQuaternion::identity(), &first_local[j], u)
+                slerp_shortest(&source.reference[j], &first_local[j], u)
             })
         } else {
             source.world_at(
                 joint,
                 options.first_frame as f64 + (t - motion_start) / frame_time,
             )
-        }
+        };
+        world * source.reference_world[joint].inverse()
     };
 
     // Sampling instants per sensor (SOU nodes share their unit's instants).
