@@ -66,7 +66,7 @@ pub struct SettingsArgs {
     #[arg(long)]
     force: bool,
     /// Causal mode: run the take as a live stream would (smoothing causal, no heading from the
-    /// direction of travel), through the same incremental stages.
+    /// knees and elbows, which reads ahead), through the same incremental stages.
     #[arg(long)]
     causal: bool,
     /// The sensors' sample rate, Hz: causal smoothing's grid uses it instead of the rate of each

@@ -11,8 +11,9 @@
 //! from what can tell it: a sensor whose forward axis is declared (that axis points where the body
 //! faces), else a sensor whose mount is known (its bone's pose orientation says where the body
 //! faces), else a second pose (each bone's turn between the poses, seen through its sensor), else
-//! the direction of travel when the take starts by walking (read off the knees, see
-//! [`heading_from_knees`]), else none (the sensors' own heading is kept: north → +Z).
+//! the hinges: knees and elbows flexing at any time in the minute after calibration — a walk, a
+//! hop, a squat, a wave — each about its own axis, left–right in a standing pose (see
+//! [`heading_from_hinges`]), else none (the sensors' own heading is kept: north → +Z).
 //!
 //! Every source comes with an estimated uncertainty `u` (degrees, about one standard deviation),
 //! and so does each sensor's alignment below. A heading that is off turns every calibrated bone's
@@ -26,10 +27,11 @@
 //! - second pose: per sensor `KNOWN_MOUNT_DEG / f` with `f` the smaller horizontal fraction of the
 //!   two turn axes; over several sensors the circular spread of their estimates `δ` over `√n`,
 //!   never below the best single one;
-//! - travel: `max(KNEE_AXIS_DEG, δ / √n)`, `δ` the circular spread of each knee's flexion axes
-//!   about its own mean (weighted by angle, pooled over the legs), `n` one independent look per
-//!   leg per second of walk; with one leg, at least `ONE_LEG_DEG` (a leg turned out turns its
-//!   knee's axis, which the other leg's mirror turn cancels in the two legs' bisector).
+//! - hinges: `max(KNEE_AXIS_DEG, δ / √n)`, `δ` the circular spread of each hinge's flexion axes
+//!   about its own mean (weighted by angle, pooled over the hinges), `n` one independent look per
+//!   hinge per second in which it flexed; without a knee or an elbow on both sides, at least
+//!   `ONE_LEG_DEG` with a knee, else `ONE_ARM_DEG` (a leg or an arm turned out turns its hinge's
+//!   axis, which the other side's mirror turn cancels in their mean).
 //!
 //! Sensors without a heading of their own (fused without a magnetometer, "6D") each sit in a world
 //! turned about the vertical by an unknown `A_i⁻¹`, which a mount cannot absorb: it would turn
@@ -62,8 +64,9 @@ pub enum HeadingSource {
     },
     /// The bones' turns between two calibration poses, seen through their sensors.
     SecondPose,
-    /// Walking after calibration: the knees' flexion axis points to the subject's left.
-    Travel,
+    /// Knees and elbows flexing after calibration: their hinge axes point to the subject's left
+    /// and right.
+    Hinges,
     /// No sensor has a heading of its own: each was aligned to the pose on its own.
     Aligned,
     None,
@@ -75,7 +78,7 @@ impl HeadingSource {
             HeadingSource::DeclaredForward { .. } => "declared-forward",
             HeadingSource::KnownMount { .. } => "mounts",
             HeadingSource::SecondPose => "second-pose",
-            HeadingSource::Travel => "travel",
+            HeadingSource::Hinges => "hinges",
             HeadingSource::Aligned => "per-sensor",
             HeadingSource::None => "none",
         }
@@ -88,7 +91,7 @@ impl HeadingSource {
                 Some(sensor)
             }
             HeadingSource::SecondPose
-            | HeadingSource::Travel
+            | HeadingSource::Hinges
             | HeadingSource::Aligned
             | HeadingSource::None => None,
         }
@@ -207,7 +210,7 @@ pub fn window(
 
 /// Stage 2, pose calibration: over the window, each sensor's mean orientation (a sensor that
 /// turns by more than [`MOVED_DURING_CALIBRATION_DEG`] in it is warned about), the heading from
-/// travel over the seconds after it, then [`solve`]. Without a window, mounts are the known ones
+/// the hinges over the minute after it, then [`solve`]. Without a window, mounts are the known ones
 /// and the heading is kept. `take_end_s` is the take's last sample time; `mapping_file` names the
 /// mapping in errors.
 pub fn calibrate(
@@ -239,7 +242,7 @@ pub fn calibrate(
         }),
     };
     let pose_local = held_pose(rig, Some(w));
-    let travel = heading_from_knees(&knee_samples(
+    let hinges = heading_from_hinges(&hinge_samples(
         rig,
         &pose_local,
         sensors,
@@ -247,7 +250,7 @@ pub fn calibrate(
         &first.held,
         w,
     ));
-    let calibration = solve(sensors, &first, second.as_ref(), travel);
+    let calibration = solve(sensors, &first, second.as_ref(), hinges);
     warnings.extend(calibration.warnings.iter().cloned());
     Ok(calibration)
 }
@@ -379,8 +382,8 @@ fn held_poses(
 /// The incremental core of stage 2, for streams: each sensor's samples (rig world) are kept until
 /// the calibration window has passed for every sensor — a sample after its end, or the sensor
 /// declared stale — then the stage solves as [`calibrate`] does, from the same samples (the last
-/// one before the window, those in it, the first after it), but without the heading from travel,
-/// which would need the seconds after the window (a stream uses a declared forward axis or a
+/// one before the window, those in it, the first after it), but without the heading from the
+/// hinges, which would need the seconds after the window (a stream uses a declared forward axis or a
 /// known mount). Before that, [`CalibrationCore::left_s`] says how long the pose is to be held.
 pub struct CalibrationCore {
     window: Option<CalibrationWindow>,
@@ -564,17 +567,29 @@ pub const KNEE_AXIS_DEG: f64 = 3.0;
 /// How far one leg's knee axis may turn from the body's left–right axis by the leg turning out
 /// (toe-out and hip rotation in gait, about 5–10°), degrees: what one leg alone cannot cancel.
 pub const ONE_LEG_DEG: f64 = 8.0;
+/// The same for one arm: a relaxed arm hangs turned in, so its elbow flexes the hand forward and
+/// towards the midline, 15–20° off the left–right axis: one elbow alone cannot give a sure heading.
+pub const ONE_ARM_DEG: f64 = 20.0;
 
 /// A sensor turning further than this from its mean during the calibration window is reported.
 pub const MOVED_DURING_CALIBRATION_DEG: f64 = 5.0;
 
-/// How long after the calibration window the walk is read for the heading from travel.
-pub const TRAVEL_WINDOW_S: f64 = 4.0;
+/// How far past the calibration window the hinges are read for the heading, seconds: a take
+/// need not start moving at once (a subject standing a while, then hopping or waving).
+pub const HINGE_SEARCH_S: f64 = 60.0;
 
-/// A shank standing in the calibration pose, as the heading from travel's knee hinge needs: in
-/// the pose's world (`pose_positions`, the joints' positions with the pose held), the knee is
-/// above the shank's joint below it (or its end site) and the shank points mostly down. Read in
-/// the pose, not in the rig's zero pose, which need not stand.
+/// A hinge sample counts towards the heading when the joint has flexed this far since
+/// calibration (about a horizontal axis), degrees: below it, sensor noise and the joint's other
+/// small turns would dominate its axis.
+pub const FLEXED_DEG: f64 = 10.0;
+
+/// The least time a hinge must spend flexed to give an axis, seconds (a stray twitch does not).
+pub const MIN_FLEXED_S: f64 = 0.5;
+
+/// A limb segment hanging down in the calibration pose, as a hinge's axis needs to mean
+/// left–right: in the pose's world (`pose_positions`, the joints' positions with the pose held),
+/// the joint is above the segment's joint below it (or its end site) and the segment points mostly
+/// down. Read in the pose, not in the rig's zero pose, which need not stand.
 fn stands_down(
     rig: &Rig,
     pose_positions: &[Vector3<f64>],
@@ -600,59 +615,72 @@ fn stands_down(
     v.norm() > 0.0 && -v.y > 0.8 * v.norm()
 }
 
-/// One leg's samples for the heading from travel: at each of the shank's samples in the seconds
-/// after the window, the time (s) and the thigh's and the shank's rotations since calibration
-/// (rig world).
-pub type KneeSamples = Vec<(f64, UnitQuaternion<f64>, UnitQuaternion<f64>)>;
+/// One hinge joint's samples for the heading (a knee: thigh and shank; an elbow: upper arm and
+/// forearm): at each of the outer segment's samples in the [`HINGE_SEARCH_S`] after the window,
+/// the time (s) and the inner and the outer segment's rotations since calibration (rig world).
+#[derive(Debug, Clone)]
+pub struct HingeSamples {
+    pub side: crate::rig::anatomy::Side,
+    /// +1 for a knee (it flexes about the subject's left: the foot swings back), −1 for an
+    /// elbow (about the right: the hand comes forward).
+    pub flexes_about_left: f64,
+    pub samples: Vec<(f64, UnitQuaternion<f64>, UnitQuaternion<f64>)>,
+}
 
-/// For every mapped thigh–shank pair whose sensors both have a heading of their own and whose
-/// shank stands in the calibration pose (`pose_local`, the pose's local rotations), the leg's
-/// [`KneeSamples`].
-fn knee_samples(
+/// For every mapped knee and elbow whose two segments' sensors both have a heading of their own
+/// and whose upper segment hangs down in the calibration pose (`pose_local`, the pose's local
+/// rotations), its [`HingeSamples`].
+fn hinge_samples(
     rig: &Rig,
     pose_local: &[UnitQuaternion<f64>],
     sensors: &[ResolvedSensor],
     tracks: &[Track<UnitQuaternion<f64>>],
     held: &[UnitQuaternion<f64>],
     window: &CalibrationWindow,
-) -> Vec<KneeSamples> {
+) -> Vec<HingeSamples> {
+    use crate::rig::anatomy::{Anatomy, Limb, Side};
     let start = window.end_s();
-    let end = start + TRAVEL_WINDOW_S;
-    let mut legs = Vec::new();
-    let anatomy = crate::rig::anatomy::Anatomy::of(rig);
+    let end = start + HINGE_SEARCH_S;
+    let anatomy = Anatomy::of(rig);
     let pose_world = rig.world_rotations(pose_local);
     let pose_positions = rig.world_positions(pose_local, Vector3::zeros());
-    for (s, shank) in sensors.iter().enumerate() {
-        // The rig's shanks and thighs are its anatomy's; the leg must stand in the pose.
-        let Some(side) = crate::rig::anatomy::Side::BOTH
-            .into_iter()
-            .find(|&side| anatomy.limb(side, crate::rig::anatomy::Limb::Shank) == Some(shank.bone))
-        else {
-            continue;
-        };
-        let Some(thigh) = anatomy.limb(side, crate::rig::anatomy::Limb::Thigh) else {
-            continue;
-        };
-        let Some(t) = sensors.iter().position(|o| o.bone == thigh) else {
-            continue;
-        };
-        if !stands_down(rig, &pose_positions, &pose_world, shank.bone)
-            || shank.own_heading
-            || sensors[t].own_heading
-        {
-            continue;
+    let sensor_of = |bone: usize| sensors.iter().position(|s| s.bone == bone);
+    let mut hinges = Vec::new();
+    for side in Side::BOTH {
+        for (inner, outer, sign) in [
+            (Limb::Thigh, Limb::Shank, 1.0),
+            (Limb::UpperArm, Limb::Forearm, -1.0),
+        ] {
+            let (Some(inner), Some(outer)) = (anatomy.limb(side, inner), anatomy.limb(side, outer))
+            else {
+                continue;
+            };
+            let (Some(i), Some(o)) = (sensor_of(inner), sensor_of(outer)) else {
+                continue;
+            };
+            if sensors[i].own_heading
+                || sensors[o].own_heading
+                || !stands_down(rig, &pose_positions, &pose_world, inner)
+                || !stands_down(rig, &pose_positions, &pose_world, outer)
+            {
+                continue;
+            }
+            let samples = tracks[o]
+                .iter()
+                .filter(|(time, _)| *time > start && *time <= end)
+                .map(|(time, q)| {
+                    let inner = tracks[i].sample_at(time);
+                    (time, inner * held[i].inverse(), q * held[o].inverse())
+                })
+                .collect();
+            hinges.push(HingeSamples {
+                side,
+                flexes_about_left: sign,
+                samples,
+            });
         }
-        let leg = tracks[s]
-            .iter()
-            .filter(|(time, _)| *time > start && *time <= end)
-            .map(|(time, q)| {
-                let thigh = tracks[t].sample_at(time);
-                (time, thigh * held[t].inverse(), q * held[s].inverse())
-            })
-            .collect();
-        legs.push(leg);
     }
-    legs
+    hinges
 }
 
 /// Sign-aligned mean of unit quaternions (accurate for the small spread of a held pose).
@@ -677,58 +705,78 @@ pub fn heading_towards_plus_z(d: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
     Some(UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -psi))
 }
 
-/// The heading from walking, and its uncertainty in degrees (module docs): a knee flexes about
-/// the subject's left axis whatever the mounts, so the mean rotation vector of each shank relative
-/// to its thigh (both as world-frame rotations since calibration) points left; forward =
-/// left × up. With both legs, the bisector of the two legs' mean axes: a leg turned out (toe-out,
-/// hip rotation) turns its knee axis one way and the other leg's the mirror way, which the
-/// bisector cancels. `None` when the knees barely bend (under 10° on average): not walking.
-pub fn heading_from_knees(knees: &[KneeSamples]) -> Option<(UnitQuaternion<f64>, f64)> {
-    let mut flexion = 0.0;
-    let mut count = 0usize;
-    let mut looks = 0.0;
+/// The heading from the hinges, and its uncertainty in degrees (module docs). A knee flexes about
+/// the subject's left axis and an elbow about the right, whatever the mounts. The outer segment's
+/// turn relative to the inner one, `Δ_inner⁻¹ ⊗ Δ_outer` (both world-frame rotations since
+/// calibration), is the joint's turn about its own axis as the axis stood at calibration —
+/// whichever way the body has turned since — so each flexed sample's rotation vector (horizontal
+/// part, at least [`FLEXED_DEG`]) points along the hinge's axis in the calibration pose; forward
+/// = left × up. Each hinge's mean axis counts once: with both sides, a leg or arm turned out
+/// (toe-out, hip or shoulder rotation) turns its axis one way and the other side's the mirror
+/// way, which their mean cancels. `None` when no hinge flexes for [`MIN_FLEXED_S`].
+pub fn heading_from_hinges(hinges: &[HingeSamples]) -> Option<(UnitQuaternion<f64>, f64)> {
     let mut left = Vector3::zeros();
-    // Each leg's axes' spread about its own mean (squared, radians), weighted by its samples.
-    let mut spread_sq = 0.0;
-    let mut legs = 0usize;
-    for leg in knees {
-        let (mut sum, mut lengths) = (Vector3::zeros(), 0.0);
-        for (_, thigh, shank) in leg {
-            let v = (shank * thigh.inverse()).scaled_axis();
-            let v = Vector3::new(v.x, 0.0, v.z);
+    // Each hinge's axes' spread about its own mean (squared, radians), weighted by its samples.
+    let (mut spread_sq, mut count, mut looks) = (0.0, 0usize, 0.0);
+    let mut sides = Vec::new();
+    for hinge in hinges {
+        let (mut sum, mut lengths, mut n) = (Vector3::zeros(), 0.0, 0usize);
+        let mut seconds = std::collections::BTreeSet::new();
+        for (t, inner, outer) in &hinge.samples {
+            let v = (inner.inverse() * outer).scaled_axis();
+            let v = Vector3::new(v.x, 0.0, v.z) * hinge.flexes_about_left;
+            if v.norm() < FLEXED_DEG.to_radians() {
+                continue;
+            }
             sum += v;
             lengths += v.norm();
+            n += 1;
+            seconds.insert(t.floor() as i64);
         }
-        flexion += sum.norm();
-        count += leg.len();
-        if sum.norm() == 0.0 {
+        let flexed_s = match (hinge.samples.first(), hinge.samples.last()) {
+            (Some(a), Some(b)) if hinge.samples.len() > 1 => {
+                (b.0 - a.0) * n as f64 / (hinge.samples.len() - 1) as f64
+            }
+            _ => 0.0,
+        };
+        if n == 0 || flexed_s < MIN_FLEXED_S || sum.norm() == 0.0 {
             continue;
         }
         // The weighted mean resultant length R gives the circular spread sqrt(-2 ln R).
         let resultant = (sum.norm() / lengths).clamp(1e-12, 1.0);
-        spread_sq += -2.0 * resultant.ln() * leg.len() as f64;
+        spread_sq += -2.0 * resultant.ln() * n as f64;
+        count += n;
         left += sum.normalize();
-        legs += 1;
-        if let (Some(first), Some(last)) = (leg.first(), leg.last()) {
-            // One independent look per leg per second (about a stride).
-            looks += (last.0 - first.0).max(1.0);
-        }
+        // One independent look per hinge per second flexed in (about a stride).
+        looks += seconds.len() as f64;
+        sides.push((hinge.flexes_about_left, hinge.side));
     }
-    if count == 0 || legs == 0 || (flexion / count as f64).to_degrees() < 10.0 {
+    if count == 0 {
         return None;
     }
     let heading = heading_towards_plus_z(&left.normalize().cross(&Vector3::y()))?;
     let spread_deg = (spread_sq / count as f64).sqrt().to_degrees();
-    let one_leg = if legs == 1 { ONE_LEG_DEG } else { 0.0 };
+    // A kind of hinge seen on both sides cancels its turn-out; else the least sure lone one.
+    let both_sides = |sign: f64| {
+        let on = |side| sides.contains(&(sign, side));
+        on(crate::rig::anatomy::Side::Left) && on(crate::rig::anatomy::Side::Right)
+    };
+    let one_side = if both_sides(1.0) || both_sides(-1.0) {
+        0.0
+    } else if sides.iter().any(|(sign, _)| *sign > 0.0) {
+        ONE_LEG_DEG
+    } else {
+        ONE_ARM_DEG
+    };
     let uncertainty = KNEE_AXIS_DEG
         .max(spread_deg / looks.max(1.0).sqrt())
-        .max(one_leg);
+        .max(one_side);
     tracing::debug!(
         spread_deg,
         looks,
-        legs,
+        hinges = sides.len(),
         uncertainty,
-        "the heading from walking"
+        "the heading from the hinges"
     );
     Some((heading, uncertainty))
 }
@@ -801,15 +849,15 @@ fn heading_from_second_pose(
 ///
 /// `first.held[i]`: sensor i's mean orientation over the window, in the rig world (`C ⊗ q`);
 /// `first.pose_world[i]`: its bone's world orientation in the calibration pose; `second`: the
-/// same for the second pose, if any. `travel`: the heading from walking
-/// ([`heading_from_knees`]), used when neither a declared forward axis nor a known mount gives
+/// same for the second pose, if any. `hinges`: the heading from the knees and elbows
+/// ([`heading_from_hinges`]), used when neither a declared forward axis nor a known mount gives
 /// one. Only sensors with a heading of their own give the heading `H`; the others are aligned
 /// one by one (module docs).
 pub fn solve(
     sensors: &[ResolvedSensor],
     first: &Held,
     second: Option<&Held>,
-    travel: Option<(UnitQuaternion<f64>, f64)>,
+    hinges: Option<(UnitQuaternion<f64>, f64)>,
 ) -> Calibration {
     let (held, pose_world) = (&first.held, &first.pose_world);
     let mut warnings = Vec::new();
@@ -856,14 +904,14 @@ pub fn solve(
             }
         }
     }
-    // 3. A second pose, 4. the direction of travel.
+    // 3. A second pose, 4. the hinges.
     let heading = heading
         .or_else(|| {
             second
                 .and_then(|p| heading_from_second_pose(sensors, first, p))
                 .map(|(h, u)| (h, HeadingSource::SecondPose, u))
         })
-        .or_else(|| travel.map(|(h, u)| (h, HeadingSource::Travel, u)));
+        .or_else(|| hinges.map(|(h, u)| (h, HeadingSource::Hinges, u)));
     let (heading, heading_source, heading_uncertainty_deg) = heading.unwrap_or((
         UnitQuaternion::identity(),
         HeadingSource::None,
@@ -1013,6 +1061,7 @@ fn yaw_between(sensor: &Vector3<f64>, bone: &Vector3<f64>) -> Option<UnitQuatern
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rig::anatomy::Side;
 
     fn rot(axis: Vector3<f64>, deg: f64) -> UnitQuaternion<f64> {
         UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), deg.to_radians())
@@ -1077,6 +1126,18 @@ mod tests {
         assert!(cal.heading.angle() < 1e-12);
     }
 
+    fn hinge(
+        side: Side,
+        sign: f64,
+        samples: Vec<(f64, UnitQuaternion<f64>, UnitQuaternion<f64>)>,
+    ) -> HingeSamples {
+        HingeSamples {
+            side,
+            flexes_about_left: sign,
+            samples,
+        }
+    }
+
     #[test]
     fn knees_bending_about_plus_x_mean_facing_plus_z() {
         // A subject facing +Z: left is +X, and knee flexion turns the shank about +X (the foot
@@ -1091,11 +1152,12 @@ mod tests {
                 (i as f64 * 0.08, thigh, flex * thigh)
             })
             .collect();
-        let (h, u) = heading_from_knees(std::slice::from_ref(&leg)).unwrap();
+        let knee = |side, samples| hinge(side, 1.0, samples);
+        let (h, u) = heading_from_hinges(&[knee(Side::Left, leg.clone())]).unwrap();
         assert!((h * turn * Vector3::z() - Vector3::z()).norm() < 1e-9);
-        // Straight knees: not walking.
+        // Straight knees: no heading.
         let still = vec![(0.0, UnitQuaternion::identity(), rot(Vector3::x(), 2.0)); 10];
-        assert!(heading_from_knees(&[still]).is_none());
+        assert!(heading_from_hinges(&[knee(Side::Left, still)]).is_none());
         // One leg alone: it may be turned out.
         assert!((u - ONE_LEG_DEG).abs() < 1e-9, "{u}");
         // Both legs turned out by 12°, mirror-wise (toe-out): their bisector still faces +Z,
@@ -1106,7 +1168,11 @@ mod tests {
                 .map(|(t, a, b)| (*t, out * a * out.inverse(), out * b * out.inverse()))
                 .collect::<Vec<_>>()
         };
-        let (h, u) = heading_from_knees(&[turned(12.0), turned(-12.0)]).unwrap();
+        let (h, u) = heading_from_hinges(&[
+            knee(Side::Left, turned(12.0)),
+            knee(Side::Right, turned(-12.0)),
+        ])
+        .unwrap();
         assert!((h * turn * Vector3::z() - Vector3::z()).norm() < 1e-9);
         assert!((u - KNEE_AXIS_DEG).abs() < 1e-9, "{u}");
         // A knee whose axis wobbles ±30° through the stride: the spread over √(legs × seconds).
@@ -1118,8 +1184,71 @@ mod tests {
                 (*t, w * a * w.inverse(), w * b * w.inverse())
             })
             .collect();
-        let (_, u) = heading_from_knees(&[wobbly.clone(), wobbly]).unwrap();
+        let (_, u) =
+            heading_from_hinges(&[knee(Side::Left, wobbly.clone()), knee(Side::Right, wobbly)])
+                .unwrap();
         assert!(u > KNEE_AXIS_DEG && u < 30.0, "{u}");
+    }
+
+    /// The knee's axis is read as it stood at calibration: a subject who turns 120° on the spot
+    /// while bending the knees (a squat with a turn) still faces +Z at calibration. (Read in the
+    /// world of the moment, Δ_shank ⊗ Δ_thigh⁻¹, the axis would turn with the body: about 60° off.)
+    #[test]
+    fn the_knees_axis_is_read_where_it_stood_at_calibration() {
+        let leg: Vec<_> = (0..200)
+            .map(|i| {
+                let t = i as f64 * 0.02;
+                let body = rot(Vector3::y(), 30.0 * t);
+                let flex = rot(Vector3::x(), 40.0 + 30.0 * (t * 3.0).sin());
+                (t, body, body * flex)
+            })
+            .collect();
+        let knees = [
+            hinge(Side::Left, 1.0, leg.clone()),
+            hinge(Side::Right, 1.0, leg),
+        ];
+        let (h, _) = heading_from_hinges(&knees).unwrap();
+        assert!(h.angle().to_degrees() < 1e-6, "{}", h.angle().to_degrees());
+    }
+
+    /// Elbows flex about the subject's right: two give the heading as knees do; one alone is
+    /// never sure enough (a relaxed arm hangs turned in). Still stretches before a hinge bends
+    /// are passed over.
+    #[test]
+    fn elbows_give_the_heading_and_one_elbow_is_not_sure() {
+        // Facing −X (rig world): right is forward × up = −Z, so the forearm turns about −Z as
+        // it comes up in front.
+        let arm: Vec<_> = (0..300)
+            .map(|i| {
+                let t = i as f64 * 0.02;
+                // Still for 3 s, then waving.
+                let angle = if t < 3.0 {
+                    0.0
+                } else {
+                    60.0 + 40.0 * (t * 4.0).sin()
+                };
+                (t, UnitQuaternion::identity(), rot(-Vector3::z(), angle))
+            })
+            .collect();
+        let elbows = [
+            hinge(Side::Left, -1.0, arm.clone()),
+            hinge(Side::Right, -1.0, arm.clone()),
+        ];
+        let (h, u) = heading_from_hinges(&elbows).unwrap();
+        assert!((h * -Vector3::x() - Vector3::z()).norm() < 1e-9);
+        assert!((u - KNEE_AXIS_DEG).abs() < 1e-9, "{u}");
+        let (_, u) = heading_from_hinges(&elbows[..1]).unwrap();
+        assert!((u - ONE_ARM_DEG).abs() < 1e-9, "{u}");
+        assert!(u > MAX_HEADING_UNCERTAINTY_DEG);
+        // A twitch shorter than MIN_FLEXED_S gives nothing.
+        let twitch: Vec<_> = arm
+            .iter()
+            .map(|&(t, a, _)| {
+                let bent = (1.0..1.3).contains(&t);
+                (t, a, if bent { rot(-Vector3::z(), 60.0) } else { a })
+            })
+            .collect();
+        assert!(heading_from_hinges(&[hinge(Side::Left, -1.0, twitch)]).is_none());
     }
 
     #[test]

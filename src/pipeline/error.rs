@@ -87,7 +87,7 @@ pub fn heading_unsure_message(heading: &str, uncertainty_deg: f64, sensor: &str)
     let how = if uncertainty_deg.is_finite() {
         format!("unsure by about {uncertainty_deg:.0}° (from `{heading}`)")
     } else if heading == "none" {
-        "unknown: no sensor declares `forward`, no mount is known, there is no second pose and the take does not start by walking".to_string()
+        "unknown: no sensor declares `forward`, no mount is known, there is no second pose and no knee or elbow flexes in the minute after calibration".to_string()
     } else {
         format!("unknown for some sensors (`{heading}`)")
     };

@@ -65,7 +65,7 @@ pub struct PipelineOptions {
     /// and the take's.
     pub world: Option<World>,
     /// Causal mode: the take runs through the stream's incremental cores ([`stream`]), as a live
-    /// capture would: smoothing causal, no heading from the direction of travel.
+    /// capture would: smoothing causal, no heading from the hinges (it reads the minute after calibration).
     pub causal: bool,
     /// The sensors' sample rate, when known: causal smoothing's grid uses it instead of the rate
     /// of each sensor's first samples.

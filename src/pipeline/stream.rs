@@ -13,7 +13,7 @@
 //! 6. relative rotations ([`frame_to_local`]), 7. the root.
 //!
 //! What looks ahead stays with whole takes: zero-phase filters, and the heading from the
-//! direction of travel (a stream takes its heading from a declared forward axis or a known mount).
+//! hinges (a stream takes its heading from a declared forward axis or a known mount).
 //! The whole-take path with causal settings ([`super::run`] with `causal`) is this stream fed
 //! the take's samples, so a stream and a file of the same rows give the same frames.
 //!

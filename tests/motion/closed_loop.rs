@@ -152,19 +152,7 @@ fn closed_loop_args(
         .unwrap();
     let world_out = |frame: usize| out_rig.world_rotations(&output.local_rotations(frame));
 
-    // Output frames during the motion, with the source's fractional frame at each.
-    let motion_start = truth["motion_start_s"].as_f64().unwrap();
-    let first = truth["first_frame"].as_u64().unwrap() as f64;
-    let last = truth["last_frame"].as_u64().unwrap() as f64;
-    let frame_time = truth["source_frame_time_s"].as_f64().unwrap();
-    let mut compared = Vec::new();
-    for k in 0..output.frame_count() {
-        let t = k as f64 / OUT_FPS;
-        let f = first + (t - motion_start) / frame_time;
-        if t >= motion_start && f <= last {
-            compared.push((k, f));
-        }
-    }
+    let compared = motion_frames(&truth, output.frame_count(), OUT_FPS);
     assert!(compared.len() > 300, "{} frames to compare", compared.len());
     let sensors = truth["sensors"].as_array().unwrap();
     let joints: Vec<&str> = sensors
@@ -230,9 +218,24 @@ fn closed_loop_args(
     })
 }
 
+/// The output frames (of `frames` at `fps`) during a simulated capture's motion, each with the
+/// source's fractional frame at its time (from `simulate`'s truth file).
+pub(crate) fn motion_frames(truth: &Value, frames: usize, fps: f64) -> Vec<(usize, f64)> {
+    let motion_start = truth["motion_start_s"].as_f64().unwrap();
+    let first = truth["first_frame"].as_u64().unwrap() as f64;
+    let last = truth["last_frame"].as_u64().unwrap() as f64;
+    let frame_time = truth["source_frame_time_s"].as_f64().unwrap();
+    (0..frames)
+        .map(|k| (k, k as f64 / fps))
+        .filter(|&(_, t)| t >= motion_start)
+        .map(|(k, t)| (k, first + (t - motion_start) / frame_time))
+        .filter(|&(_, f)| f <= last)
+        .collect()
+}
+
 /// [`Loop::position_error_h`]: the source's joints by the independent numpy reader
 /// (tests/python/bvh_positions.py, linearly between its frames), the output's by its BVH.
-fn position_error_h(
+pub(crate) fn position_error_h(
     py: &Path,
     bvh: &Path,
     output: &imubake::bvh::Bvh,
@@ -240,7 +243,20 @@ fn position_error_h(
     sensors: &[Value],
     compared: &[(usize, f64)],
 ) -> f64 {
-    let ends = ["Head", "LeftHand", "RightHand", "LeftFoot", "RightFoot"];
+    // Mixamo's and CMU's names, and Poser's (CMU 03_02).
+    let ends = [
+        "Head",
+        "LeftHand",
+        "RightHand",
+        "LeftFoot",
+        "RightFoot",
+        "head",
+        "lHand",
+        "rHand",
+        "lFoot",
+        "rFoot",
+    ];
+    let is_hips = |bone: &str| ["Hips", "N0_0", "hip"].contains(&bone);
     let pairs: Vec<(&str, &str)> = sensors
         .iter()
         .map(|s| {
@@ -249,10 +265,9 @@ fn position_error_h(
                 s["source_joint"].as_str().unwrap(),
             )
         })
-        .filter(|(bone, _)| ends.contains(bone) || *bone == "Hips" || *bone == "N0_0")
+        .filter(|(bone, _)| ends.contains(bone) || is_hips(bone))
         .collect();
-    let Some(&(hips_bone, hips_joint)) = pairs.iter().find(|(b, _)| *b == "Hips" || *b == "N0_0")
-    else {
+    let Some(&(hips_bone, hips_joint)) = pairs.iter().find(|(b, _)| is_hips(b)) else {
         return f64::NAN;
     };
     let names: Vec<&str> = pairs.iter().map(|p| p.1).collect();
@@ -355,12 +370,24 @@ fn cmu_with_noise() {
     );
 }
 
-/// The heading from travel: the same simulated walk converted with a mapping that declares no
-/// forward axis must face the direction the source walks in over the first 4 s of motion (read
-/// straight from the BVH's root position channels), within 10°: the pymo walker curves and sways
-/// its hips by ±40°, so its direction of travel is itself only that well defined.
+/// The heading from the hinges: the same simulated walk converted with a mapping that declares
+/// no forward axis must face the subject the way the simulation faced it during calibration
+/// (its `--heading-deg`, undone), within 3° — and the sidecar's uncertainty must cover the error.
+/// Not the direction of walking: the pymo walker sets off 11° to the side of where it stood facing,
+/// which knees read in the world of the moment (as before) took for the heading.
 #[test]
-fn heading_from_travel_faces_the_walking_direction() {
+fn heading_from_the_hinges_is_the_facing_at_calibration() {
+    hinges_give_the_facing_at_calibration(2.0);
+}
+
+/// The same when the subject stands 8 s after calibration before walking off: the knees are read
+/// whenever they bend (read only in the 4 s after calibration, as before, they held no heading).
+#[test]
+fn heading_from_the_hinges_waits_for_the_knees_to_bend() {
+    hinges_give_the_facing_at_calibration(8.0);
+}
+
+fn hinges_give_the_facing_at_calibration(hold_s: f64) {
     let (Some(bvh), Some(_)) = (shared("bvh/pymo_walk.bvh"), python()) else {
         return;
     };
@@ -377,6 +404,7 @@ fn heading_from_travel_faces_the_walking_direction() {
         .arg(&capture)
         .arg("--truth")
         .arg(&truth_path)
+        .args(["--hold-s", &hold_s.to_string()])
         .args([
             "--bone-map",
             "Spine2=Spine",
@@ -394,7 +422,7 @@ fn heading_from_travel_faces_the_walking_direction() {
         .remove("forward");
     let no_forward = dir.path().join("no_forward.json");
     std::fs::write(&no_forward, mapping.to_string()).unwrap();
-    let heading = |mapping: &Path, out: &str| -> (String, f64) {
+    let heading = |mapping: &Path, out: &str| -> (String, f64, Option<f64>) {
         let out_dir = dir.path().join(out);
         run(Command::new(imubake_bin())
             .arg("convert")
@@ -407,45 +435,34 @@ fn heading_from_travel_faces_the_walking_direction() {
         let sidecar: Value =
             serde_json::from_slice(&std::fs::read(out_dir.join("walk.imubake.json")).unwrap())
                 .unwrap();
+        let pipeline = &sidecar["pipeline"];
         (
-            sidecar["pipeline"]["heading"].as_str().unwrap().to_string(),
-            sidecar["pipeline"]["heading_deg"].as_f64().unwrap(),
+            pipeline["heading"].as_str().unwrap().to_string(),
+            pipeline["heading_deg"].as_f64().unwrap(),
+            pipeline["heading_uncertainty_deg"].as_f64(),
         )
     };
-    let (source, declared_deg) = heading(&root.join(MAPPING), "declared");
-    assert_eq!(source, "declared-forward");
-    let (source, travel_deg) = heading(&no_forward, "travel");
-    assert_eq!(source, "travel");
-
-    // The source's walking direction: the mean direction of its root's steps (X/Z position, its
-    // first channels) every 0.1 s over the first 4 s of motion (the walk curves, so the mean
-    // direction, not the chord).
-    let text = std::fs::read_to_string(&bvh).unwrap();
-    let motion: Vec<Vec<f64>> = text
-        .lines()
-        .skip_while(|l| !l.starts_with("Frame Time"))
-        .skip(1)
-        .map(|l| l.split_whitespace().map(|v| v.parse().unwrap()).collect())
-        .collect();
+    // The heading that undoes the simulated one.
     let truth: Value = serde_json::from_slice(&std::fs::read(&truth_path).unwrap()).unwrap();
-    let frame_time = truth["source_frame_time_s"].as_f64().unwrap();
-    let step = (0.1 / frame_time).round() as usize;
-    let (mut dx, mut dz) = (0.0, 0.0);
-    for k in (0..(4.0 / frame_time) as usize).step_by(step) {
-        let (a, b) = (&motion[k], &motion[k + step]);
-        let n = (b[0] - a[0]).hypot(b[2] - a[2]);
-        dx += (b[0] - a[0]) / n;
-        dz += (b[2] - a[2]) / n;
-    }
-    // Declared output = the source's own world; the travel output is turned by the difference
-    // of the two headings, which must bring the walking direction onto +Z.
-    let expected_deg = -dx.atan2(dz).to_degrees();
-    let turn = (travel_deg - declared_deg - expected_deg + 540.0).rem_euclid(360.0) - 180.0;
-    eprintln!("travel heading off the walking direction by {turn:.2}°");
-    assert!(
-        turn.abs() < 10.0,
-        "travel heading is {turn:.1}° off the walking direction"
+    let expected_deg = -truth["heading_deg"].as_f64().unwrap();
+    let off = |deg: f64| (deg - expected_deg + 540.0).rem_euclid(360.0) - 180.0;
+    let (source, declared_deg, _) = heading(&root.join(MAPPING), "declared");
+    assert_eq!(source, "declared-forward");
+    let (source, hinges_deg, uncertainty) = heading(&no_forward, "hinges");
+    assert_eq!(source, "hinges");
+    let uncertainty = uncertainty.expect("a known heading has an uncertainty");
+    eprintln!(
+        "held {hold_s} s: the hinges' heading is {:.2}° off the truth (uncertainty {uncertainty:.1}°), the declared forward's {:.2}°",
+        off(hinges_deg),
+        off(declared_deg)
     );
+    assert!(off(declared_deg).abs() < 0.5, "declared {declared_deg}°");
+    assert!(
+        off(hinges_deg).abs() < 3.0,
+        "held {hold_s} s: the hinges' heading is {:.1}° off the truth",
+        off(hinges_deg)
+    );
+    assert!(uncertainty >= off(hinges_deg).abs() && uncertainty <= 10.0);
 }
 
 /// Paper 002's layout through a SOU log (NED yaw/pitch/roll with 3 decimals, ms timestamps) onto

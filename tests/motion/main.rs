@@ -12,6 +12,7 @@ mod broad;
 mod bvh_retarget;
 mod closed_loop;
 mod filters_scipy;
+mod functional_calibration;
 mod fusion_real;
 mod fusion_reference;
 mod joint_angles;
