@@ -9,9 +9,11 @@
 //!   next joint, or `D`, rest length `ℓ_i`) points along the bend's tangent at its middle, so
 //!   `Σ_{j≤i} f_j = (Σ_{j<i} ℓ_j + ℓ_i / 2) / Σ ℓ`; `D` keeps the rest of the rotation, so the
 //!   chain bends smoothly and `D` is exactly where its sensor says (two equal segments: ¼, ½, and
-//!   ¼ left for `D`). An unsensed joint without a sensed descendant (a head with no sensor) keeps its
-//!   held rotation (below); where branches meet, the first sensed descendant in the rig's order
-//!   decides.
+//!   ¼ left for `D`). A limb's root is not such a chain: unsensed joints of the limb's own before
+//!   a sensed upper arm (a clavicle) share [`CLAVICLE_SHARE`] of its turn in all, before a sensed
+//!   thigh (a hip offset bone) none, the pelvis being rigid ([`limb_root_share`]). An unsensed
+//!   joint without a sensed descendant (a head with no sensor) keeps its held rotation (below);
+//!   where branches meet, the first sensed descendant in the rig's order decides.
 //! - `rest`: every unsensed joint keeps its held local rotation, so the whole change of the bend
 //!   between two sensors happens at the lower one.
 //!
@@ -28,6 +30,14 @@
 //! `exp(f_i · log R)`.
 
 use crate::rig::Rig;
+use crate::rig::anatomy::{Anatomy, Limb, Side};
+
+/// The share of an upper arm's turn (relative to the chest) its unsensed clavicle takes: most of
+/// an arm's swing is at the shoulder joint, the shoulder girdle following by about a tenth to a
+/// fifth (shoulder rhythm), where a chain bending evenly along its length would give the clavicle
+/// half — lifting the shoulder, and the hand with it, by about a tenth of the body's height when
+/// the arms come down from a T-pose.
+pub const CLAVICLE_SHARE: f64 = 0.15;
 use nalgebra::UnitQuaternion;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -101,6 +111,7 @@ pub fn plan(rig: &Rig, sensed: &[bool], mode: Unsensed, held: &[UnitQuaternion<f
         return done(out);
     }
     let joints = rig.joints();
+    let anatomy = Anatomy::of(rig);
     // Sensed joints in the rig's (parents-first) order: each claims the unsensed chain above it.
     for d in (0..n).filter(|&j| sensed[j]) {
         let mut chain = Vec::new();
@@ -128,6 +139,12 @@ pub fn plan(rig: &Rig, sensed: &[bool], mode: Unsensed, held: &[UnitQuaternion<f
             .map(|&j| joints[j].offset.norm())
             .collect();
         let total: f64 = lengths.iter().sum();
+        let root_share = limb_root_share(&anatomy, &chain, d);
+        let chain_share = if total > 0.0 {
+            (total - lengths[lengths.len() - 1] / 2.0) / total
+        } else {
+            1.0 - 0.5 / lengths.len() as f64
+        };
         let mut before = 0.0; // the arc length before segment i
         let mut previous = 0.0; // the tangent's share at the previous segment's middle
         for (i, &u) in chain.iter().enumerate() {
@@ -137,7 +154,11 @@ pub fn plan(rig: &Rig, sensed: &[bool], mode: Unsensed, held: &[UnitQuaternion<f
                 (i as f64 + 0.5) / lengths.len() as f64
             };
             before += lengths[i];
-            let fraction = middle - previous;
+            let fraction = match root_share {
+                // A limb's root takes its fixed share, spread as the bend would spread it.
+                Some(share) if chain_share > 0.0 => (middle - previous) * share / chain_share,
+                _ => middle - previous,
+            };
             previous = middle;
             out[u] = Some(Between {
                 ancestor: a,
@@ -151,6 +172,32 @@ pub fn plan(rig: &Rig, sensed: &[bool], mode: Unsensed, held: &[UnitQuaternion<f
         }
     }
     done(out)
+}
+
+/// How much of a limb's turn relative to the trunk the unsensed joints at its root take, when
+/// they are the limb's own (no spine, neck or pelvis joint among them): a clavicle
+/// ([`CLAVICLE_SHARE`]) before a sensed upper arm, nothing before a sensed thigh (a skeleton's
+/// hip offset bone, CMU's `LHipJoint`, is part of the rigid pelvis). `None` elsewhere: the chain
+/// bends evenly.
+fn limb_root_share(anatomy: &Anatomy, chain: &[usize], descendant: usize) -> Option<f64> {
+    let trunk = |j: &usize| {
+        anatomy.spine().contains(j)
+            || anatomy.neck().contains(j)
+            || anatomy.pelvis() == Some(*j)
+            || anatomy.thorax() == Some(*j)
+    };
+    if chain.iter().any(trunk) {
+        return None;
+    }
+    Side::BOTH.into_iter().find_map(|side| {
+        if anatomy.limb(side, Limb::Thigh) == Some(descendant) {
+            Some(0.0)
+        } else if anatomy.limb(side, Limb::UpperArm) == Some(descendant) {
+            Some(CLAVICLE_SHARE)
+        } else {
+            None
+        }
+    })
 }
 
 /// Which joints the animation keys: the sensed ones, (under [`Unsensed::Interpolate`]) the
@@ -375,6 +422,43 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A limb's root is not a bending chain: an unsensed clavicle takes CLAVICLE_SHARE of the
+    /// upper arm's turn (an evenly bending chain would give it half), a hip offset bone none
+    /// (the pelvis is rigid), and the sensed bones still land where their sensors say.
+    #[test]
+    fn a_clavicle_takes_a_small_share_and_a_hip_offset_none() {
+        let text = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/mixamo.yaml"),
+        )
+        .unwrap()
+        .replace(
+            "  - {name: LeftUpLeg, parent: Hips, offset: [0.095, -0.0725, 0.0]}",
+            "  - {name: LHipJoint, parent: Hips, offset: [0.05, -0.04, 0.0]}\n  - {name: LeftUpLeg, parent: LHipJoint, offset: [0.045, -0.0325, 0.0]}",
+        );
+        let rig =
+            crate::rig::file::parse_rig(&text, std::path::Path::new("hip_offset.yaml")).unwrap();
+        let idx = |n: &str| rig.joint_index(n).unwrap();
+        let z = |deg: f64| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), deg.to_radians());
+        let mut world = vec![None; rig.len()];
+        for name in ["Hips", "Spine2"] {
+            world[idx(name)] = Some(vec![UnitQuaternion::identity()]);
+        }
+        // The arm comes down from the T-pose, the thigh swings out.
+        world[idx("LeftArm")] = Some(vec![z(-80.0)]);
+        world[idx("LeftUpLeg")] = Some(vec![z(30.0)]);
+        let rest = vec![UnitQuaternion::identity(); rig.len()];
+        let local = to_local(&rig, world.clone(), 1, Unsensed::Interpolate, &rest);
+        let clavicle = local[idx("LeftShoulder")][0].angle().to_degrees();
+        assert!(
+            (clavicle - 80.0 * CLAVICLE_SHARE).abs() < 1e-9,
+            "{clavicle}"
+        );
+        assert!(local[idx("LHipJoint")][0].angle() < 1e-12);
+        let worlds = rig.world_rotations(&local.iter().map(|t| t[0]).collect::<Vec<_>>());
+        assert!(worlds[idx("LeftArm")].angle_to(&z(-80.0)) < 1e-12);
+        assert!(worlds[idx("LeftUpLeg")].angle_to(&z(30.0)) < 1e-12);
     }
 
     /// Hips and Spine2 sensed, Spine and Spine1 between them: a 60° bend about x shares by the
