@@ -75,6 +75,7 @@ mod tests {
             heading,
             heading_source: HeadingSource::None,
             heading_uncertainty_deg: f64::INFINITY,
+            heading_looks: Vec::new(),
             axes_uncertainty_deg: vec![0.0],
             mounts: vec![mount],
             align: vec![UnitQuaternion::identity()],

@@ -8,12 +8,14 @@
 //! its pose orientation over the window: `q_bone_sensor = q_world_bone(pose)⁻¹ ⊗ H ⊗ mean q_rig_sensor`.
 //!
 //! A static pose cannot tell the subject's heading apart from unknown mounts, so the heading comes
-//! from what can tell it: a sensor whose forward axis is declared (that axis points where the body
-//! faces), else a sensor whose mount is known (its bone's pose orientation says where the body
-//! faces), else a second pose (each bone's turn between the poses, seen through its sensor), else
-//! the hinges: knees and elbows flexing at any time in the minute after calibration — a walk, a
-//! hop, a squat, a wave — each about its own axis, left–right in a standing pose (see
-//! [`heading_from_hinges`]), else none (the sensors' own heading is kept: north → +Z).
+//! from what can tell it: each sensor whose forward axis is declared (that axis points where the
+//! body faces), each sensor whose mount is known (its bone's pose orientation says where the body
+//! faces), a second pose (each bone's turn between the poses, seen through its sensor), and the
+//! hinges: knees and elbows flexing at any time in the minute after calibration — a walk, a hop,
+//! a squat, a wave — each about its own axis, left–right in a standing pose (see
+//! [`heading_from_hinges`]). Every look that is there is combined into one heading by its
+//! uncertainty, a look that disagrees with the others left out ([`combine_looks`]); without any,
+//! none (the sensors' own heading is kept: north → +Z).
 //!
 //! Every source comes with an estimated uncertainty `u` (degrees, about one standard deviation),
 //! and so does each sensor's alignment below. A heading that is off turns every calibrated bone's
@@ -131,6 +133,8 @@ pub struct Calibration {
     pub heading_source: HeadingSource,
     /// The heading's estimated uncertainty, degrees (module docs); infinite when it is unknown.
     pub heading_uncertainty_deg: f64,
+    /// Every source's look at the heading, and whether it agreed ([`combine_looks`]).
+    pub heading_looks: Vec<HeadingLook>,
     /// Per mapped sensor: how far about the vertical its bone's turn axes may be off, degrees —
     /// the heading's uncertainty for a `calibrate` mount on a sensor with north, its alignment's
     /// for a sensor without (infinite when unaligned), 0 for a known mount with north.
@@ -272,6 +276,7 @@ fn without_window(sensors: &[ResolvedSensor]) -> Calibration {
         heading: UnitQuaternion::identity(),
         heading_source: HeadingSource::None,
         heading_uncertainty_deg: f64::INFINITY,
+        heading_looks: Vec::new(),
         // Every mount is known (a `calibrate` one would have made a window): a sensor with north
         // has its bone's axes right; one without is unaligned.
         axes_uncertainty_deg: sensors
@@ -845,6 +850,93 @@ fn heading_from_second_pose(
     Some((heading, best.max(spread_deg / n.sqrt())))
 }
 
+/// One source's look at the heading (sidecar `pipeline.heading_looks`): where it came from, the
+/// turn about +Y it gives (degrees), its uncertainty (degrees) and whether it agreed with the
+/// others ([`combine_looks`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeadingLook {
+    pub source: HeadingSource,
+    pub heading_deg: f64,
+    pub uncertainty_deg: f64,
+    pub agrees: bool,
+}
+
+impl HeadingLook {
+    fn new(source: HeadingSource, heading: &UnitQuaternion<f64>, uncertainty_deg: f64) -> Self {
+        HeadingLook {
+            source,
+            heading_deg: heading.scaled_axis().y.to_degrees(),
+            uncertainty_deg,
+            agrees: true,
+        }
+    }
+}
+
+/// The signed difference of two angles, degrees, in (−180, 180].
+fn angle_diff_deg(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(360.0);
+    if d > 180.0 { d - 360.0 } else { d }
+}
+
+/// One heading from every look, each weighed by its uncertainty: the circular mean with weights
+/// `1/u²`. A look further from it than three of its own uncertainties disagrees: it is left out
+/// (and warned about) and the mean taken again without it; should every look disagree, the
+/// surest alone decides. The result: the heading, the source of the first agreeing look (`looks`
+/// come in the order declared forward, known mounts, second pose, hinges: the sidecar's
+/// `heading` names what the subject set up, when it agreed), and the uncertainty of the mean,
+/// `(Σ 1/u²)^(−½)` over the agreeing looks. `None` without looks.
+fn combine_looks(
+    looks: &mut [HeadingLook],
+    warnings: &mut Vec<String>,
+) -> Option<(UnitQuaternion<f64>, HeadingSource, f64)> {
+    let mean = |looks: &[HeadingLook]| -> Option<f64> {
+        let (sin, cos) = looks
+            .iter()
+            .filter(|l| l.agrees)
+            .fold((0.0, 0.0), |(s, c), l| {
+                let (w, a) = (l.uncertainty_deg.powi(-2), l.heading_deg.to_radians());
+                (s + w * a.sin(), c + w * a.cos())
+            });
+        (sin != 0.0 || cos != 0.0).then(|| sin.atan2(cos).to_degrees())
+    };
+    let first = mean(looks)?;
+    for l in looks.iter_mut() {
+        l.agrees = angle_diff_deg(l.heading_deg, first).abs() <= 3.0 * l.uncertainty_deg;
+    }
+    if !looks.iter().any(|l| l.agrees) {
+        let surest = looks
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.uncertainty_deg.total_cmp(&b.1.uncertainty_deg))
+            .map(|(i, _)| i)?;
+        looks[surest].agrees = true;
+    }
+    let heading_deg = mean(looks)?;
+    for l in looks.iter().filter(|l| !l.agrees) {
+        warnings.push(format!(
+            "the heading from {}{} ({:.1}°, ±{:.1}°) disagrees with the others ({:.1}°) by more than three times its uncertainty: left out",
+            l.source.label(),
+            l.source
+                .sensor()
+                .map_or(String::new(), |s| format!(" (sensor `{s}`)")),
+            l.heading_deg,
+            l.uncertainty_deg,
+            heading_deg
+        ));
+    }
+    let agreeing = looks.iter().filter(|l| l.agrees);
+    let first = agreeing.clone().next()?;
+    let uncertainty = agreeing
+        .map(|l| l.uncertainty_deg.powi(-2))
+        .sum::<f64>()
+        .powf(-0.5);
+    Some((
+        UnitQuaternion::from_axis_angle(&Vector3::y_axis(), heading_deg.to_radians()),
+        first.source.clone(),
+        uncertainty,
+    ))
+}
+
 /// Solves heading, alignments and mounts.
 ///
 /// `first.held[i]`: sensor i's mean orientation over the window, in the rig world (`C ⊗ q`);
@@ -861,62 +953,60 @@ pub fn solve(
 ) -> Calibration {
     let (held, pose_world) = (&first.held, &first.pose_world);
     let mut warnings = Vec::new();
-    let mut heading = None;
-    // 1. A declared forward axis.
+    let mut looks = Vec::new();
+    // 1. Each declared forward axis.
     for (i, s) in sensors.iter().enumerate() {
         let Some(axis) = s.forward.filter(|_| !s.own_heading) else {
             continue;
         };
         let facing = held[i] * axis;
         match heading_towards_plus_z(&facing) {
-            Some(h) => {
-                let u = FORWARD_AXIS_DEG / horizontal_fraction(&facing);
-                heading = Some((h, HeadingSource::DeclaredForward { sensor: s.sensor.clone() }, u));
-                break;
-            }
+            Some(h) => looks.push(HeadingLook::new(
+                HeadingSource::DeclaredForward {
+                    sensor: s.sensor.clone(),
+                },
+                &h,
+                FORWARD_AXIS_DEG / horizontal_fraction(&facing),
+            )),
             None => warnings.push(format!(
                 "sensor `{}`: its forward axis points almost vertically during calibration; it cannot give the heading",
                 s.sensor
             )),
         }
     }
-    // 2. A known mount: the bone's forward (+Z in the pose) seen through the sensor.
-    if heading.is_none() {
-        for (i, s) in sensors.iter().enumerate() {
-            let Mount::Fixed(mount) = s.mount else {
-                continue;
-            };
-            if s.own_heading {
-                continue;
-            }
-            let bone_world_unturned = held[i] * mount.inverse();
-            let facing = bone_world_unturned * (pose_world[i].inverse() * Vector3::z());
-            if let Some(h) = heading_towards_plus_z(&facing) {
-                let u = KNOWN_MOUNT_DEG / horizontal_fraction(&facing);
-                heading = Some((
-                    h,
-                    HeadingSource::KnownMount {
-                        sensor: s.sensor.clone(),
-                    },
-                    u,
-                ));
-                break;
-            }
+    // 2. Each known mount: the bone's forward (+Z in the pose) seen through the sensor.
+    for (i, s) in sensors.iter().enumerate() {
+        let Mount::Fixed(mount) = s.mount else {
+            continue;
+        };
+        if s.own_heading {
+            continue;
+        }
+        let bone_world_unturned = held[i] * mount.inverse();
+        let facing = bone_world_unturned * (pose_world[i].inverse() * Vector3::z());
+        if let Some(h) = heading_towards_plus_z(&facing) {
+            looks.push(HeadingLook::new(
+                HeadingSource::KnownMount {
+                    sensor: s.sensor.clone(),
+                },
+                &h,
+                KNOWN_MOUNT_DEG / horizontal_fraction(&facing),
+            ));
         }
     }
     // 3. A second pose, 4. the hinges.
-    let heading = heading
-        .or_else(|| {
-            second
-                .and_then(|p| heading_from_second_pose(sensors, first, p))
-                .map(|(h, u)| (h, HeadingSource::SecondPose, u))
-        })
-        .or_else(|| hinges.map(|(h, u)| (h, HeadingSource::Hinges, u)));
-    let (heading, heading_source, heading_uncertainty_deg) = heading.unwrap_or((
-        UnitQuaternion::identity(),
-        HeadingSource::None,
-        f64::INFINITY,
-    ));
+    if let Some((h, u)) = second.and_then(|p| heading_from_second_pose(sensors, first, p)) {
+        looks.push(HeadingLook::new(HeadingSource::SecondPose, &h, u));
+    }
+    if let Some((h, u)) = hinges {
+        looks.push(HeadingLook::new(HeadingSource::Hinges, &h, u));
+    }
+    let (heading, heading_source, heading_uncertainty_deg) =
+        combine_looks(&mut looks, &mut warnings).unwrap_or((
+            UnitQuaternion::identity(),
+            HeadingSource::None,
+            f64::INFINITY,
+        ));
 
     // 5. Sensors without a heading of their own, each aligned by Y_i = H ⊗ A_i.
     let mut align = vec![UnitQuaternion::identity(); sensors.len()];
@@ -999,6 +1089,7 @@ pub fn solve(
         heading,
         heading_source,
         heading_uncertainty_deg,
+        heading_looks: looks,
         axes_uncertainty_deg,
         mounts,
         align,
@@ -1188,6 +1279,68 @@ mod tests {
             heading_from_hinges(&[knee(Side::Left, wobbly.clone()), knee(Side::Right, wobbly)])
                 .unwrap();
         assert!(u > KNEE_AXIS_DEG && u < 30.0, "{u}");
+    }
+
+    /// Every source's look is weighed by its uncertainty; one that disagrees by more than three
+    /// of its own uncertainties is left out and warned about; should all disagree, the surest
+    /// decides; angles wrap.
+    #[test]
+    fn heading_looks_combine_by_their_uncertainty() {
+        let look = |source: HeadingSource, deg: f64, u: f64| HeadingLook {
+            source,
+            heading_deg: deg,
+            uncertainty_deg: u,
+            agrees: true,
+        };
+        let declared = |deg| {
+            look(
+                HeadingSource::DeclaredForward {
+                    sensor: "pelvis".into(),
+                },
+                deg,
+                FORWARD_AXIS_DEG,
+            )
+        };
+        let deg = |h: &UnitQuaternion<f64>| h.scaled_axis().y.to_degrees();
+        let mut warnings = Vec::new();
+        // 30° ± 5° and 32° ± 3°: (30/25 + 32/9) / (1/25 + 1/9), ± (1/25 + 1/9)^−½.
+        let mut looks = vec![declared(30.0), look(HeadingSource::Hinges, 32.0, 3.0)];
+        let (h, source, u) = combine_looks(&mut looks, &mut warnings).unwrap();
+        let w = (1.0 / 25.0, 1.0 / 9.0);
+        let expected = (30.0 * w.0 + 32.0 * w.1) / (w.0 + w.1);
+        assert!((deg(&h) - expected).abs() < 1e-3, "{}", deg(&h));
+        assert!((u - (w.0 + w.1).powf(-0.5)).abs() < 1e-12);
+        assert_eq!(source.label(), "declared-forward");
+        assert!(looks.iter().all(|l| l.agrees) && warnings.is_empty());
+        // A forward axis 50° off the two others: left out, and said.
+        let mut looks = vec![
+            look(HeadingSource::SecondPose, 30.0, 3.0),
+            look(HeadingSource::Hinges, 31.0, 3.0),
+            declared(80.0),
+        ];
+        let (h, _, _) = combine_looks(&mut looks, &mut warnings).unwrap();
+        assert!((deg(&h) - 30.5).abs() < 1e-3, "{}", deg(&h));
+        assert_eq!(
+            looks.iter().map(|l| l.agrees).collect::<Vec<_>>(),
+            [true, true, false]
+        );
+        assert_eq!(warnings.len(), 1);
+        assert!(
+            warnings[0].contains("declared-forward (sensor `pelvis`)"),
+            "{warnings:?}"
+        );
+        // Two sure looks a quarter turn apart: the first of the surest decides.
+        let mut looks = vec![
+            look(HeadingSource::SecondPose, 0.0, 1.0),
+            look(HeadingSource::Hinges, 90.0, 1.0),
+        ];
+        let (h, source, _) = combine_looks(&mut looks, &mut Vec::new()).unwrap();
+        assert!(deg(&h).abs() < 1e-9 && source == HeadingSource::SecondPose);
+        // Across ±180°.
+        let mut looks = vec![declared(179.0), declared(-179.0)];
+        let (h, _, _) = combine_looks(&mut looks, &mut Vec::new()).unwrap();
+        assert!((deg(&h).abs() - 180.0).abs() < 1e-6, "{}", deg(&h));
+        assert!(combine_looks(&mut [], &mut Vec::new()).is_none());
     }
 
     /// The knee's axis is read as it stood at calibration: a subject who turns 120° on the spot

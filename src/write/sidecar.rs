@@ -141,6 +141,10 @@ pub struct PipelineRecord {
     /// `estimate` (from the take, refused when unsure) or `sensors` (the sensors' north kept
     /// deliberately).
     pub heading_policy: &'static str,
+    /// Every source's look at the heading and whether it agreed with the others (those that
+    /// did are combined into `heading_deg`); empty without any.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub heading_looks: Vec<HeadingLookRecord>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub trim: Option<TrimRecord>,
     /// `"quaternion"`, or `"legacy-euler"` for paper 002's Listing-2 mappings.
@@ -309,6 +313,17 @@ pub fn fusion_record(
     })
 }
 
+/// One source's look at the heading, in the sidecar.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeadingLookRecord {
+    pub source: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<String>,
+    pub heading_deg: f64,
+    pub uncertainty_deg: f64,
+    pub agrees: bool,
+}
+
 /// The sidecar's `pipeline`: what was done, in which mode.
 /// `heading`: the calibration's, `None` for modes without one (the sidecar says `none`).
 pub fn pipeline_record(
@@ -334,6 +349,18 @@ pub fn pipeline_record(
             .map(|(c, _)| c.heading_uncertainty_deg)
             .filter(|u| u.is_finite()),
         heading_policy: heading.map_or("none", |(_, p)| p.label()),
+        heading_looks: heading.map_or_else(Vec::new, |(c, _)| {
+            c.heading_looks
+                .iter()
+                .map(|l| HeadingLookRecord {
+                    source: l.source.label(),
+                    sensor: l.source.sensor().map(str::to_string),
+                    heading_deg: l.heading_deg,
+                    uncertainty_deg: l.uncertainty_deg,
+                    agrees: l.agrees,
+                })
+                .collect()
+        }),
         trim: options.trim.map(|t| TrimRecord {
             start_s: t.start_s,
             end_s: (t.end_s < f64::MAX).then_some(t.end_s),

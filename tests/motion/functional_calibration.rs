@@ -211,6 +211,28 @@ fn one_run(motion: &Motion, seed: u64, raw: bool) -> Option<Outcome> {
     };
     let (known_sidecar, known_h) = convert(&known, "known");
     assert_eq!(known_sidecar["pipeline"]["heading"], "declared-forward");
+    // Both looks are there, agree, and are combined.
+    let looks: Vec<(&str, bool)> = known_sidecar["pipeline"]["heading_looks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| {
+            (
+                l["source"].as_str().unwrap(),
+                l["agrees"].as_bool().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        looks,
+        [("declared-forward", true), ("hinges", true)],
+        "{}",
+        motion.name
+    );
+    let combined = known_sidecar["pipeline"]["heading_uncertainty_deg"]
+        .as_f64()
+        .unwrap();
+    assert!(combined < 3.0, "{combined}");
     let (sidecar, hinges_h) = convert(&hinges, "hinges");
     let pipeline = &sidecar["pipeline"];
     assert_eq!(pipeline["heading"], "hinges", "{}", motion.name);
