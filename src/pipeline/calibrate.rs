@@ -761,7 +761,8 @@ pub fn heading_from_hinges(hinges: &[HingeSamples]) -> Option<(UnitQuaternion<f6
     }
     let heading = heading_towards_plus_z(&left.normalize().cross(&Vector3::y()))?;
     let spread_deg = (spread_sq / count as f64).sqrt().to_degrees();
-    // A kind of hinge seen on both sides cancels its turn-out; else the least sure lone one.
+    // A kind of hinge seen on both sides cancels its turn-out; else a lone knee bounds it at
+    // ONE_LEG_DEG, lone elbows at ONE_ARM_DEG.
     let both_sides = |sign: f64| {
         let on = |side| sides.contains(&(sign, side));
         on(crate::rig::anatomy::Side::Left) && on(crate::rig::anatomy::Side::Right)
