@@ -300,6 +300,53 @@ fn the_hinges_give_the_heading_from_raw_readings() {
     check(&runs);
 }
 
+/// Only the arms sensed, the pose held in CMU 01_01's frame 1 (arms down): one elbow flexes
+/// enough over the hops, and one elbow alone is never sure (its axis is 24° off the left–right
+/// axis here): refused, naming the hinges and the ways out.
+#[test]
+fn one_elbow_alone_is_refused() {
+    let (Some(bvh), Some(_)) = (shared("bvh/cmu_01_01.bvh"), python()) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mapping = dir.path().join("arms.json");
+    let mut value = own_rig_mapping(&CMU_BONES);
+    value["calibration"]["pose"] = Value::from("frame:1");
+    let sensors = value["sensors"].as_object_mut().unwrap();
+    sensors.retain(|name, _| {
+        !name.contains("thigh") && !name.contains("shank") && !name.contains("foot")
+    });
+    sensors["pelvis"].as_object_mut().unwrap().remove("forward");
+    std::fs::write(&mapping, value.to_string()).unwrap();
+    let capture = dir.path().join("arms.csv");
+    run(Command::new(imubake_bin())
+        .arg("simulate")
+        .arg(&bvh)
+        .arg("--rig")
+        .arg(&bvh)
+        .arg("--mapping")
+        .arg(&mapping)
+        .arg("--output")
+        .arg(&capture)
+        .args(["--frames", "1:900", "--seed", "3"]));
+    let out = Command::new(imubake_bin())
+        .arg("convert")
+        .arg(&capture)
+        .arg("--mapping")
+        .arg(&mapping)
+        .arg("--rig")
+        .arg(&bvh)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    for part in ["unsure by about 30°", "from `hinges`", "declare `forward`"] {
+        assert!(stderr.contains(part), "{part}: {stderr}");
+    }
+}
+
 /// Standing still throughout — nothing flexes — still gives no heading: refused, as before.
 #[test]
 fn a_take_standing_still_is_still_refused() {
