@@ -874,12 +874,6 @@ impl HeadingLook {
     }
 }
 
-/// The signed difference of two angles, degrees, in (−180, 180].
-fn angle_diff_deg(a: f64, b: f64) -> f64 {
-    let d = (a - b).rem_euclid(360.0);
-    if d > 180.0 { d - 360.0 } else { d }
-}
-
 /// One heading from every look, each weighed by its uncertainty: the circular mean with weights
 /// `1/u²`. A look further from it than three of its own uncertainties disagrees: it is left out
 /// (and warned about) and the mean taken again without it; should every look disagree, the
@@ -903,7 +897,8 @@ fn combine_looks(
     };
     let first = mean(looks)?;
     for l in looks.iter_mut() {
-        l.agrees = angle_diff_deg(l.heading_deg, first).abs() <= 3.0 * l.uncertainty_deg;
+        l.agrees =
+            crate::rotation::wrap_deg(l.heading_deg - first).abs() <= 3.0 * l.uncertainty_deg;
     }
     if !looks.iter().any(|l| l.agrees) {
         let surest = looks

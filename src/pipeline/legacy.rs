@@ -72,8 +72,8 @@ use crate::anim::Animation;
 use crate::fps::Fps;
 use crate::mapping::{LegacyChannel, LegacyMapping, LegacyTarget, MappingError};
 use crate::rig::Rig;
-use crate::rotation::EulerOrder;
 use crate::rotation::euler;
+use crate::rotation::{EulerOrder, wrap_deg};
 use crate::take::{OrientationTrack, Take, Track};
 use nalgebra::UnitQuaternion;
 use std::collections::{BTreeMap, BTreeSet};
@@ -120,12 +120,6 @@ pub fn subtract_last_value(child: &Track<Angles>, parent: &Track<Angles>) -> Tra
 pub fn copy_channel(channel: &LegacyChannel, relative: &Track<Angles>) -> Track<f64> {
     let angle = channel.source.angle;
     relative.map(|a| channel.sign * a[angle])
-}
-
-/// An angle difference in degrees brought into (−180°, 180°].
-pub fn wrap_deg(d: f64) -> f64 {
-    let r = d.rem_euclid(360.0);
-    if r > 180.0 { r - 360.0 } else { r }
 }
 
 /// Stage 4: a channel (degrees) at frames `first .. first + frames` of `fps`, interpolated along

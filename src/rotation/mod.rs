@@ -10,6 +10,12 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
+/// An angle difference in degrees brought into (−180°, 180°].
+pub fn wrap_deg(d: f64) -> f64 {
+    let r = d.rem_euclid(360.0);
+    if r > 180.0 { r - 360.0 } else { r }
+}
+
 /// An intrinsic Euler order, named by the order its rotations are applied as BVH channel lists
 /// are: `ZXY` (BVH `Zrotation Xrotation Yrotation`) means R = Rz · Rx · Ry. Blender names the same
 /// rotation mode with the string reversed (`'YXZ'`).

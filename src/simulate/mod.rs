@@ -533,11 +533,6 @@ pub fn simulate(
             frames,
         });
     }
-    // The source's reference: frame N for a calibration pose `frame:N`, else its rest.
-    let reference = match mapping.calibration.as_ref().map(|c| &c.pose) {
-        Some(crate::mapping::PoseRef::BvhFrame(n)) if *n < frames => bvh.local_rotations(*n),
-        _ => vec![UnitQuaternion::identity(); bvh.local_rotations(0).len()],
-    };
     let mut source = Source {
         reference: Vec::new(),
         reference_world: Vec::new(),
@@ -568,6 +563,11 @@ pub fn simulate(
             .map_err(|e| SimulateError::Invalid(format!("the BVH is not a valid rig: {e}")))?,
         first: options.first_frame,
         last,
+    };
+    // The source's reference: frame N for a calibration pose `frame:N`, else its rest.
+    let reference = match mapping.calibration.as_ref().map(|c| &c.pose) {
+        Some(crate::mapping::PoseRef::BvhFrame(n)) if *n < frames => bvh.local_rotations(*n),
+        _ => vec![UnitQuaternion::identity(); source.rig.len()],
     };
     source.reference_world = (0..reference.len())
         .map(|j| source.chain(j, |k| reference[k]))
