@@ -389,6 +389,20 @@ pub fn settings(flags: Config, config: Option<&Path>) -> Result<ConvertSettings,
     })
 }
 
+/// Why a plan could not be made: the config file, or a file the settings name.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Resolve(#[from] crate::convert::ConvertError),
+}
+
+/// The plan of [`settings`]: every file the settings name read once ([`Plan::resolve`]).
+pub fn plan(flags: Config, config: Option<&Path>) -> Result<crate::convert::Plan, PlanError> {
+    Ok(crate::convert::Plan::resolve(settings(flags, config)?)?)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

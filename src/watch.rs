@@ -39,6 +39,7 @@ use crate::batch::{
     Attempt, BatchTake, DiscoverOptions, Skipped, Summary, TakeJob, TakeResult, TakeStatus,
     attempt_take, discover,
 };
+use crate::config::PlanError;
 use crate::convert::{Plan, source_sha256};
 use crate::ledger::{
     FINGERPRINT_SCHEMA, Ledger, SourceStat, Status, fingerprint_schema, settings_fingerprint,
@@ -352,7 +353,7 @@ type FolderSettings = (Option<SourceStat>, FileStats, Option<Resolved>);
 /// The follower of one inbox.
 struct Watch<'a> {
     opts: &'a WatchOptions,
-    load_plan: &'a dyn Fn(Option<&Path>) -> Result<Plan, String>,
+    load_plan: &'a dyn Fn(Option<&Path>) -> Result<Plan, PlanError>,
     plan: Arc<Plan>,
     fingerprint: String,
     config_seen: Option<SourceStat>,
@@ -907,7 +908,7 @@ fn wake_of(res: DebounceEventResult) -> Option<Wake> {
 /// [`WatchError::AlreadyWatched`] before doing anything else.
 pub fn run(
     opts: &WatchOptions,
-    load_plan: &dyn Fn(Option<&Path>) -> Result<Plan, String>,
+    load_plan: &dyn Fn(Option<&Path>) -> Result<Plan, PlanError>,
     stop: &AtomicBool,
 ) -> Result<Summary, WatchError> {
     fs::create_dir_all(&opts.out)?;

@@ -3,7 +3,7 @@
 use super::ReadArgs;
 use anyhow::Context;
 use clap::Args;
-use imubake::config::Config;
+use imubake::config::{Config, PlanError};
 use imubake::convert::{ConvertSettings, OutputFormat, Plan, convert, take_stem};
 use imubake::fps::Fps;
 use imubake::pipeline::Trim;
@@ -158,12 +158,12 @@ impl SettingsArgs {
 
     /// The plan of these settings: every file they name read once.
     pub fn plan(&self) -> anyhow::Result<Plan> {
-        Ok(Plan::resolve(self.settings()?)?)
+        Ok(self.plan_with(self.config())?)
     }
 
     /// The plan of the settings from `config` (a YAML file, or none) with these flags over it.
-    pub fn plan_with(&self, config: Option<&Path>) -> anyhow::Result<Plan> {
-        Ok(Plan::resolve(self.settings_with(config)?)?)
+    pub fn plan_with(&self, config: Option<&Path>) -> Result<Plan, PlanError> {
+        imubake::config::plan(self.layer(), config)
     }
 
     /// These flags as one settings layer.

@@ -3,7 +3,6 @@
 use super::convert::SettingsArgs;
 use anyhow::Context;
 use clap::Args;
-use imubake::convert::Plan;
 use imubake::watch::{self, WatchOptions};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -59,11 +58,7 @@ pub fn run(args: WatchArgs) -> anyhow::Result<ExitCode> {
     opts.follow_symlinks = args.follow_symlinks;
     let stop = super::stop_on_signals()?;
     // `--config` wins; else the inbox's imubake.yaml the watcher passes in. Flags override both.
-    let load = |config: Option<&Path>| -> Result<Plan, String> {
-        args.settings
-            .plan_with(user_config.as_deref().or(config))
-            .map_err(|e| format!("{e:#}"))
-    };
+    let load = |config: Option<&Path>| args.settings.plan_with(user_config.as_deref().or(config));
     let summary = match watch::run(&opts, &load, &stop) {
         Ok(summary) => summary,
         // Another watcher follows this output folder: say which, and stop at once.

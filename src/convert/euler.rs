@@ -10,8 +10,8 @@ use super::orientations::resolve_world;
 use super::plan::{Mode, Plan, PlanMapping};
 use crate::mapping::{LegacyTargetRecord, MappingRecord};
 use crate::pipeline;
+use crate::pipeline::record::pipeline_record;
 use crate::take::Take;
-use crate::write::sidecar::pipeline_record;
 use crate::write::take::Conversion;
 use std::path::Path;
 

@@ -3,15 +3,14 @@
 //! driving the rig's bones named like them.
 
 use super::error::ConvertError;
-use super::plan::{Mode, Plan, PlanMapping};
+use super::plan::{Plan, PlanMapping};
 use crate::mapping::Mapping;
 use crate::pipeline;
+use crate::pipeline::record::FileRecord;
 use crate::take::Take;
 use crate::world::{World, WorldFrom};
-use crate::write::sidecar::PipelineRecord;
-use crate::write::sidecar::{FileRecord, fusion_record, mapping_record, pipeline_record};
 use crate::write::take::Conversion;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// The take through the quaternion pipeline onto the plan's rig.
 pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversion, ConvertError> {
@@ -40,39 +39,26 @@ pub(super) fn convert(input: &Path, take: Take, plan: &Plan) -> Result<Conversio
         }
         PlanMapping::Euler(_) => unreachable!("a Listing-2 mapping converts in the Euler mode"),
     };
-    let rig = plan.rig();
-    let mapping_name = file.map_or_else(
-        || PathBuf::from("(sensors matched to bones by name)"),
-        Path::to_path_buf,
-    );
     let mut options = plan.pipeline().clone();
     options.world = Some(world);
-    // All the sidecar needs of the plan, taken before the pipeline runs.
-    let calibration_file = plan.sensor_calibration().map(|c| FileRecord {
-        path: c.path.display().to_string(),
-        sha256: c.sha256.clone(),
-    });
-    let converted =
-        pipeline::run_owned(take, rig, mapping, &mapping_name, &options).map_err(|source| {
+    let mut recorded =
+        pipeline::run_owned(take, plan.rig(), mapping, file, &options).map_err(|source| {
             ConvertError::Pipeline {
                 input: input.to_path_buf(),
                 source,
             }
         })?;
-    let policy = options.heading_policy(mapping);
+    if let Some(fusion) = &mut recorded.pipeline.fusion {
+        fusion.sensor_calibration = plan.sensor_calibration().map(|c| FileRecord {
+            path: c.path.display().to_string(),
+            sha256: c.sha256.clone(),
+        });
+    }
+    let converted = recorded.converted;
     Ok(Conversion {
         euler_deg: None,
-        mapping: mapping_record(&converted, rig, mapping, file),
-        pipeline: PipelineRecord {
-            fusion: fusion_record(&converted, options.fusion.is_some(), calibration_file),
-            ..pipeline_record(
-                &options,
-                Some((&converted.calibration, policy)),
-                converted.first_frame,
-                Mode::Orientations,
-                converted.root_mode,
-            )
-        },
+        mapping: recorded.mapping,
+        pipeline: recorded.pipeline,
         contacts: converted.contacts,
         world: (converted.world, world_from),
         vendor_contacts: None,

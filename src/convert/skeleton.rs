@@ -5,10 +5,10 @@ use super::error::ConvertError;
 use super::plan::{Mode, Plan};
 use crate::anim::Animation;
 use crate::mapping::{MappingRecord, SensorRecord};
+use crate::pipeline::record::pipeline_record;
 use crate::pipeline::root::RootMode;
 use crate::retarget::{Reference, SourceMotion};
 use crate::world::{World, WorldFrom};
-use crate::write::sidecar::pipeline_record;
 use crate::write::take::Conversion;
 use std::path::Path;
 

@@ -21,6 +21,7 @@ mod error;
 pub mod legacy;
 mod options;
 pub(crate) mod parallel;
+pub mod record;
 pub mod relative;
 pub mod resample;
 pub mod root;
@@ -32,7 +33,7 @@ pub use error::{PipelineError, RecalibrateError};
 pub use options::{PipelineOptions, Trim};
 
 use crate::anim::{Animation, AnimationBuilder, Pose};
-use crate::mapping::{CalibrationWindow, HeadingPolicy, Mapping, ResolvedSensor};
+use crate::mapping::{CalibrationWindow, HeadingPolicy, Mapping, MappingRecord, ResolvedSensor};
 use crate::rig::Rig;
 use crate::take::Take;
 use crate::take::Track;
@@ -40,6 +41,7 @@ use crate::world::World;
 use calibrate::Calibration;
 use nalgebra::UnitQuaternion;
 use parallel::parallel_map_with;
+use record::PipelineRecord;
 use resample::FrameGrid;
 use root::RootMode;
 use smoothing::smooth_track;
@@ -90,21 +92,40 @@ pub fn run(
 }
 
 /// [`run`] on a take the pipeline may consume: the devices' orientation tracks are moved into
-/// stage 1 instead of copied, so a long take's samples are never held twice.
+/// stage 1 instead of copied, so a long take's samples are never held twice. With what the
+/// sidecar says of the run (`mapping_file`: `None` for sensors matched to bones by name).
 pub fn run_owned(
     mut take: Take,
     rig: &Rig,
     mapping: &Mapping,
-    mapping_file: &Path,
+    mapping_file: Option<&Path>,
     options: &PipelineOptions,
-) -> Result<Converted, PipelineError> {
-    run_on(
-        TakeInput::Owned(&mut take),
-        rig,
-        mapping,
-        mapping_file,
-        options,
-    )
+) -> Result<Recorded, PipelineError> {
+    let named = mapping_file.unwrap_or(Path::new("(sensors matched to bones by name)"));
+    let converted = run_on(TakeInput::Owned(&mut take), rig, mapping, named, options)?;
+    let policy = options.heading_policy(mapping);
+    Ok(Recorded {
+        mapping: record::mapping_record(&converted, rig, mapping, mapping_file),
+        pipeline: PipelineRecord {
+            fusion: record::fusion_record(&converted, options.fusion.is_some(), None),
+            ..record::pipeline_record(
+                options,
+                Some((&converted.calibration, policy)),
+                converted.first_frame,
+                record::Mode::Orientations,
+                converted.root_mode,
+            )
+        },
+        converted,
+    })
+}
+
+/// A run of the pipeline with the sidecar's records of it.
+#[derive(Debug, Clone)]
+pub struct Recorded {
+    pub converted: Converted,
+    pub mapping: MappingRecord,
+    pub pipeline: PipelineRecord,
 }
 
 fn run_on(
@@ -119,30 +140,19 @@ fn run_on(
         return run_causal(input.take(), rig, mapping, mapping_file, options);
     }
     let (file, w) = (mapping_file.display().to_string(), &mut Vec::new());
-    // What stage 1 may take away from an owned take, and where the heading may come from.
-    let take = (
-        input.take().last_time_s(),
-        input.take().recalibrations_s().to_vec(),
-        options.heading_policy(mapping),
-    );
+    let (times, policy) = (TakeTimes::of(input.take()), options.heading_policy(mapping));
     let (world, sources, window) = stage(debug_span!("sources"), || {
         sources_and_window(input, rig, mapping, mapping_file, options, w)
     })?;
     let (calibration, later) = stage(debug_span!("calibrate"), || {
-        calibrations(rig, &sources, window.as_ref(), take, &file, w)
+        calibrations(rig, &sources, window.as_ref(), times, policy, &file, w)
     })?;
-    let Sources {
-        sensors,
-        tracks,
-        origins,
-        fusion,
-    } = sources;
     let bone_tracks = stage(debug_span!("bone world"), || {
-        bone_world::bone_world_recalibrated(tracks, &calibration, &later)
+        bone_world::bone_world_recalibrated(sources.tracks, &calibration, &later)
     });
-    let grid = frame_grid(rig, &sensors, &bone_tracks, options, w)?;
+    let grid = frame_grid(rig, &sources.sensors, &bone_tracks, options, w)?;
     let on_grid = stage(debug_span!("smooth and resample"), || {
-        smooth_and_resample(rig, &sensors, bone_tracks, &grid, options, w)
+        smooth_and_resample(rig, &sources.sensors, bone_tracks, &grid, options, w)
     });
     let held = calibrate::held_pose(rig, window.as_ref());
     let local = stage(debug_span!("local rotations"), || {
@@ -153,18 +163,34 @@ fn run_on(
     })?;
     Ok(Converted {
         animation,
-        sensors,
+        sensors: sources.sensors,
         calibration,
         window,
         world,
-        origins,
-        fusion,
+        origins: sources.origins,
+        fusion: sources.fusion,
         root_mode,
         contacts,
         first_frame: grid.first,
         unsmoothed: local.unsmoothed,
         warnings: std::mem::take(w),
     })
+}
+
+/// What stage 2 needs of the take, seconds, taken before stage 1 may consume it: its last
+/// time and a live session's recalibration times.
+struct TakeTimes {
+    last_s: f64,
+    recalibrations_s: Vec<f64>,
+}
+
+impl TakeTimes {
+    fn of(take: &Take) -> TakeTimes {
+        TakeTimes {
+            last_s: take.last_time_s(),
+            recalibrations_s: take.recalibrations_s().to_vec(),
+        }
+    }
 }
 
 /// Runs one stage inside its `tracing` span (`IMUBAKE_LOG=imubake=debug` prints each one's
@@ -175,18 +201,18 @@ fn stage<R>(span: tracing::Span, f: impl FnOnce() -> R) -> R {
 }
 
 /// Stage 2: the calibration from the window, and a live session's recalibrations — the same
-/// pose held again, each solved on its own window and applying from the window's end (`take`:
-/// the take's last time and its recalibration times, seconds, and the heading policy). Each is
-/// refused when its heading is unsure ([`Calibration::check_heading`]).
+/// pose held again, each solved on its own window and applying from the window's end. Each is
+/// refused when its heading is unsure under `policy` ([`Calibration::check_heading`]).
 fn calibrations(
     rig: &Rig,
     sources: &Sources,
     window: Option<&CalibrationWindow>,
-    take: (f64, Vec<f64>, HeadingPolicy),
+    take: TakeTimes,
+    policy: HeadingPolicy,
     file: &str,
     warnings: &mut Vec<String>,
 ) -> Result<(Calibration, Vec<(f64, Calibration)>), PipelineError> {
-    let (take_last_s, recalibrations_s, policy) = take;
+    let (take_last_s, recalibrations_s) = (take.last_s, take.recalibrations_s);
     let calibration = calibrate::calibrate(rig, sources, window, take_last_s, file, warnings)?;
     calibration.check_heading(&sources.sensors, policy, file)?;
     let mut later = Vec::new();
