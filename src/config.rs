@@ -29,7 +29,7 @@
 //! sensor_calibration: sensors.yaml   # calibrate-sensors' file; relative to this one
 //! subject: subject.yaml  # height_m and/or segment lengths: the rig scaled to the subject
 //! bone_map: bones.json   # a BVH take: which joint drives which bone (default: by part)
-//! bvh_reference: rest    # a BVH take: changes measured from its rest pose, or frame:N
+//! bvh_reference: match:0 # a BVH take: its frame 0's pose matched; or frame:N, rest
 //! mvnx_segments: false   # an MVNX take: Xsens's own segment kinematics instead of its sensors
 //! smoothing: butterworth:order=4,cutoff=14   # or none, gaussian:sigma=0.02, fft, fft:cutoff=8
 //! # or with per-bone overrides:
@@ -398,7 +398,8 @@ pub enum PlanError {
     Resolve(#[from] crate::convert::ConvertError),
 }
 
-/// The plan of [`settings`]: every file the settings name read once ([`Plan::resolve`]).
+/// The plan of [`settings`]: every file the settings name read once
+/// ([`crate::convert::Plan::resolve`]).
 pub fn plan(flags: Config, config: Option<&Path>) -> Result<crate::convert::Plan, PlanError> {
     Ok(crate::convert::Plan::resolve(settings(flags, config)?)?)
 }

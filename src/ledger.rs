@@ -160,8 +160,9 @@ const RACY_NS: u64 = 2_000_000_000;
 /// body walks when both legs are sensed); 6: joints between two sensed ones share the bend
 /// (`unsensed: interpolate`, the default); 7: a take whose heading is unsure is refused unless
 /// the mapping or `--heading` keeps the sensors' north (takes that converted fail, or convert
-/// with their heading declared).
-pub const FINGERPRINT_SCHEMA: u32 = 7;
+/// with their heading declared); 8: a BVH take is retargeted by matching its first frame's pose
+/// (`--bvh-reference match:0`, was the zero pose).
+pub const FINGERPRINT_SCHEMA: u32 = 8;
 
 /// What decides a conversion's outputs besides the capture, in a stable serialisation: field
 /// names and values, not Rust's `Debug` text; the mapping and rig files by content, not by path.
@@ -206,7 +207,7 @@ struct FingerprintInput<'a> {
     /// SHA-256 of a BVH take's bone map.
     #[serde(skip_serializing_if = "Option::is_none")]
     bone_map: Option<String>,
-    /// A BVH take's reference pose, when not the rest pose.
+    /// A BVH take's reference pose, when not the default (`match:0`).
     #[serde(skip_serializing_if = "Option::is_none")]
     bvh_reference: Option<String>,
     #[serde(skip_serializing_if = "std::ops::Not::not")]
@@ -255,7 +256,7 @@ pub fn settings_fingerprint(plan: &Plan) -> String {
         sensor_calibration: plan.sensor_calibration().map(|c| c.sha256.clone()),
         subject: plan.subject().map(|s| s.sha256.clone()),
         bone_map: plan.bone_map().map(|b| b.sha256.clone()),
-        bvh_reference: (settings.bvh_reference != crate::retarget::Reference::Rest)
+        bvh_reference: (settings.bvh_reference != crate::retarget::Reference::default())
             .then(|| settings.bvh_reference.to_string()),
         mvnx_segments: settings.mvnx_segments,
         rate_hz: settings.read.rate_hz,

@@ -4,22 +4,25 @@
 //!
 //! Each mapped source joint s drives one target bone j (the same body part of both skeletons'
 //! [`crate::rig::anatomy`], chains paired by their place along them, or a bone map). With S_s(t) the source joint's world rotation (the
-//! BVH's forward kinematics, rig world: Y up) and R_s its world rotation in the reference pose
-//! (the BVH's rest — every channel zero — or frame N), the change since the reference is
+//! BVH's forward kinematics, rig world: Y up) and R_s its world rotation in the reference (frame
+//! N, or the zero pose — every channel zero — where R_s = 1), the change since the reference is
 //!
 //! ```text
 //! D_s(t) = S_s(t) ⊗ R_s⁻¹
 //! ```
 //!
-//! and the target bone turns by the same change from its own rest: W_j(t) = D_s(t) ⊗ W_j(rest),
-//! with W_j(rest) = 1 (a rig's rest rotations are the identity). A target bone without a source
+//! and the target bone turns by the same change from the bone's reference, W_j(t) = D_s(t) ⊗ M_j:
+//! by default ([`Reference::Match`]) M_j aims bone j from its rest as joint s is aimed in frame N
+//! ([`matched_pose`]: from joint positions alone, so the source's joint axes and zero pose play
+//! no part); with [`Reference::Frame`] and [`Reference::Rest`], M_j = 1 (the reference is taken
+//! for the rig's rest pose, whose rotations are the identity). A target bone without a source
 //! keeps its rest rotation relative to its parent (W_j = W_parent). Local rotations follow:
 //! L_j = W_parent(j)⁻¹ ⊗ W_j.
 //!
 //! The root position is the source root's, scaled by the ratio of hip heights, k = h_target /
 //! h_source, and stood on the target's floor: p(t) = k · (p_s(t) − (0, floor_source, 0)) +
 //! (0, floor_target, 0). Both hip heights are read in one standing frame — the reference frame
-//! (`--bvh-reference frame:N`), else the first — as the root's height above that frame's lowest
+//! (`match:N`, `frame:N`), else the first — as the root's height above that frame's lowest
 //! point (end sites included): the source's in its own pose, the target's in the pose it takes
 //! there, so that the target's feet stand on its floor in that frame whatever the two skeletons'
 //! proportions. Never in a zero pose, which need not stand (a skeleton whose bones lie along +X,
@@ -41,25 +44,47 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 /// The source pose the changes are measured from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Reference {
-    /// The BVH's rest pose: every channel zero.
-    #[default]
+    /// The BVH's zero pose (every channel zero) taken as the target's rest: right when the
+    /// source's zero pose is the target's rest pose with the same joint axes.
     Rest,
-    /// A frame of the take (0-based).
+    /// Frame N taken as the target's rest: for a take that starts in the target's rest pose.
     Frame(usize),
+    /// Frame N matched (the default, frame 0): each target bone aimed as its source joint is
+    /// in that frame — the zero pose and the joints' axes play no part, so a skeleton and its
+    /// twin with other joint axes (bones along +X) give one output.
+    Match(usize),
+}
+
+impl Default for Reference {
+    fn default() -> Reference {
+        Reference::Match(0)
+    }
+}
+
+impl Reference {
+    /// The frame whose pose is the reference (0 for the rest pose's standing frame).
+    fn frame(self) -> Option<usize> {
+        match self {
+            Reference::Rest => None,
+            Reference::Frame(n) | Reference::Match(n) => Some(n),
+        }
+    }
 }
 
 impl FromStr for Reference {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let frame = |prefix: &str| s.trim().strip_prefix(prefix).and_then(|n| n.parse().ok());
         match s.trim() {
             "rest" => Ok(Reference::Rest),
-            other => other
-                .strip_prefix("frame:")
-                .and_then(|n| n.parse().ok())
+            _ => frame("frame:")
                 .map(Reference::Frame)
-                .ok_or_else(|| format!("`{s}`: expected `rest` or `frame:N` (0-based)")),
+                .or_else(|| frame("match:").map(Reference::Match))
+                .ok_or_else(|| {
+                    format!("`{s}`: expected `match:N`, `frame:N` (N 0-based) or `rest`")
+                }),
         }
     }
 }
@@ -69,6 +94,7 @@ impl std::fmt::Display for Reference {
         match self {
             Reference::Rest => f.write_str("rest"),
             Reference::Frame(n) => write!(f, "frame:{n}"),
+            Reference::Match(n) => write!(f, "match:{n}"),
         }
     }
 }
@@ -231,23 +257,31 @@ impl SourceMotion {
 }
 
 impl SourceMotion {
+    /// Frame `n`'s joint positions and End Sites (world, source units).
+    pub fn positions(&self, n: usize) -> (Vec<Vector3<f64>>, Vec<Option<Vector3<f64>>>) {
+        let world = &self.world[n];
+        let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(self.names.len());
+        for (j, parent) in self.parents.iter().enumerate() {
+            pos.push(match parent {
+                Some(p) => pos[*p] + world[*p] * (self.rest[j] - self.rest[*p]),
+                None => self.roots[n],
+            });
+        }
+        let ends = (0..pos.len())
+            .map(|j| self.end_sites[j].map(|e| pos[j] + world[j] * e))
+            .collect();
+        (pos, ends)
+    }
+
     /// Frame `n`'s lowest point (joints and End Sites) and the root's height above it, source
     /// units: the floor and the hip height of a standing frame.
     pub fn standing(&self, n: usize) -> (f64, f64) {
-        let world = &self.world[n];
-        let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(self.names.len());
-        let mut low = f64::INFINITY;
-        for (j, parent) in self.parents.iter().enumerate() {
-            let p = match parent {
-                Some(p) => pos[*p] + world[*p] * (self.rest[j] - self.rest[*p]),
-                None => self.roots[n],
-            };
-            low = low.min(p.y);
-            if let Some(e) = self.end_sites[j] {
-                low = low.min((p + world[j] * e).y);
-            }
-            pos.push(p);
-        }
+        let (pos, ends) = self.positions(n);
+        let low = pos
+            .iter()
+            .chain(ends.iter().flatten())
+            .map(|p| p.y)
+            .fold(f64::INFINITY, f64::min);
         (low, self.roots[n].y - low)
     }
 
@@ -448,32 +482,36 @@ pub fn retarget(
         return Err(RetargetError::NoFrames);
     }
     let joints = source.names.len();
-    let reference_rot: Vec<UnitQuaternion<f64>> = match reference {
-        Reference::Rest => vec![UnitQuaternion::identity(); joints],
-        Reference::Frame(n) if n < frames => source.world[n].clone(),
-        Reference::Frame(n) => {
-            return Err(RetargetError::ReferenceFrame {
-                frame: n,
-                last: frames - 1,
-            });
-        }
+    if let Some(n) = reference.frame().filter(|&n| n >= frames) {
+        return Err(RetargetError::ReferenceFrame {
+            frame: n,
+            last: frames - 1,
+        });
+    }
+    // Each pair's D_s(t) ⊗ M_j: the change since the reference, onto the bone's reference.
+    let (reference_rot, matched) = match reference {
+        Reference::Rest => (vec![UnitQuaternion::identity(); joints], None),
+        Reference::Frame(n) => (source.world[n].clone(), None),
+        Reference::Match(n) => (
+            source.world[n].clone(),
+            Some(matched_pose(source, n, target, pairs)),
+        ),
     };
-    // Each frame's changes since the reference, of the mapped joints.
     let change: Vec<Vec<UnitQuaternion<f64>>> = source
         .world
         .iter()
         .map(|w| {
             pairs
                 .iter()
-                .map(|&(s, _)| w[s] * reference_rot[s].inverse())
+                .enumerate()
+                .map(|(m, &(s, _))| {
+                    let d = w[s] * reference_rot[s].inverse();
+                    matched.as_ref().map_or(d, |aim| d * aim[m])
+                })
                 .collect()
         })
         .collect();
-
-    let standing = match reference {
-        Reference::Frame(n) => n,
-        Reference::Rest => 0,
-    };
+    let standing = reference.frame().unwrap_or(0);
     let bones = target.joints();
     let mut source_of = vec![None; bones.len()];
     for (i, &(_, t)) in pairs.iter().enumerate() {
@@ -540,6 +578,116 @@ pub fn retarget(
         animated,
         root_positions,
     )?)
+}
+
+/// `M_j` of each pair (s, j) for [`Reference::Match`]: the world rotation that aims target bone j,
+/// from its rest, as source joint s is aimed in frame `n`. A joint's aim is where its nearest
+/// paired descendants are (`u_k = p_s'(n) − p_s(n)` in the source, `t_k` the same in the target's
+/// rest), else where its children and End Site are (their mean direction); with two or more
+/// directions apart M_j is the rotation that best turns the t̂_k onto the û_k (Kabsch, by SVD),
+/// with one (or all along one line) the shortest turn of their mean t̂ onto their mean û (no
+/// twist about the bone, which positions cannot tell). A
+/// bone with no aim on either side keeps its rest turn relative to its nearest paired ancestor.
+/// Only joint positions in frame n enter, so a skeleton's joint axes do not.
+fn matched_pose(
+    source: &SourceMotion,
+    n: usize,
+    target: &Rig,
+    pairs: &[(usize, usize)],
+) -> Vec<UnitQuaternion<f64>> {
+    let (src_pos, src_ends) = source.positions(n);
+    let tgt_pos = target.rest_positions();
+    let bones = target.joints();
+    let mut pair_of = vec![None; bones.len()];
+    for (m, &(_, j)) in pairs.iter().enumerate() {
+        pair_of[j] = Some(m);
+    }
+    // Each target bone's nearest paired descendants, through unpaired bones.
+    let mut nearest: Vec<Vec<usize>> = vec![Vec::new(); bones.len()];
+    for j in (0..bones.len()).rev() {
+        if let Some(p) = bones[j].parent {
+            let below = if pair_of[j].is_some() {
+                vec![j]
+            } else {
+                nearest[j].clone()
+            };
+            nearest[p].extend(below);
+        }
+    }
+    let unit = |v: Vector3<f64>| (v.norm() > 1e-9).then(|| v.normalize());
+    let mut aims = vec![None; pairs.len()];
+    for (m, &(s, j)) in pairs.iter().enumerate() {
+        let mut dirs: Vec<(Vector3<f64>, Vector3<f64>)> = nearest[j]
+            .iter()
+            .filter_map(|&d| {
+                let (s_d, _) = pairs[pair_of[d]?];
+                Some((
+                    unit(tgt_pos[d] - tgt_pos[j])?,
+                    unit(src_pos[s_d] - src_pos[s])?,
+                ))
+            })
+            .collect();
+        if dirs.is_empty() {
+            let mean = |vs: Vec<Vector3<f64>>| unit(vs.into_iter().filter_map(unit).sum());
+            let t_children = (0..bones.len())
+                .filter(|&c| bones[c].parent == Some(j))
+                .map(|c| tgt_pos[c] - tgt_pos[j])
+                .chain(bones[j].end_site)
+                .collect();
+            let s_children = (0..source.names.len())
+                .filter(|&c| source.parents[c] == Some(s))
+                .map(|c| src_pos[c] - src_pos[s])
+                .chain(src_ends[s].map(|e| e - src_pos[s]))
+                .collect();
+            if let (Some(t), Some(u)) = (mean(t_children), mean(s_children)) {
+                dirs.push((t, u));
+            }
+        }
+        aims[m] = aim(&dirs);
+    }
+    // Bones without an aim: their nearest paired ancestor's, else the rest.
+    let mut resolved = vec![UnitQuaternion::identity(); bones.len()];
+    for (j, bone) in bones.iter().enumerate() {
+        let inherited = bone
+            .parent
+            .map_or(UnitQuaternion::identity(), |p| resolved[p]);
+        resolved[j] = pair_of[j].and_then(|m| aims[m]).unwrap_or(inherited);
+    }
+    pairs.iter().map(|&(_, j)| resolved[j]).collect()
+}
+
+/// The rotation that best turns each `t` onto its `u` (unit vectors): Kabsch when they span a
+/// plane, else the shortest turn of their mean direction (of the first, should they cancel);
+/// `None` without any.
+fn aim(dirs: &[(Vector3<f64>, Vector3<f64>)]) -> Option<UnitQuaternion<f64>> {
+    let &(t0, u0) = dirs.first()?;
+    let (t_sum, u_sum) = dirs
+        .iter()
+        .fold((Vector3::zeros(), Vector3::zeros()), |(a, b), (t, u)| {
+            (a + t, b + u)
+        });
+    let t = t_sum.try_normalize(1e-6).unwrap_or(t0);
+    let u = u_sum.try_normalize(1e-6).unwrap_or(u0);
+    let shortest = UnitQuaternion::rotation_between(&t, &u).unwrap_or_else(|| {
+        // Opposite: half a turn about any axis across them.
+        let across = t.cross(&Vector3::x()).try_normalize(1e-6);
+        let axis = across.unwrap_or_else(|| t.cross(&Vector3::y()).normalize());
+        UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(axis), std::f64::consts::PI)
+    });
+    let h: nalgebra::Matrix3<f64> = dirs.iter().map(|(t, u)| u * t.transpose()).sum();
+    let svd = h.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return Some(shortest);
+    };
+    let sv = svd.singular_values;
+    // One direction, or all along one line on either side: the plane, and so the twist about
+    // the line, is not known.
+    if sv.iter().filter(|&&x| x > 1e-3 * sv.max()).count() < 2 {
+        return Some(shortest);
+    }
+    let d = (u * v_t).determinant().signum();
+    let r = u * nalgebra::Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t;
+    Some(UnitQuaternion::from_matrix(&r))
 }
 
 /// The target's pose: each bone with a source (`source_of[j]`, an index of the pairs) turned to
@@ -686,6 +834,28 @@ pub fn mvnx_animation(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The aim of known directions turned by a known rotation is that rotation: three directions
+    /// (a plane and more, by SVD), two, and one (the shortest turn, so no twist about it).
+    #[test]
+    fn the_aim_of_turned_directions_is_the_turn() {
+        let turn = UnitQuaternion::from_euler_angles(0.3, -1.1, 2.0);
+        let t = [
+            Vector3::new(0.0, 1.0, 0.0),
+            Vector3::new(1.0, 0.2, 0.0).normalize(),
+            Vector3::new(-1.0, 0.2, 0.1).normalize(),
+        ];
+        for n in [3, 2] {
+            let dirs: Vec<_> = t[..n].iter().map(|t| (*t, turn * t)).collect();
+            let got = aim(&dirs).unwrap();
+            assert!(got.angle_to(&turn) < 1e-9, "{n}: {}", got.angle_to(&turn));
+        }
+        let one = aim(&[(t[0], turn * t[0])]).unwrap();
+        assert!((one * t[0] - turn * t[0]).norm() < 1e-9);
+        let swing = UnitQuaternion::rotation_between(&t[0], &(turn * t[0])).unwrap();
+        assert!(one.angle_to(&swing) < 1e-9);
+        assert!(aim(&[]).is_none());
+    }
 
     /// Mixamo's rig as a source whose `Spine1` turns 30° after the first frame (a part: no
     /// warning), then with a leaf `Tail` that is no part and turns 30° too (a warning naming it);

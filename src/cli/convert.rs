@@ -113,9 +113,11 @@ pub struct SettingsArgs {
     /// [default: by anatomical part, from the joints' names]
     #[arg(long, value_name = "FILE.json")]
     bone_map: Option<PathBuf>,
-    /// A BVH take: the pose its joints' turns are measured from: rest (every channel zero) or
-    /// frame:N [default: rest]
-    #[arg(long, value_name = "rest|frame:N")]
+    /// A BVH take: the pose its joints' turns are measured from. match:N: frame N's pose, each
+    /// bone aimed as its joint is there (any joint axes); frame:N: frame N is the rig's rest
+    /// pose; rest: the BVH's zero pose is the rig's rest pose, with the same joint axes
+    /// [default: match:0]
+    #[arg(long, value_name = "match:N|frame:N|rest")]
     bvh_reference: Option<imubake::retarget::Reference>,
     /// An Xsens MVNX take: Xsens's own segment orientations and positions instead of its
     /// sensors, on a rig made from the file's segments (or retargeted onto --rig)

@@ -66,5 +66,7 @@ pub(super) fn convert(
         mode: Mode::BvhRetarget,
         warnings,
     };
-    Ok((motion.conversion(plan), record))
+    let mut conversion = motion.conversion(plan);
+    conversion.pipeline.bvh_reference = Some(plan.settings().bvh_reference.to_string());
+    Ok((conversion, record))
 }

@@ -119,7 +119,7 @@ impl Default for ConvertSettings {
             in_place: false,
             world_from: None,
             bone_map: None,
-            bvh_reference: crate::retarget::Reference::Rest,
+            bvh_reference: crate::retarget::Reference::default(),
             mvnx_segments: false,
             given: Given::default(),
         }

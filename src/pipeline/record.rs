@@ -40,6 +40,9 @@ pub struct PipelineRecord {
     pub trim: Option<TrimRecord>,
     /// `"quaternion"`, or `"legacy-euler"` for paper 002's Listing-2 mappings.
     pub mode: Mode,
+    /// A BVH take's reference pose (`--bvh-reference`: `match:N`, `frame:N`, `rest`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bvh_reference: Option<String>,
     /// Causal mode: the take ran through the stream's stages.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub causal: bool,
@@ -252,6 +255,7 @@ pub fn pipeline_record(
             first_frame,
         }),
         mode,
+        bvh_reference: None,
         causal: options.causal,
         bind_frame: false,
         in_place: false,

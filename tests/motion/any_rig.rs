@@ -191,6 +191,88 @@ fn a_rig_and_its_bone_along_x_twin_give_the_same_joint_positions() {
     }
 }
 
+/// A BVH take and its bone-along-X twins (ours and the shared one) retargeted onto mixamo with
+/// the default reference (`match:0`) give one output: every channel within 1e-4 (degrees, and
+/// the hips' centimetres), so the same joint positions; and no joint of any shared BVH's take
+/// goes more than 0.02 h below the floor. With `--bvh-reference rest` the twin's zero pose
+/// (limbs along +X) is taken for a standing pose: its output is another (asserted, so that the
+/// default is what makes them one).
+#[test]
+fn a_bvh_take_and_its_bone_along_x_twin_retarget_to_one_output() {
+    let Some(src) = shared("bvh/cmu_01_01.bvh") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let bvh = imubake::bvh::parse(&std::fs::read(&src).unwrap()).unwrap();
+    let mine = dir.path().join("cmu_01_01_twin.bvh");
+    std::fs::write(&mine, twin::bone_along_x(&bvh, None)).unwrap();
+    let mut takes = vec![src.clone(), mine];
+    takes.extend(shared("bvh/cmu_01_01_boneaxis_x.bvh"));
+    let convert = |take: &Path, reference: &[&str]| {
+        let out = dir.path().join(format!(
+            "{}{}",
+            take.file_stem().unwrap().to_string_lossy(),
+            reference.len()
+        ));
+        run(Command::new(imubake_bin())
+            .arg("convert")
+            .arg(take)
+            .args(["--rig", "mixamo", "--format", "bvh", "--out"])
+            .arg(&out)
+            .args(reference));
+        let stem = take.file_stem().unwrap().to_string_lossy().into_owned();
+        let text = std::fs::read_to_string(out.join(format!("{stem}.bvh"))).unwrap();
+        let motion: Vec<Vec<f64>> = text
+            .split("MOTION")
+            .nth(1)
+            .unwrap()
+            .lines()
+            .skip(3)
+            .filter(|l| !l.trim().is_empty())
+            .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
+            .collect();
+        (motion, out.join(format!("{stem}.bvh")))
+    };
+    let largest = |a: &[Vec<f64>], b: &[Vec<f64>]| {
+        assert_eq!(a.len(), b.len());
+        a.iter()
+            .zip(b)
+            .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs()))
+            .fold(0.0, f64::max)
+    };
+    let (original, path) = convert(&src, &[]);
+    let (all, h) = positions(&path);
+    let floor = all[0].iter().map(|p| p.y).fold(f64::MAX, f64::min);
+    assert!(all.len() > 600);
+    for take in &takes[1..] {
+        let (other, _) = convert(take, &[]);
+        let d = largest(&original, &other);
+        assert!(d < 1e-4, "{}: a channel {d} away", take.display());
+        let (rest, _) = convert(take, &["--bvh-reference", "rest"]);
+        assert!(largest(&original, &rest) > 1.0, "{}", take.display());
+    }
+    // The floor: the rig's rest pose's lowest point, which every frame keeps above.
+    let lowest = all.iter().flatten().map(|p| p.y).fold(f64::MAX, f64::min);
+    assert!(lowest > floor - 0.02 * h, "{lowest} vs floor {floor}");
+    for name in [
+        "pymo_walk",
+        "cmu_03_02_uneven_terrain",
+        "mixamo_rig_freebvh",
+        "mocapbank_crlf",
+    ] {
+        let Some(take) = shared(&format!("bvh/{name}.bvh")) else {
+            continue;
+        };
+        let (_, path) = convert(&take, &[]);
+        let (all, h) = positions(&path);
+        let lowest = all.iter().flatten().map(|p| p.y).fold(f64::MAX, f64::min);
+        assert!(
+            lowest > floor - 0.02 * h,
+            "{name}: {lowest} vs floor {floor}"
+        );
+    }
+}
+
 /// With `calibrate` mounts and nothing that gives the heading (no `forward`, no known mount, no
 /// second pose, no legs to walk on), a take is refused with an error naming the ways out — by
 /// `convert`, and by `batch` and `watch` as a failed take with the same message — and

@@ -51,11 +51,14 @@ fn check(
 }
 
 /// CMU 01_01 (120 fps, inches-like units, 31 joints) and pymo's walk (120 fps, cm) onto mixamo at
-/// 30 fps: every mapped bone within 0.5° of its source joint's turn since the rest pose at every
-/// frame, and since frame 100 with `--bvh-reference frame:100`; the hips within 1 mm of the
-/// source root scaled by hip heights; the parts matched by anatomy (CMU's three-joint spine
-/// LowerBack, Spine, Spine1 drives Mixamo's Spine, Spine1, Spine2 in order; its two-joint neck's
-/// top, Neck1, the one Neck; pymo's one-joint spine all three, which then turn as one).
+/// 30 fps: every mapped bone within 0.5° of its source joint's turn since the reference at every
+/// frame — by default frame 0's pose matched (each bone first aimed as its joint is there), and
+/// since the zero pose (`--bvh-reference rest`) and since frame 100 (`frame:100`); the hips within
+/// 1 mm of the source root scaled by hip heights; the parts matched by anatomy (CMU's three-joint
+/// spine LowerBack, Spine, Spine1 drives Mixamo's Spine, Spine1, Spine2 in order; its two-joint
+/// neck's top, Neck1, the one Neck; pymo's one-joint spine all three, which then turn as one).
+/// By default every bone with one paired joint below it points as its source joint does, at
+/// every frame (within 0.01°); from the zero pose they do not (CMU's legs splay there).
 #[test]
 fn shared_bvhs_onto_mixamo_follow_their_sources() {
     let (Some(py), Some(cmu), Some(pymo)) = (
@@ -67,28 +70,31 @@ fn shared_bvhs_onto_mixamo_follow_their_sources() {
     };
     let dir = tempfile::tempdir().unwrap();
     for (source, parts) in [(&cmu, 22usize), (&pymo, 21)] {
-        for reference in ["rest", "100"] {
+        for reference in ["match:0", "rest", "frame:100"] {
             let out = dir.path().join(format!(
-                "{}-{reference}",
-                source.file_stem().unwrap().to_string_lossy()
+                "{}-{}",
+                source.file_stem().unwrap().to_string_lossy(),
+                reference.replace(':', "")
             ));
-            let flag = format!("frame:{reference}");
-            let args: Vec<&str> = if reference == "rest" {
+            let args: Vec<&str> = if reference == "match:0" {
                 vec![]
             } else {
-                vec!["--bvh-reference", &flag]
+                vec!["--bvh-reference", reference]
             };
             let sidecar = convert(source, &out, &args);
             assert_eq!(sidecar["source"]["format"], "bvh");
             assert_eq!(sidecar["pipeline"]["mode"], "bvh-retarget");
+            assert_eq!(sidecar["pipeline"]["bvh_reference"], reference);
             assert_eq!(sidecar["fps"]["num"], 30);
             let sensors = sidecar["mapping"]["sensors"].as_array().unwrap();
             assert_eq!(sensors.len(), parts, "{sensors:?}");
             let stem = source.file_stem().unwrap().to_string_lossy();
             let target = out.join(format!("{stem}.bvh"));
             let report = check(&py, source, &target, &sidecar, 4, reference);
+            let aim = report["worst_aim_deg"].as_f64().unwrap();
             eprintln!(
-                "{stem} ({reference}): {} frames, worst bone {:.2e}°, hips {:.2e} m (k = {:.4})",
+                "{stem} ({reference}): {} frames, worst bone {:.2e}°, hips {:.2e} m (k = {:.4}), \
+                 aims {aim:.2e}°",
                 report["frames"],
                 report["worst_deg"].as_f64().unwrap(),
                 report["worst_root_m"].as_f64().unwrap(),
@@ -97,6 +103,12 @@ fn shared_bvhs_onto_mixamo_follow_their_sources() {
             assert!(report["frames"].as_u64().unwrap() > 200);
             assert!(report["worst_deg"].as_f64().unwrap() < 0.5, "{report}");
             assert!(report["worst_root_m"].as_f64().unwrap() < 1e-3, "{report}");
+            if reference == "match:0" {
+                assert!(aim < 0.01, "{report}");
+            }
+            if reference == "rest" && *source == cmu {
+                assert!(aim > 10.0, "{report}");
+            }
         }
     }
     let sidecar: Value = serde_json::from_slice(
@@ -127,7 +139,14 @@ fn a_bone_map_is_honoured_and_checked() {
     let sidecar = convert(&cmu, &out, &["--bone-map", map.to_str().unwrap()]);
     let sensors = sidecar["mapping"]["sensors"].as_array().unwrap();
     assert_eq!(sensors.len(), 4);
-    let report = check(&py, &cmu, &out.join("cmu_01_01.bvh"), &sidecar, 4, "rest");
+    let report = check(
+        &py,
+        &cmu,
+        &out.join("cmu_01_01.bvh"),
+        &sidecar,
+        4,
+        "match:0",
+    );
     assert!(report["worst_deg"].as_f64().unwrap() < 0.5, "{report}");
     assert!(
         report["per_pair"]["LeftArm->RightArm"].is_number(),
