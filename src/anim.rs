@@ -26,6 +26,10 @@ pub struct Animation {
     translations: Vec<(usize, Vec<Vector3<f64>>)>,
     /// Root joint position per frame, rig units, rig world (Y up).
     root_positions: Vec<Vector3<f64>>,
+    /// The standing pose's lowest and highest points' heights (the floor and the top of the
+    /// head), rig units, the root at its rest offset: the calibration pose's when the pipeline
+    /// made the animation ([`Animation::standing_in`]), else the rest pose's.
+    standing: (f64, f64),
 }
 
 /// One frame of an animation: what a stream emits. Every joint's local rotation (rig world
@@ -159,6 +163,7 @@ impl Animation {
             return Err(AnimationError::NonFinite("root positions".into()));
         }
         Ok(Animation {
+            standing: rig.rest_extent(),
             rig,
             fps,
             frames,
@@ -168,6 +173,24 @@ impl Animation {
             contacts: None,
             translations: Vec::new(),
         })
+    }
+
+    /// The pose the subject stood in, by its lowest and highest points' heights (rig units,
+    /// [`Rig::extent_in`]): the floor the root motion stood the body on, and the standing
+    /// height; the rest pose's need not stand.
+    pub fn standing_in(mut self, extent: (f64, f64)) -> Animation {
+        self.standing = extent;
+        self
+    }
+
+    /// The floor's height, rig units, rig world.
+    pub fn floor_y(&self) -> f64 {
+        self.standing.0
+    }
+
+    /// The standing height, rig units: the standing pose's extent from floor to top.
+    pub fn standing_height(&self) -> f64 {
+        self.standing.1 - self.standing.0
     }
 
     /// Joints (other than the root) with an animated translation, and per frame that translation
@@ -184,7 +207,7 @@ impl Animation {
     pub fn in_place(self) -> Result<Animation, AnimationError> {
         let old = self.rig.joints();
         let rest_hips = old[0].offset;
-        let floor = rest_hips.y - self.rig.root_height();
+        let (floor, standing) = (self.floor_y(), self.standing);
         let name = if old.iter().any(|j| j.name == "root") {
             "imubake_root"
         } else {
@@ -231,7 +254,7 @@ impl Animation {
             .chain(self.translations.into_iter().map(|(j, t)| (j + 1, t)))
             .collect();
         let contacts = self.contacts;
-        let mut out = Animation::new(rig, self.fps, local, animated, roots)?;
+        let mut out = Animation::new(rig, self.fps, local, animated, roots)?.standing_in(standing);
         out.contacts = contacts;
         out.translations = translations;
         Ok(out)
@@ -367,6 +390,7 @@ impl Animation {
                 .map(|(j, t)| (*j, t[range.clone()].to_vec()))
                 .collect(),
             root_positions: self.root_positions[range].to_vec(),
+            standing: self.standing,
         })
     }
 

@@ -64,8 +64,8 @@ impl Default for Reference {
 }
 
 impl Reference {
-    /// The frame whose pose is the reference (0 for the rest pose's standing frame).
-    fn frame(self) -> Option<usize> {
+    /// The frame whose pose is the reference; `None` for the zero pose.
+    pub fn frame(self) -> Option<usize> {
         match self {
             Reference::Rest => None,
             Reference::Frame(n) | Reference::Match(n) => Some(n),

@@ -258,16 +258,32 @@ impl JointAngles {
     }
 }
 
-/// The angles of every frame of a BVH file's motion (its own skeleton; time `n ×` Frame Time).
-pub fn of_bvh(bvh: &Bvh, name: &str) -> Result<AngleTable, AnalysisError> {
+/// The angles of every frame of a BVH file's motion (its own skeleton; time `n ×` Frame Time),
+/// the segments' frames read in frame `reference`'s pose (`None`: the zero pose, every channel
+/// zero), as [`JointAngles::in_pose`]: a skeleton and its twin with other joint axes measure the
+/// same angles in a frame's pose, not in their zero poses, which differ.
+pub fn of_bvh(
+    bvh: &Bvh,
+    name: &str,
+    reference: Option<usize>,
+) -> Result<AngleTable, AnalysisError> {
     let rig = bvh
         .to_rig(name, LengthUnit::Metres)
         .map_err(|e| AnalysisError::Rig {
             rig: name.to_string(),
             reason: e.to_string(),
         })?;
-    let angles = JointAngles::new(&rig)?;
     let frames = bvh.frame_count();
+    let angles = match reference {
+        None => JointAngles::new(&rig)?,
+        Some(n) if n < frames => JointAngles::in_pose(&rig, &bvh.local_rotations(n))?,
+        Some(n) => {
+            return Err(AnalysisError::Rig {
+                rig: name.to_string(),
+                reason: format!("the reference frame {n} is past the last frame {frames}"),
+            });
+        }
+    };
     let time_s = (0..frames).map(|n| n as f64 * bvh.frame_time_s()).collect();
     let rows = (0..frames).map(|n| rig.world_rotations(&bvh.local_rotations(n)));
     angles.table(time_s, rows)

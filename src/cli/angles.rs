@@ -96,7 +96,9 @@ pub fn load(input: &Path, plan: &mut LazyPlan<'_>) -> anyhow::Result<AngleTable>
         let bvh =
             imubake::bvh::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
         let name = imubake::convert::take_stem(input);
-        return angles::of_bvh(&bvh, &name)
+        // The segments' frames read in the pose a BVH take is retargeted from (`--bvh-reference`).
+        let reference = plan.get()?.settings().bvh_reference.frame();
+        return angles::of_bvh(&bvh, &name, reference)
             .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()));
     }
     if is_angle_table(input) {

@@ -167,7 +167,16 @@ impl Plan {
         };
         let (rig, rig_file) = load_rig_hashed(name)?;
         let rig = match &subject {
-            Some(s) => s.value.apply(&rig, &s.path)?,
+            Some(s) => {
+                // Its height is the calibration pose's: the rig's zero pose need not stand.
+                let pose = match &mapping {
+                    PlanMapping::Quaternion(m) => m.value.calibration.as_ref(),
+                    PlanMapping::ByName | PlanMapping::Euler(_) => None,
+                }
+                .and_then(|c| rig.pose(&c.pose.label()));
+                s.value
+                    .apply(&rig, pose.as_ref().map(|p| p.local.as_slice()), &s.path)?
+            }
             None => rig,
         };
         let table1 = match mapping {

@@ -351,7 +351,8 @@ fn root_stage(
     let (roots, contacts) =
         root::root_positions(rig, root_mode, &local, options.fps.frame_time_s(), held);
     let moving = relative::moving(rig, animated, options.unsensed, held);
-    let mut animation = Animation::new(rig.clone(), options.fps, local, moving, roots)?;
+    let mut animation = Animation::new(rig.clone(), options.fps, local, moving, roots)?
+        .standing_in(rig.extent_in(held));
     if let Some(c) = &contacts {
         animation = animation.with_contacts(c.per_frame.clone())?;
     }
@@ -471,7 +472,9 @@ fn run_causal(
     drop(stream);
     let held = calibrate::held_pose(rig, window.as_ref());
     let moving = relative::moving(rig, &animated, options.unsensed, &held);
-    let animation = animation.finish(grid.first, grid.frames, moving)?;
+    let animation = animation
+        .finish(grid.first, grid.frames, moving)?
+        .standing_in(rig.extent_in(&held));
     let kept = feet
         .get(grid.first..(grid.first + grid.frames).min(feet.len()))
         .unwrap_or(&[]);

@@ -72,8 +72,15 @@ impl Subject {
         })
     }
 
-    /// `rig` scaled to this subject; `path` names the file in errors.
-    pub fn apply(&self, rig: &Rig, path: &Path) -> Result<Rig, SubjectError> {
+    /// `rig` scaled to this subject; `path` names the file in errors. `standing`: the local
+    /// rotations of the pose the subject stands in (the calibration pose; `None`: the rest
+    /// pose), whose height [`Rig::extent_in`] `height_m` is — a zero pose need not stand.
+    pub fn apply(
+        &self,
+        rig: &Rig,
+        standing: Option<&[nalgebra::UnitQuaternion<f64>]>,
+        path: &Path,
+    ) -> Result<Rig, SubjectError> {
         let err = |message: String| SubjectError {
             path: path.to_path_buf(),
             message,
@@ -85,7 +92,8 @@ impl Subject {
             if !(h.is_finite() && h > 0.0) {
                 return Err(err(format!("`height_m`: {h} is not a height above 0 m")));
             }
-            let rig_h = rig.standing_height() * metres;
+            let (low, high) = standing.map_or_else(|| rig.rest_extent(), |p| rig.extent_in(p));
+            let rig_h = (high - low) * metres;
             let ratio = h / rig_h;
             if !(1.0 / 3.0..=3.0).contains(&ratio) {
                 return Err(err(format!(
@@ -157,12 +165,12 @@ mod tests {
             segments: [("left_thigh".to_string(), 0.5)].into(),
         };
         let mixamo = load_rig("mixamo").unwrap();
-        let scaled = s.apply(&mixamo, Path::new("s.yaml")).unwrap();
+        let scaled = s.apply(&mixamo, None, Path::new("s.yaml")).unwrap();
         let knee = scaled.joint_index("LeftLeg").unwrap();
         assert!((scaled.joints()[knee].offset.norm() - 0.5).abs() < 1e-12);
         let poser = "name: poser\njoints:\n  - {name: hip, offset: [0, 1, 0]}\n  - {name: lThigh, parent: hip, offset: [0.1, 0, 0]}\n  - {name: lShin, parent: lThigh, offset: [0, -0.4, 0]}\n  - {name: lFoot, parent: lShin, offset: [0, -0.4, 0], end_site: [0, 0, 0.1]}\n  - {name: rThigh, parent: hip, offset: [-0.1, 0, 0]}\n  - {name: rShin, parent: rThigh, offset: [0, -0.4, 0]}\n  - {name: rFoot, parent: rShin, offset: [0, -0.4, 0], end_site: [0, 0, 0.1]}\n";
         let rig = crate::rig::file::parse_rig(poser, Path::new("poser.yaml")).unwrap();
-        let scaled = s.apply(&rig, Path::new("s.yaml")).unwrap();
+        let scaled = s.apply(&rig, None, Path::new("s.yaml")).unwrap();
         let knee = scaled.joint_index("lShin").unwrap();
         assert!((scaled.joints()[knee].offset.norm() - 0.5).abs() < 1e-12);
         let other = scaled.joint_index("rShin").unwrap();
@@ -177,7 +185,7 @@ mod tests {
             height_m: Some(h * 0.9),
             segments: [("LeftUpLeg".to_string(), 0.5)].into(),
         };
-        let scaled = s.apply(&rig, Path::new("s.yaml")).unwrap();
+        let scaled = s.apply(&rig, None, Path::new("s.yaml")).unwrap();
         let leg = scaled.joint_index("LeftLeg").unwrap();
         assert!((scaled.joints()[leg].offset.norm() - 0.5).abs() < 1e-12);
         let spine = scaled.joint_index("Spine").unwrap();
@@ -187,7 +195,7 @@ mod tests {
             height_m: Some(1.9),
             ..Default::default()
         }
-        .apply(&rig, Path::new("s.yaml"))
+        .apply(&rig, None, Path::new("s.yaml"))
         .unwrap();
         assert!((tall.standing_height() - 1.9).abs() < 1e-9);
         assert_eq!(tall.pose_names(), rig.pose_names());
@@ -198,7 +206,9 @@ mod tests {
         let rig = load_rig("mixamo").unwrap();
         let bad = |yaml: &str| {
             let s: Subject = serde_yaml::from_str(yaml).unwrap();
-            s.apply(&rig, Path::new("s.yaml")).unwrap_err().to_string()
+            s.apply(&rig, None, Path::new("s.yaml"))
+                .unwrap_err()
+                .to_string()
         };
         assert!(bad("height_m: -1").contains("`height_m`"));
         assert!(bad("height_m: 9").contains("within ⅓–3×"));

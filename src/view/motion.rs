@@ -48,7 +48,7 @@ pub struct ViewTake {
 #[derive(Debug)]
 pub enum Motion {
     /// An animation in memory (the rig at rest for a live session).
-    Animation(Animation),
+    Animation(Box<Animation>),
     /// A BVH file, parsed: chunks are made from its frames as they are asked for.
     Bvh { bvh: Bvh, units: LengthUnit },
     /// A GLB served as it is, in one chunk (a GLB without its BVH cannot be cut).
@@ -249,7 +249,7 @@ impl ViewTake {
             source: "imubake live".into(),
             fps,
             frames: 1,
-            motion: Motion::Animation(rest),
+            motion: Motion::Animation(Box::new(rest)),
             chunk_frames: 1,
             sensors,
             contacts: None,

@@ -238,7 +238,7 @@ pub fn write_take(job: TakeJob<'_>, conversion: Conversion) -> Result<WrittenTak
                 path: s.path.display().to_string(),
                 sha256: s.sha256.to_string(),
                 subject: s.subject.clone(),
-                standing_height_m: out_rig.standing_height() * out_rig.units().metres_per_unit(),
+                standing_height_m: animation.standing_height() * out_rig.units().metres_per_unit(),
             }),
         },
         mapping: conversion.mapping,

@@ -146,17 +146,25 @@ fn a_rig_and_its_bone_along_x_twin_give_the_same_joint_positions() {
             }
         }
     }
-    // Offline, and through the stream's incremental cores as `live` runs them (`--causal`).
-    for (root, causal) in [
-        ("fixed", false),
-        ("ground", false),
-        ("feet", false),
-        ("feet", true),
-        ("ground", true),
+    // Offline, and through the stream's incremental cores as `live` runs them (`--causal`); and
+    // scaled to a subject a quarter taller (CMU's BVH read as a rig, in centimetres, stands
+    // 0.266 m tall: 0.3325 m) with the root moved to the floor (`--in-place`): the height and the
+    // floor are the calibration pose's, so the scaled rigs stand that tall in it (the sidecar's
+    // `standing_height_m`) and their root joints stand on one floor.
+    let subject = dir.path().join("subject.yaml");
+    std::fs::write(&subject, "height_m: 0.3325\n").unwrap();
+    let scaled = ["--in-place", "--subject", subject.to_str().unwrap()];
+    for (root, flags) in [
+        ("fixed", &[][..]),
+        ("ground", &[]),
+        ("feet", &[]),
+        ("feet", &["--causal"]),
+        ("ground", &["--causal"]),
+        ("feet", &scaled),
     ] {
         let mut outs = Vec::new();
         for (k, rig) in rigs.iter().enumerate() {
-            let out = dir.path().join(format!("{root}_{causal}_{k}"));
+            let out = dir.path().join(format!("{root}_{}_{k}", flags.len()));
             run(Command::new(imubake_bin())
                 .arg("convert")
                 .arg(&capture)
@@ -166,11 +174,17 @@ fn a_rig_and_its_bone_along_x_twin_give_the_same_joint_positions() {
                 .arg(rig)
                 .args(["--root", root, "--fps", "60", "--format", "bvh", "--out"])
                 .arg(&out)
-                .args(if causal { &["--causal"][..] } else { &[] }));
+                .args(flags));
             let sidecar: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(out.join("take.imubake.json")).unwrap())
                     .unwrap();
             assert_eq!(sidecar["pipeline"]["heading"], "declared-forward");
+            if flags == scaled {
+                let h = sidecar["rig"]["subject"]["standing_height_m"]
+                    .as_f64()
+                    .unwrap();
+                assert!((h - 0.3325).abs() < 1e-9, "{}: {h} m", rig.display());
+            }
             outs.push(positions(&out.join("take.bvh")));
         }
         let (reference, h) = &outs[0];
@@ -183,7 +197,7 @@ fn a_rig_and_its_bone_along_x_twin_give_the_same_joint_positions() {
                 .fold(0.0, f64::max);
             assert!(
                 worst / h < 1e-4,
-                "--root {root} (causal: {causal}), rig {}: a joint {:.2e} h away from the original rig's",
+                "--root {root} {flags:?}, rig {}: a joint {:.2e} h away from the original rig's",
                 rigs[k].display(),
                 worst / h
             );
@@ -191,8 +205,8 @@ fn a_rig_and_its_bone_along_x_twin_give_the_same_joint_positions() {
     }
 }
 
-/// A BVH take and its bone-along-X twins (ours and the shared one) retargeted onto mixamo with
-/// the default reference (`match:0`) give one output: every channel within 1e-4 (degrees, and
+/// A BVH take and its bone-along-X twins (ours and the shared one) have the same joint angles
+/// (`angles`), and retargeted onto mixamo with the default reference (`match:0`) give one output: every channel within 1e-4 (degrees, and
 /// the hips' centimetres), so the same joint positions; and no joint of any shared BVH's take
 /// goes more than 0.02 h below the floor. With `--bvh-reference rest` the twin's zero pose
 /// (limbs along +X) is taken for a standing pose: its output is another (asserted, so that the
@@ -240,6 +254,42 @@ fn a_bvh_take_and_its_bone_along_x_twin_retarget_to_one_output() {
             .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs()))
             .fold(0.0, f64::max)
     };
+    // `angles` on the take itself: the segments' frames read in frame 0's pose, as retargeting
+    // reads it, so every twin measures the same angles.
+    let angles = |take: &Path| -> serde_json::Value {
+        serde_json::from_slice(
+            &run(Command::new(imubake_bin())
+                .arg("angles")
+                .arg(take)
+                .arg("--json"))
+            .stdout,
+        )
+        .unwrap()
+    };
+    let mine_angles = angles(&src);
+    for take in &takes[1..] {
+        let theirs = angles(take);
+        let (a, b) = (
+            mine_angles["angles"].as_object().unwrap(),
+            theirs["angles"].as_object().unwrap(),
+        );
+        assert!(a.len() >= 20 && a.len() == b.len(), "{}", take.display());
+        for (name, series) in a {
+            for (x, y) in series
+                .as_array()
+                .unwrap()
+                .iter()
+                .zip(b[name].as_array().unwrap())
+            {
+                let (Some(x), Some(y)) = (x.as_f64(), y.as_f64()) else {
+                    assert_eq!(x.is_null(), y.is_null(), "{name}");
+                    continue;
+                };
+                let d = ((x - y + 180.0).rem_euclid(360.0) - 180.0).abs();
+                assert!(d < 1e-3, "{}: {name} {x}° vs {y}°", take.display());
+            }
+        }
+    }
     let (original, path) = convert(&src, &[]);
     let (all, h) = positions(&path);
     let floor = all[0].iter().map(|p| p.y).fold(f64::MAX, f64::min);

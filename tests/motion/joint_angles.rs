@@ -27,27 +27,38 @@ fn read_table(path: &Path) -> BTreeMap<String, Vec<f64>> {
 /// Every angle of every frame of two real BVH files (CMU's 01_01 and pymo's walk: different
 /// skeletons, rest poses and channel orders) as the checked-in numpy/scipy script computes them
 /// from the same definitions (its own BVH parser and forward kinematics, scipy's Euler
-/// decompositions): the same columns, within the CSV's rounding.
+/// decompositions): the same columns, within the CSV's rounding — the segments' frames read in
+/// frame 0's pose (the default, as BVH takes retarget) and in the zero pose (`--bvh-reference
+/// rest`).
 #[test]
 fn angles_match_an_independent_numpy_scipy_implementation() {
     let Some(py) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
-    for name in ["cmu_01_01", "pymo_walk"] {
+    // By default the segments' frames are read in frame 0's pose; `--bvh-reference rest` reads
+    // them in the zero pose.
+    for (name, reference) in [
+        ("cmu_01_01", None),
+        ("pymo_walk", None),
+        ("cmu_01_01", Some("rest")),
+        ("pymo_walk", Some("rest")),
+    ] {
         let Some(bvh) = shared(&format!("bvh/{name}.bvh")) else {
             return;
         };
-        let ours = dir.path().join(format!("{name}.csv"));
-        let theirs = dir.path().join(format!("{name}.ref.csv"));
+        let ours = dir.path().join(format!("{name}{reference:?}.csv"));
+        let theirs = dir.path().join(format!("{name}{reference:?}.ref.csv"));
         run(Command::new(imubake_bin())
             .arg("angles")
             .arg(&bvh)
             .arg("--csv")
             .arg("-o")
-            .arg(&ours));
+            .arg(&ours)
+            .args(reference.map(|r| ["--bvh-reference", r]).iter().flatten()));
         run(Command::new(&py)
             .arg(repo_file("tests/python/joint_angles.py"))
             .arg(&bvh)
-            .arg(&theirs));
+            .arg(&theirs)
+            .args(reference.is_none().then_some("0")));
         let (a, b) = (read_table(&ours), read_table(&theirs));
         assert_eq!(
             a.keys().collect::<Vec<_>>(),
@@ -67,7 +78,10 @@ fn angles_match_an_independent_numpy_scipy_implementation() {
                 }
             }
         }
-        eprintln!("{name}: largest difference {:.2e}° ({})", worst.0, worst.1);
+        eprintln!(
+            "{name} ({reference:?}): largest difference {:.2e}° ({})",
+            worst.0, worst.1
+        );
         assert!(worst.0 < 2e-6, "{name}: {worst:?}");
         // Plausible motion, not only agreement: a walk bends the knees by tens of degrees.
         let knee = &a["left_knee_flexion"];

@@ -2,8 +2,11 @@
 """Joint angles of a BVH at every frame, computed independently of imubake with numpy and scipy
 (a reference for `imubake angles`).
 
-usage: joint_angles.py FILE.bvh OUT.csv
+usage: joint_angles.py FILE.bvh OUT.csv [N]
 writes CSV `frame,time_s,<columns>`, one row per BVH frame (time_s = frame * Frame Time), degrees.
+With N the reference pose is frame N's instead of the rest pose: every "rest" below is frame N
+(positions P are frame N's), and R_world(j, t) is replaced by R_world(j, t) R_world(j, N)^T, the
+turn since frame N (so a skeleton whose joints' axes differ gives the same angles).
 
 Definitions:
 - BVH: rotation channels compose as intrinsic Euler angles in channel order; a position channel
@@ -140,12 +143,16 @@ def euler(R, seq):
     return out
 
 
-def compute(path):
+def compute(path, ref=None):
     joints, values, frame_time = parse(path)
     sk = Skeleton(joints)
     world, pos = forward(joints, values)
-    _, rest = forward(joints, np.zeros((1, values.shape[1])), channels=False)
-    rest = [p[0] for p in rest]
+    if ref is None:
+        _, rest = forward(joints, np.zeros((1, values.shape[1])), channels=False)
+        rest = [p[0] for p in rest]
+    else:
+        rest = [p[ref] for p in pos]
+        world = [w * w[ref].inv() for w in world]
     wmat = {}
 
     def W(k):
@@ -248,9 +255,10 @@ def compute(path):
 
 def main():
     path, out = sys.argv[1], sys.argv[2]
+    ref = int(sys.argv[3]) if len(sys.argv) > 3 else None
     with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
         warnings.simplefilter("ignore")
-        frame_time, n, columns, data = compute(path)
+        frame_time, n, columns, data = compute(path, ref)
     table = np.column_stack(data) if data else np.zeros((n, 0))
     with open(out, "w") as f:
         f.write(",".join(["frame", "time_s"] + columns) + "\n")
