@@ -45,6 +45,36 @@ fn positions(path: &Path) -> (Vec<Vec<Vector3<f64>>>, f64) {
     (all, h)
 }
 
+/// Two `angles --json` outputs name the same angles (at least 20) and agree within 10⁻³° at
+/// every frame (`what` names the second's source in a failure).
+fn same_angles(a: &serde_json::Value, b: &serde_json::Value, what: &Path) {
+    let (a, b) = (
+        a["angles"].as_object().unwrap(),
+        b["angles"].as_object().unwrap(),
+    );
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    assert!(a.len() >= 20, "{} angles", a.len());
+    for (name, series) in a {
+        for (x, y) in series
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(b[name].as_array().unwrap())
+        {
+            let (Some(x), Some(y)) = (x.as_f64(), y.as_f64()) else {
+                assert_eq!(x.is_null(), y.is_null(), "{name}");
+                continue;
+            };
+            let d = ((x - y + 180.0).rem_euclid(360.0) - 180.0).abs();
+            assert!(
+                d < 1e-3,
+                "angles on {}: {name} {x}° vs {y}°",
+                what.display()
+            );
+        }
+    }
+}
+
 #[test]
 fn the_twin_maker_keeps_every_joint_in_place_and_lays_the_zero_pose_down() {
     let Some(src) = shared("bvh/cmu_01_01.bvh") else {
@@ -120,31 +150,7 @@ fn a_rig_and_its_bone_along_x_twin_give_the_same_joint_positions() {
         })
         .collect();
     for (k, other) in angles.iter().enumerate().skip(1) {
-        let (a, b) = (
-            angles[0]["angles"].as_object().unwrap(),
-            other["angles"].as_object().unwrap(),
-        );
-        assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
-        assert!(a.len() >= 20, "{} angles", a.len());
-        for (name, series) in a {
-            for (x, y) in series
-                .as_array()
-                .unwrap()
-                .iter()
-                .zip(b[name].as_array().unwrap())
-            {
-                let (Some(x), Some(y)) = (x.as_f64(), y.as_f64()) else {
-                    assert_eq!(x.is_null(), y.is_null(), "{name}");
-                    continue;
-                };
-                let d = ((x - y + 180.0).rem_euclid(360.0) - 180.0).abs();
-                assert!(
-                    d < 1e-3,
-                    "angles on {}: {name} {x}° vs {y}°",
-                    rigs[k].display()
-                );
-            }
-        }
+        same_angles(&angles[0], other, &rigs[k]);
     }
     // Offline, and through the stream's incremental cores as `live` runs them (`--causal`); and
     // scaled to a subject a quarter taller (CMU's BVH read as a rig, in centimetres, stands
@@ -268,27 +274,7 @@ fn a_bvh_take_and_its_bone_along_x_twin_retarget_to_one_output() {
     };
     let mine_angles = angles(&src);
     for take in &takes[1..] {
-        let theirs = angles(take);
-        let (a, b) = (
-            mine_angles["angles"].as_object().unwrap(),
-            theirs["angles"].as_object().unwrap(),
-        );
-        assert!(a.len() >= 20 && a.len() == b.len(), "{}", take.display());
-        for (name, series) in a {
-            for (x, y) in series
-                .as_array()
-                .unwrap()
-                .iter()
-                .zip(b[name].as_array().unwrap())
-            {
-                let (Some(x), Some(y)) = (x.as_f64(), y.as_f64()) else {
-                    assert_eq!(x.is_null(), y.is_null(), "{name}");
-                    continue;
-                };
-                let d = ((x - y + 180.0).rem_euclid(360.0) - 180.0).abs();
-                assert!(d < 1e-3, "{}: {name} {x}° vs {y}°", take.display());
-            }
-        }
+        same_angles(&mine_angles, &angles(take), take);
     }
     let (original, path) = convert(&src, &[]);
     let (all, h) = positions(&path);
