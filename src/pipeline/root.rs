@@ -15,10 +15,10 @@
 //!   other foot's when the weight passes to it, unless the feet are then a step apart
 //!   ([`STEP_H`]; a stair, a kerb: the body climbs, as paper 003's does), so sensor error cannot
 //!   make the floor wander. The contact weights `w_f` score each foot — how much higher it is
-//!   than the other, how fast it moves horizontally relative to the hips (a swinging foot moves
-//!   faster than the planted one, which moves at the body's speed), how fast it rises (a foot
-//!   pushing off rises first) — and blend smoothly between alike feet (double support), so a
-//!   switch never jumps. Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3
+//!   than the other, how fast it moves over the ground (its motion relative to the hips plus the
+//!   hips' recent velocity: nil for a planted foot whichever way the body moves — forwards,
+//!   backwards, sideways), how fast it rises relative to the hips (a foot pushing off rises
+//!   first) — and blend smoothly between alike feet (double support), so a switch never jumps. Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3
 //!   samples), which seldom holds on real walks. When the legs throw the hips up faster than
 //!   [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off) the body is airborne: the hips keep
 //!   their horizontal velocity and fall with gravity until a foot reaches its surface. Nothing
@@ -81,8 +81,8 @@ impl std::str::FromStr for RootMode {
 /// A foot this much higher than the other scores one unit against carrying the body, × h
 /// (the weights go from one foot to the other over two units).
 pub const BAND_H: f64 = 0.004;
-/// So does this much horizontal speed relative to the hips, × h / s (a swinging foot moves
-/// faster than the planted one, which moves at the body's speed)…
+/// So does this much horizontal speed over the ground, × h / s (a planted foot has none, a
+/// swinging one about twice the body's)…
 pub const SPEED_H_S: f64 = 0.1;
 /// … and this much rising relative to the hips, × h / s (a foot pushing off rises first).
 pub const RISE_H_S: f64 = 0.1 / 6.0;
@@ -416,13 +416,18 @@ impl RootCore {
             let k = pivot[f];
             moved[f] = now[f].get(k).copied().unwrap_or_default() - state.previous[f][k];
         }
-        // Contact weights: the foot that is lower, slower relative to the hips and not rising
-        // carries the body; when the two are alike both share it (double support), smoothly.
+        // Contact weights: the foot that is lower, slower over the ground and not rising
+        // relative to the hips carries the body; when the two are alike both share it (double
+        // support), smoothly. Its speed over the ground is its speed relative to the hips plus
+        // the hips' own as they moved lately: a planted foot's is nil whichever way the body
+        // goes (backwards, sideways), where relative to the hips it is the body's speed.
         let dt = self.dt;
+        let hips = state.velocity;
         let score = |f: usize| {
             let relative = moved[f] / dt;
+            let ground = Vector3::new(relative.x + hips.x, 0.0, relative.z + hips.z);
             (low[f].1 - low[0].1.min(low[1].1)) / (BAND_H * h)
-                + Vector3::new(relative.x, 0.0, relative.z).norm() / (SPEED_H_S * h)
+                + ground.norm() / (SPEED_H_S * h)
                 + relative.y.max(0.0) / (RISE_H_S * h)
         };
         let w_left = smooth(score(1) - score(0));

@@ -261,7 +261,7 @@ fn above_floor(take: &Take) -> Vec<f64> {
 
 /// The pymo walk, `--root feet`: no foot skate beyond the source's own (mean excess per stance
 /// phase ≤ 0.006 h), the hips' path within 3 % of the distance walked, the lowest point on the
-/// floor. Measured: skate −0.0017 h, path 0.42 % (9.76 h walked), the floor ±0.
+/// floor. Measured: skate −0.0017 h, path 0.18 % (9.76 h walked), the floor ±0.
 #[test]
 fn a_walk_walks_without_sliding() {
     let Some(take) = closed_loop(
@@ -304,9 +304,10 @@ fn a_walk_walks_without_sliding() {
 
 /// The pymo walk and CMU 01_01's hops played backwards (`common::reverse`), 16 simulated sensors
 /// with their true mounts, 0.5° of noise, `--root feet`: issue 49's targets for every gait — the
-/// hips' path within 3 % of the distance, skate ≤ 0.006 h per stance phase. Measured 2026-12-05,
-/// before issue 49's work: pymo backwards skate 0.124 h, path 4.38 % (one false flight, frames
-/// 448–458, where forwards has none); CMU backwards skate 0.0145 h, path 8.90 %. Ignored until
+/// hips' path within 3 % of the distance, skate ≤ 0.006 h per stance phase. Measured 2026-12-05:
+/// pymo backwards skate 0.124 h, path 4.38 % (one false flight, frames 448–458) while a foot's
+/// speed was read relative to the hips; 0.026 h, 1.20 % with its speed over the ground. CMU
+/// backwards 0.0145 h, 8.90 %, then 0.0148 h, 8.95 % (forwards: 0.0136 h, 8.1 %). Ignored until
 /// issue 49 makes it pass: `cargo test --test motion -- --ignored every_gait`.
 #[test]
 #[ignore = "issue 49: walks played backwards do not meet the targets yet"]
