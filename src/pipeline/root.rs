@@ -108,6 +108,10 @@ pub const MIN_FRAMES: usize = 3;
 struct Foot {
     /// The joints whose positions (and end sites) make the foot's contact points.
     joints: Vec<usize>,
+    /// The heel: the sole's point below the foot joint in the standing pose, in the foot joint's
+    /// frame — a skeleton has no heel joint, and without it a foot rolling onto its heel (the end
+    /// of a backwards step, a heel pivot) pivots on its ankle, which swings.
+    heel: Vector3<f64>,
 }
 
 /// The foot joints of a rig, its body parts' ([`crate::rig::anatomy`]: declared, named in any
@@ -221,6 +225,8 @@ fn foot_points(
             out.push(pos[j] + world[j] * e);
         }
     }
+    let f = foot.joints[0];
+    out.push(pos[f] + world[f] * foot.heel);
 }
 
 /// Forward kinematics with the hips at the origin into the buffers (world rotations,
@@ -262,9 +268,10 @@ fn measure_feet(
     positions: &mut Vec<Vector3<f64>>,
     now: &mut [Vec<Vector3<f64>>; 2],
 ) -> f64 {
-    let body_low = pose_relative_to_hips(rig, local, world, positions);
+    let mut body_low = pose_relative_to_hips(rig, local, world, positions);
     for (foot, out) in feet.iter().zip(now.iter_mut()) {
         foot_points(rig, foot, positions, world, out);
+        body_low = body_low.min(lowest(out).1);
     }
     body_low
 }
@@ -301,6 +308,10 @@ impl RootCore {
         } else {
             mode
         };
+        // The standing pose with the hips at the origin: each foot's heel below its joint, at
+        // the height of the foot's lowest point (its sole).
+        let (mut world, mut positions) = (Vec::new(), Vec::new());
+        pose_relative_to_hips(rig, reference, &mut world, &mut positions);
         let feet = foot_joints(rig).map(|[l, r]| {
             let subtree = |f: usize| {
                 let mut joints = vec![f];
@@ -309,7 +320,15 @@ impl RootCore {
                         joints.push(i);
                     }
                 }
-                Foot { joints }
+                let mut foot = Foot {
+                    joints,
+                    heel: Vector3::zeros(),
+                };
+                let mut points = Vec::new();
+                foot_points(rig, &foot, &positions, &world, &mut points);
+                let sole = lowest(&points).1 - positions[f].y;
+                foot.heel = world[f].inverse() * Vector3::new(0.0, sole.min(0.0), 0.0);
+                foot
             };
             [subtree(l), subtree(r)]
         });
