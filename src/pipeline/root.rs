@@ -18,8 +18,9 @@
 //!   than the other, how fast it moves over the ground (its motion relative to the hips plus the
 //!   hips' recent velocity: nil for a planted foot whichever way the body moves — forwards,
 //!   backwards, sideways), how fast it rises relative to the hips (a foot pushing off rises
-//!   first) — and blend smoothly between alike feet (double support), so a switch never jumps. Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3
-//!   samples), which seldom holds on real walks. When the legs throw the hips up faster than
+//!   first) — and blend smoothly between alike feet (double support), so a switch never jumps.
+//!   Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3 samples), which
+//!   seldom holds on real walks. When the legs throw the hips up faster than
 //!   [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off) the body is airborne: the hips keep
 //!   their horizontal velocity and fall with gravity until a foot reaches its surface. Nothing
 //!   goes below the planted foot's surface (the clamp).
