@@ -169,13 +169,8 @@ impl Plan {
         let rig = match &subject {
             Some(s) => {
                 // Its height is the calibration pose's: the rig's zero pose need not stand.
-                let pose = match &mapping {
-                    PlanMapping::Quaternion(m) => m.value.calibration.as_ref(),
-                    PlanMapping::ByName | PlanMapping::Euler(_) => None,
-                }
-                .and_then(|c| rig.pose(&c.pose.label()));
-                s.value
-                    .apply(&rig, pose.as_ref().map(|p| p.local.as_slice()), &s.path)?
+                let pose = calibration_pose_on(&mapping, &rig);
+                s.value.apply(&rig, pose.as_deref(), &s.path)?
             }
             None => rig,
         };
@@ -223,11 +218,7 @@ impl Plan {
     /// `calibration.pose` on the plan's rig), `None` for the rest pose or without one: the
     /// standing reference joint angles are measured from.
     pub fn calibration_pose(&self) -> Option<Vec<nalgebra::UnitQuaternion<f64>>> {
-        let PlanMapping::Quaternion(m) = &self.mapping else {
-            return None;
-        };
-        let pose = &m.value.calibration.as_ref()?.pose;
-        self.rig().pose(&pose.label()).map(|p| p.local)
+        calibration_pose_on(&self.mapping, self.rig())
     }
 
     /// The output transforms asked for, in the order they apply.
@@ -352,6 +343,18 @@ fn is_bvh_take(input: &Path, read: &ReadOptions) -> bool {
                     .is_ok_and(|f| f == crate::take::InputFormat::Bvh)
         }
     }
+}
+
+/// The local rotations of `mapping`'s calibration pose on `rig` ([`Plan::calibration_pose`]).
+fn calibration_pose_on(
+    mapping: &PlanMapping,
+    rig: &Rig,
+) -> Option<Vec<nalgebra::UnitQuaternion<f64>>> {
+    let PlanMapping::Quaternion(m) = mapping else {
+        return None;
+    };
+    let pose = &m.value.calibration.as_ref()?.pose;
+    rig.pose(&pose.label()).map(|p| p.local)
 }
 
 #[cfg(test)]
