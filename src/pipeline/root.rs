@@ -22,8 +22,11 @@
 //!   Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3 samples), which
 //!   seldom holds on real walks. When the legs throw the hips up faster than
 //!   [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off) the body is airborne: the hips keep
-//!   their horizontal velocity and fall with gravity until a foot reaches its surface. Nothing
-//!   goes below the planted foot's surface (the clamp).
+//!   their horizontal velocity and follow gravity. While they still rise the legs may be
+//!   unfolding under the push-off: a foot at its surface then carries them higher and faster
+//!   (the take-off velocity is the push's last, not the smoothed one at its start); on the way
+//!   down the first foot to reach its surface lands. Nothing goes below the planted foot's
+//!   surface (the clamp).
 //! - `auto` (the default): `feet` when both legs are sensed down to the feet (the thigh and the
 //!   shank of each side: the foot follows the shank when it has no sensor of its own), else
 //!   `ground` when both thighs are, else `fixed`.
@@ -453,15 +456,26 @@ impl RootCore {
         let w_left = smooth(score(1) - score(0));
         let weights = [w_left, 1.0 - w_left];
         let before = state.hips;
+        // A foot still pushing off under a take-off: airborne, but not off the ground yet.
+        let mut pushing = false;
         if state.airborne {
             // Ballistic: the horizontal velocity kept, gravity vertically.
             state.velocity.y -= GRAVITY_H_S2 * h * dt;
             state.hips += state.velocity * dt;
+            // A foot reaching its surface lands on the way down; on the way up the legs are still
+            // unfolding under a push-off, and they carry the hips higher and faster.
             let f = usize::from(low[1].1 < low[0].1);
-            if state.hips.y + low[f].1 <= state.level[f] {
-                state.airborne = false;
-                state.level[1 - f] = state.level[f];
-                state.dominant = f;
+            let on_foot = state.level[f] - low[f].1;
+            if on_foot >= state.hips.y {
+                if state.velocity.y <= 0.0 {
+                    state.airborne = false;
+                    state.level[1 - f] = state.level[f];
+                    state.dominant = f;
+                } else {
+                    state.velocity.y += (on_foot - state.hips.y) / dt;
+                    state.hips.y = on_foot;
+                    pushing = true;
+                }
             }
         } else {
             // Horizontally the planted feet stay where they are.
@@ -521,7 +535,8 @@ impl RootCore {
             } else {
                 (PLANT_H * h, PLANT_SPEED_H_S * h)
             };
-            state.planted[f] = !state.airborne && height <= height_limit && speed <= speed_limit;
+            state.planted[f] =
+                (!state.airborne || pushing) && height <= height_limit && speed <= speed_limit;
         }
         for (previous, now) in state.previous.iter_mut().zip(now) {
             previous.clear();
@@ -530,7 +545,7 @@ impl RootCore {
         RootFrame {
             position: state.hips,
             contact: state.planted,
-            airborne: state.airborne,
+            airborne: state.airborne && !pushing,
         }
     }
 }

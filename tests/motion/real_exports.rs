@@ -1,7 +1,6 @@
-//! Real suits' BVH exports, fetched from public repositories (never copied into this one: the
-//! test reads them from the fetched snapshots under `IMUBAKE_MIRROR`, by default
-//! `/work/.mirror`, and skips with a message where a snapshot is absent — CI machines have no
-//! network to fetch them): each retargeted onto the built-in Mixamo rig, every body part both
+//! Real suits' BVH exports, fetched from public repositories (never copied into this one:
+//! `common::mirror` reads them from the fetched snapshots and skips with a message where one is
+//! absent): each retargeted onto the built-in Mixamo rig, every body part both
 //! skeletons have turns in the world as its source joint did, within 2°, by an independent
 //! forward kinematics of both files (`tests/real_exports/turns.py`, scipy's rotations); and no
 //! part is left out (the gap issue 45 found: mocopi's pelvis and spine, MVN's joint-named arms
@@ -9,7 +8,6 @@
 
 use crate::common;
 
-use std::path::PathBuf;
 use std::process::Command;
 
 /// (suit, repository, commit, path in it, its licence, output rate = the source's).
@@ -83,31 +81,6 @@ const LEGS: [&str; 7] = [
     "right_shank",
 ];
 
-fn mirror() -> PathBuf {
-    std::env::var_os("IMUBAKE_MIRROR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("/work/.mirror"))
-}
-
-/// The file at `commit:path` of a fetched snapshot, or `None` (with the reason) when absent.
-fn fetched(repo: &str, commit: &str, path: &str) -> Option<Vec<u8>> {
-    let dir = mirror().join(repo.replace('/', "+")).join("repo");
-    let out = Command::new("git")
-        .arg("-C")
-        .arg(&dir)
-        .args(["show", &format!("{commit}:{path}")])
-        .output()
-        .ok()?;
-    if !out.status.success() {
-        eprintln!(
-            "SKIPPED {repo}@{commit}:{path}: not fetched here ({})",
-            String::from_utf8_lossy(&out.stderr).trim()
-        );
-        return None;
-    }
-    Some(out.stdout)
-}
-
 /// The body parts of `path`, also written to `into` for the Python check.
 fn parts_into(path: &std::path::Path, into: &std::path::Path) -> serde_json::Value {
     let parts = common::inspect_json(path);
@@ -123,7 +96,7 @@ fn real_exports_retarget_onto_mixamo_part_by_part_within_2_degrees() {
     let dir = tempfile::tempdir().unwrap();
     let mut checked = 0;
     for (i, &(suit, repo, commit, path, licence, fps)) in EXPORTS.iter().enumerate() {
-        let Some(bytes) = fetched(repo, commit, path) else {
+        let Some(bytes) = common::mirror::fetched(repo, commit, path) else {
             continue;
         };
         let src = dir.path().join(format!("export{i}.bvh"));

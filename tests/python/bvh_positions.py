@@ -4,15 +4,17 @@ scipy: a minimal BVH parser (offsets, End Sites, channels), each joint's rotatio
 as intrinsic Euler angles in channel order, positions down the hierarchy
 (p_child = p_parent + R_parent · offset), a position channel replacing its OFFSET component (the root's channels are its world position).
 
-usage: bvh_positions.py FILE.bvh JOINT[,JOINT...]
+usage: bvh_positions.py FILE.bvh JOINT[,JOINT...] [FOOT,FOOT...]
 prints JSON {"joints": {joint: [[x, y, z] per frame]}, "lowest": [y per frame] (the lowest joint
 or End Site), "rest_lowest": y, "rest_highest": y (the rest pose, root at its OFFSET),
-"frame_time": s}
+"frame_time": s; with FOOT names "contacts": {foot: [bool per frame]} and "airborne": [bool per
+frame], no point of any foot near its lowest height (see `contacts`)}
 """
 import json
 import sys
 
 import numpy as np
+from scipy.ndimage import minimum_filter1d
 from scipy.spatial.transform import Rotation
 
 
@@ -106,8 +108,36 @@ def positions(joints, values, channels=True):
     return forward(joints, values, channels)[1]
 
 
+def subtree(joints, k):
+    """Indices of joint k and every joint and End Site below it."""
+    out = [k]
+    for i, j in enumerate(joints):
+        if j["parent"] in out:
+            out.append(i)
+    return out
+
+
+def contacts(joints, pos, k, height, frame_time):
+    """Issue 49's rule for a foot in contact, per frame: one of its points (the foot joint, its
+    toes, their End Sites) within 0.02 h of the lowest height that point reaches within ±0.5 s and
+    moving horizontally slower than 0.12 h/s (central differences). Also whether one of them is
+    that low at all, whatever its speed (a foot on the ground, even rolling or pushing off)."""
+    half = max(1, int(round(0.5 / frame_time)))
+    touching = np.zeros(len(pos[k]), dtype=bool)
+    low_enough = np.zeros(len(pos[k]), dtype=bool)
+    for i in subtree(joints, k):
+        p = pos[i]
+        low = minimum_filter1d(p[:, 1], size=2 * half + 1, mode="nearest")
+        speed = np.linalg.norm(np.gradient(p[:, [0, 2]], frame_time, axis=0), axis=1)
+        near = p[:, 1] <= low + 0.02 * height
+        touching |= near & (speed < 0.12 * height)
+        low_enough |= near
+    return touching, low_enough
+
+
 def main():
     path, names = sys.argv[1], sys.argv[2].split(",")
+    feet = sys.argv[3].split(",") if len(sys.argv) > 3 else []
     joints, values, frame_time = parse(path)
     pos = positions(joints, values)
     rest = positions(joints, np.zeros((1, values.shape[1])), channels=False)
@@ -121,6 +151,16 @@ def main():
     for name in names:
         k = next(i for i, j in enumerate(joints) if j["name"] == name)
         out["joints"][name] = pos[k].tolist()
+    height = out["rest_highest"] - out["rest_lowest"]
+    out["contacts"] = {}
+    grounded = np.zeros(len(values), dtype=bool)
+    for name in feet:
+        k = next(i for i, j in enumerate(joints) if j["name"] == name)
+        touching, low_enough = contacts(joints, pos, k, height, frame_time)
+        out["contacts"][name] = touching.tolist()
+        grounded |= low_enough
+    if feet:
+        out["airborne"] = (~grounded).tolist()
     print(json.dumps(out))
 
 
