@@ -215,13 +215,14 @@ pub fn window(
 /// Stage 2, pose calibration: over the window, each sensor's mean orientation (a sensor that
 /// turns by more than [`MOVED_DURING_CALIBRATION_DEG`] in it is warned about), the heading from
 /// the hinges over the minute after it, then [`solve`]. Without a window, mounts are the known ones
-/// and the heading is kept. `take_end_s` is the take's last sample time; `mapping_file` names the
-/// mapping in errors.
+/// and the heading is kept. `take_end_s` is the take's last sample time; `policy` how an unsure
+/// heading is taken; `mapping_file` names the mapping in errors.
 pub fn calibrate(
     rig: &Rig,
     sources: &Sources,
     window: Option<&CalibrationWindow>,
     take_end_s: f64,
+    policy: HeadingPolicy,
     mapping_file: &str,
     warnings: &mut Vec<String>,
 ) -> Result<Calibration, PipelineError> {
@@ -254,7 +255,7 @@ pub fn calibrate(
         &first.held,
         w,
     ));
-    let calibration = solve(sensors, &first, second.as_ref(), hinges);
+    let calibration = solve(sensors, &first, second.as_ref(), hinges, policy);
     warnings.extend(calibration.warnings.iter().cloned());
     Ok(calibration)
 }
@@ -389,7 +390,9 @@ fn held_poses(
 /// declared stale — then the stage solves as [`calibrate`] does, from the same samples (the last
 /// one before the window, those in it, the first after it), but without the heading from the
 /// hinges, which would need the seconds after the window (a stream uses a declared forward axis or a
-/// known mount). Before that, [`CalibrationCore::left_s`] says how long the pose is to be held.
+/// known mount; one less sure than [`MAX_HEADING_UNCERTAINTY_DEG`] keeps the sensors' north, as
+/// under `heading: sensors`). Before that, [`CalibrationCore::left_s`] says how long the pose is to
+/// be held.
 pub struct CalibrationCore {
     window: Option<CalibrationWindow>,
     sensors: Vec<ResolvedSensor>,
@@ -535,7 +538,15 @@ impl CalibrationCore {
             held: held_poses(&self.sensors, &tracks, p.start_s, p.duration_s, warnings),
             pose_world: self.second_pose_world.clone(),
         });
-        let calibration = solve(&self.sensors, &first, second.as_ref(), None);
+        // A live subject cannot be refused: an unsure heading keeps the sensors' north, and the
+        // stream says so (`PoseStream::heading_unsure`), whatever the policy.
+        let calibration = solve(
+            &self.sensors,
+            &first,
+            second.as_ref(),
+            None,
+            HeadingPolicy::Sensors,
+        );
         warnings.extend(calibration.warnings.iter().cloned());
         self.samples = Vec::new();
         self.result = Some(calibration);
@@ -941,12 +952,15 @@ fn combine_looks(
 /// same for the second pose, if any. `hinges`: the heading from the knees and elbows
 /// ([`heading_from_hinges`]), used when neither a declared forward axis nor a known mount gives
 /// one. Only sensors with a heading of their own give the heading `H`; the others are aligned
-/// one by one (module docs).
+/// one by one (module docs). Under `policy` [`HeadingPolicy::Sensors`] a combination less sure
+/// than [`MAX_HEADING_UNCERTAINTY_DEG`] is not applied: the sensors' own north is kept, as when
+/// nothing gives the heading, and a warning says so (under `estimate` the pipeline refuses it).
 pub fn solve(
     sensors: &[ResolvedSensor],
     first: &Held,
     second: Option<&Held>,
     hinges: Option<(UnitQuaternion<f64>, f64)>,
+    policy: HeadingPolicy,
 ) -> Calibration {
     let (held, pose_world) = (&first.held, &first.pose_world);
     let mut warnings = Vec::new();
@@ -998,12 +1012,29 @@ pub fn solve(
     if let Some((h, u)) = hinges {
         looks.push(HeadingLook::new(HeadingSource::Hinges, &h, u));
     }
-    let (heading, heading_source, heading_uncertainty_deg) =
-        combine_looks(&mut looks, &mut warnings).unwrap_or((
-            UnitQuaternion::identity(),
-            HeadingSource::None,
-            f64::INFINITY,
-        ));
+    let combined = match combine_looks(&mut looks, &mut warnings) {
+        // Kept deliberately, the sensors' north is not traded for a heading this unsure.
+        Some((_, source, u))
+            if policy == HeadingPolicy::Sensors
+                && (u.is_nan() || u > MAX_HEADING_UNCERTAINTY_DEG) =>
+        {
+            warnings.push(format!(
+                "the heading from `{}` is unsure by {u:.1}° (more than {MAX_HEADING_UNCERTAINTY_DEG}°): \
+                 the sensors' own north is kept (`heading: sensors`)",
+                source.label()
+            ));
+            for l in &mut looks {
+                l.agrees = false;
+            }
+            None
+        }
+        c => c,
+    };
+    let (heading, heading_source, heading_uncertainty_deg) = combined.unwrap_or((
+        UnitQuaternion::identity(),
+        HeadingSource::None,
+        f64::INFINITY,
+    ));
 
     // 5. Sensors without a heading of their own, each aligned by Y_i = H ⊗ A_i.
     let mut align = vec![UnitQuaternion::identity(); sensors.len()];
@@ -1172,6 +1203,50 @@ mod tests {
         }
     }
 
+    /// One elbow's hinges give a heading unsure by 24°: under `heading: sensors` the sensors'
+    /// north is kept (heading identity, no source, no look agreeing, a warning); under `estimate`
+    /// the look is applied and the pipeline refuses the take.
+    #[test]
+    fn an_unsure_heading_keeps_the_sensors_north_under_heading_sensors() {
+        let hinges = Some((rot(Vector3::y(), 40.0), 24.0));
+        let s = [sensor(Mount::Calibrate, None)];
+        let first = self::held(UnitQuaternion::identity(), UnitQuaternion::identity());
+        let kept = solve(&s, &first, None, hinges, HeadingPolicy::Sensors);
+        assert_eq!(kept.heading, UnitQuaternion::identity());
+        assert_eq!(kept.heading_source, HeadingSource::None);
+        assert!(kept.heading_uncertainty_deg.is_infinite());
+        assert_eq!(kept.heading_looks.len(), 1);
+        assert!(!kept.heading_looks[0].agrees);
+        assert!(
+            kept.warnings
+                .iter()
+                .any(|w| w.contains("unsure by 24.0°") && w.contains("sensors' own north")),
+            "{:?}",
+            kept.warnings
+        );
+        assert!(
+            kept.check_heading(&s, HeadingPolicy::Sensors, "m.json")
+                .is_ok()
+        );
+        let applied = solve(&s, &first, None, hinges, HeadingPolicy::Estimate);
+        assert!((applied.heading.angle_to(&rot(Vector3::y(), 40.0))).abs() < 1e-12);
+        assert_eq!(applied.heading_source, HeadingSource::Hinges);
+        assert!(
+            applied
+                .check_heading(&s, HeadingPolicy::Estimate, "m.json")
+                .is_err()
+        );
+        // A sure look (3°) is applied under either policy.
+        let sure = solve(
+            &s,
+            &first,
+            None,
+            Some((rot(Vector3::y(), 40.0), 3.0)),
+            HeadingPolicy::Sensors,
+        );
+        assert_eq!(sure.heading_source, HeadingSource::Hinges);
+    }
+
     #[test]
     fn declared_forward_turns_the_subject_to_face_plus_z() {
         // The subject faces +X (rig world, before heading); the sensor's +y axis points forward.
@@ -1182,6 +1257,7 @@ mod tests {
             &self::held(held, UnitQuaternion::identity()),
             None,
             None,
+            HeadingPolicy::Estimate,
         );
         assert_eq!(cal.heading_source.label(), "declared-forward");
         assert!((cal.heading * Vector3::x() - Vector3::z()).norm() < 1e-12);
@@ -1201,6 +1277,7 @@ mod tests {
             &self::held(held, UnitQuaternion::identity()),
             None,
             None,
+            HeadingPolicy::Estimate,
         );
         assert_eq!(cal.heading_source.label(), "mounts");
         assert!((cal.heading * (-Vector3::x()) - Vector3::z()).norm() < 1e-12);
@@ -1209,6 +1286,7 @@ mod tests {
             &self::held(held, UnitQuaternion::identity()),
             None,
             None,
+            HeadingPolicy::Estimate,
         );
         assert_eq!(cal.heading_source, HeadingSource::None);
         assert!(cal.heading.angle() < 1e-12);
@@ -1427,7 +1505,13 @@ mod tests {
             sensor(Mount::Calibrate, None),
             sensor(Mount::Calibrate, None),
         ];
-        let cal = solve(&sensors, &first, Some(&second), None);
+        let cal = solve(
+            &sensors,
+            &first,
+            Some(&second),
+            None,
+            HeadingPolicy::Estimate,
+        );
         assert_eq!(cal.heading_source, HeadingSource::SecondPose);
         assert!(cal.heading.angle_to(&h_true) < 1e-9);
         // Both turns about a horizontal axis: the known-mount accuracy, agreeing exactly.
@@ -1450,6 +1534,7 @@ mod tests {
             &self::held(held, UnitQuaternion::identity()),
             None,
             None,
+            HeadingPolicy::Estimate,
         );
         assert_eq!(cal.heading_source, HeadingSource::None);
         assert!(cal.heading_uncertainty_deg.is_infinite());
@@ -1477,6 +1562,7 @@ mod tests {
             &self::held(UnitQuaternion::identity(), UnitQuaternion::identity()),
             None,
             None,
+            HeadingPolicy::Estimate,
         );
         assert!((cal.heading_uncertainty_deg - 5.0 / 59f64.to_radians().cos()).abs() < 1e-9);
         assert!(
@@ -1490,6 +1576,7 @@ mod tests {
             &self::held(UnitQuaternion::identity(), UnitQuaternion::identity()),
             None,
             None,
+            HeadingPolicy::Estimate,
         );
         assert!(
             cal.check_heading(&s, HeadingPolicy::Estimate, "m.json")
@@ -1537,6 +1624,7 @@ mod tests {
             &held(held1, pose1),
             None,
             None,
+            HeadingPolicy::Estimate,
         );
         assert_eq!(cal.alignment, vec![Alignment::Mount]);
         assert_eq!(cal.heading_source, HeadingSource::Aligned);
@@ -1548,6 +1636,7 @@ mod tests {
             &held(held1, pose1),
             None,
             None,
+            HeadingPolicy::Estimate,
         );
         assert_eq!(cal.alignment, vec![Alignment::Forward]);
         check_aligned(&cal, z, m);
@@ -1558,6 +1647,7 @@ mod tests {
             &held(held1, pose1),
             Some(&second),
             None,
+            HeadingPolicy::Estimate,
         );
         assert_eq!(cal.alignment, vec![Alignment::SecondPose]);
         assert!(cal.warnings.is_empty(), "{:?}", cal.warnings);
@@ -1568,6 +1658,7 @@ mod tests {
             &held(held1, pose1),
             None,
             None,
+            HeadingPolicy::Estimate,
         );
         assert_eq!(cal.alignment, vec![Alignment::None]);
         assert!(
@@ -1587,6 +1678,7 @@ mod tests {
             &held(held1, pose1),
             Some(&about_up),
             None,
+            HeadingPolicy::Estimate,
         );
         assert_eq!(cal.alignment, vec![Alignment::None]);
         assert!(

@@ -213,7 +213,8 @@ fn calibrations(
     warnings: &mut Vec<String>,
 ) -> Result<(Calibration, Vec<(f64, Calibration)>), PipelineError> {
     let (take_last_s, recalibrations_s) = (take.last_s, take.recalibrations_s);
-    let calibration = calibrate::calibrate(rig, sources, window, take_last_s, file, warnings)?;
+    let calibration =
+        calibrate::calibrate(rig, sources, window, take_last_s, policy, file, warnings)?;
     calibration.check_heading(&sources.sensors, policy, file)?;
     let mut later = Vec::new();
     for t in recalibrations_s {
@@ -226,7 +227,15 @@ fn calibrations(
             ));
             continue;
         }
-        let c = calibrate::calibrate(rig, sources, Some(&again), take_last_s, file, warnings)?;
+        let c = calibrate::calibrate(
+            rig,
+            sources,
+            Some(&again),
+            take_last_s,
+            policy,
+            file,
+            warnings,
+        )?;
         c.check_heading(&sources.sensors, policy, file)?;
         later.push((again.end_s(), c));
     }

@@ -301,8 +301,12 @@ fn the_hinges_give_the_heading_from_raw_readings() {
 }
 
 /// `simulate` CMU 01_01 on its own skeleton with `mapping` (and `simulate_args`), then `convert`
-/// it: the conversion must be refused; its error output.
-fn refused_on_cmu(mapping: &Value, simulate_args: &[&str]) -> Option<String> {
+/// it (with `convert_args`): its output, and the sidecar when it converted.
+fn convert_on_cmu(
+    mapping: &Value,
+    simulate_args: &[&str],
+    convert_args: &[&str],
+) -> Option<(std::process::Output, Option<Value>)> {
     let bvh = shared("bvh/cmu_01_01.bvh")?;
     let dir = tempfile::tempdir().unwrap();
     let mapping_path = dir.path().join("mapping.json");
@@ -327,18 +331,25 @@ fn refused_on_cmu(mapping: &Value, simulate_args: &[&str]) -> Option<String> {
         .arg(&bvh)
         .arg("--out")
         .arg(dir.path().join("out"))
+        .args(convert_args)
         .output()
         .unwrap();
+    let sidecar = std::fs::read(dir.path().join("out/take.imubake.json"))
+        .ok()
+        .map(|b| serde_json::from_slice(&b).unwrap());
+    Some((out, sidecar))
+}
+
+/// [`convert_on_cmu`] that must be refused: its error output.
+fn refused_on_cmu(mapping: &Value, simulate_args: &[&str]) -> Option<String> {
+    let (out, _) = convert_on_cmu(mapping, simulate_args, &[])?;
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(!out.status.success(), "{stderr}");
     Some(stderr)
 }
 
-/// Only the arms sensed, the pose held in CMU 01_01's frame 1 (arms down): one elbow flexes
-/// enough over the hops, and one elbow alone is never sure (its axis is 24° off the left–right
-/// axis here): refused, naming the hinges and the ways out.
-#[test]
-fn one_elbow_alone_is_refused() {
+/// The arms alone, as in [`one_elbow_alone_is_refused`].
+fn arms_only_mapping() -> Value {
     let mut mapping = own_rig_mapping(&CMU_BONES);
     mapping["calibration"]["pose"] = Value::from("frame:1");
     let sensors = mapping["sensors"].as_object_mut().unwrap();
@@ -346,12 +357,52 @@ fn one_elbow_alone_is_refused() {
         !name.contains("thigh") && !name.contains("shank") && !name.contains("foot")
     });
     sensors["pelvis"].as_object_mut().unwrap().remove("forward");
-    let Some(stderr) = refused_on_cmu(&mapping, &["--frames", "1:900", "--seed", "3"]) else {
+    mapping
+}
+
+/// Only the arms sensed, the pose held in CMU 01_01's frame 1 (arms down): one elbow flexes
+/// enough over the hops, and one elbow alone is never sure (its axis is 24° off the left–right
+/// axis here): refused, naming the hinges and the ways out.
+#[test]
+fn one_elbow_alone_is_refused() {
+    let args = ["--frames", "1:900", "--seed", "3"];
+    let Some(stderr) = refused_on_cmu(&arms_only_mapping(), &args) else {
         return;
     };
     for part in ["unsure by about 30°", "from `hinges`", "declare `forward`"] {
         assert!(stderr.contains(part), "{part}: {stderr}");
     }
+}
+
+/// The same take with the sensors' north kept deliberately (`--heading sensors`): it converts,
+/// and the elbow's unsure heading is not applied — the sidecar's heading is `none`, its look
+/// listed as not agreeing, and a warning says why (before, the look was applied: a heading 24°
+/// off instead of the sensors' north).
+#[test]
+fn one_elbow_under_heading_sensors_keeps_the_sensors_north() {
+    let args = ["--frames", "1:900", "--seed", "3"];
+    let Some((out, sidecar)) =
+        convert_on_cmu(&arms_only_mapping(), &args, &["--heading", "sensors"])
+    else {
+        return;
+    };
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("the sensors' own north is kept"),
+        "{stderr}"
+    );
+    let pipeline = &sidecar.unwrap()["pipeline"];
+    assert_eq!(pipeline["heading"], "none", "{pipeline}");
+    assert_eq!(pipeline["heading_policy"], "sensors", "{pipeline}");
+    let looks = pipeline["heading_looks"].as_array().unwrap();
+    assert!(!looks.is_empty(), "{pipeline}");
+    assert!(
+        looks
+            .iter()
+            .all(|l| l["agrees"] == false && l["source"] == "hinges"),
+        "{pipeline}"
+    );
 }
 
 /// Standing still throughout — nothing flexes — still gives no heading: refused, as before.
