@@ -1020,7 +1020,7 @@ pub fn solve(
         {
             warnings.push(format!(
                 "the heading from `{}` is unsure by {u:.1}° (more than {MAX_HEADING_UNCERTAINTY_DEG}°): \
-                 the sensors' own north is kept (`heading: sensors`)",
+                 the sensors' own north is kept",
                 source.label()
             ));
             for l in &mut looks {
