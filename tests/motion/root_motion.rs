@@ -424,7 +424,7 @@ fn a_walk_walks_without_sliding() {
 /// Motion Capture Database (mocap.cs.cmu.edu: free for research and commercial use, the data not
 /// to be resold) in its cgspeed BVH conversion — the same skeleton as the shared CMU 01_01, frame 0
 /// a reference pose — as kept by chrystianosaraujo/motion-viewer, which states no licence of its
-/// own. (label, path in it.)
+/// own: (repository, commit), then each take's (label, path in it).
 const CMU_MIRROR: (&str, &str) = (
     "chrystianosaraujo/motion-viewer",
     "6d7ca60c300f123528be0fd0939cf7a584a13f65",
