@@ -158,10 +158,7 @@ impl Calibration {
         mapping_file: &str,
     ) -> Result<(), PipelineError> {
         match self.least_sure(sensors) {
-            Some((sensor, u))
-                if policy == HeadingPolicy::Estimate
-                    && (u.is_nan() || u > MAX_HEADING_UNCERTAINTY_DEG) =>
-            {
+            Some((sensor, u)) if policy == HeadingPolicy::Estimate && too_unsure(u) => {
                 Err(PipelineError::HeadingUnsure {
                     file: mapping_file.to_string(),
                     heading: self.heading_source.label(),
@@ -945,6 +942,11 @@ fn combine_looks(
     ))
 }
 
+/// Less sure than [`MAX_HEADING_UNCERTAINTY_DEG`] (or unknown), degrees.
+fn too_unsure(uncertainty_deg: f64) -> bool {
+    uncertainty_deg.is_nan() || uncertainty_deg > MAX_HEADING_UNCERTAINTY_DEG
+}
+
 /// Solves heading, alignments and mounts.
 ///
 /// `first.held[i]`: sensor i's mean orientation over the window, in the rig world (`C ⊗ q`);
@@ -1014,10 +1016,7 @@ pub fn solve(
     }
     let combined = match combine_looks(&mut looks, &mut warnings) {
         // Kept deliberately, the sensors' north is not traded for a heading this unsure.
-        Some((_, source, u))
-            if policy == HeadingPolicy::Sensors
-                && (u.is_nan() || u > MAX_HEADING_UNCERTAINTY_DEG) =>
-        {
+        Some((_, source, u)) if policy == HeadingPolicy::Sensors && too_unsure(u) => {
             warnings.push(format!(
                 "the heading from `{}` is unsure by {u:.1}° (more than {MAX_HEADING_UNCERTAINTY_DEG}°): \
                  the sensors' own north is kept",

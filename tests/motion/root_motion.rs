@@ -201,6 +201,39 @@ fn horizontal(v: &Vector3<f64>) -> Vector2<f64> {
     Vector2::new(v.x, v.z)
 }
 
+/// The horizontal distance along a track.
+fn travel(track: &[Vector3<f64>]) -> f64 {
+    track
+        .windows(2)
+        .map(|w| (horizontal(&w[1]) - horizontal(&w[0])).norm())
+        .sum()
+}
+
+/// The stretches of `flags` that hold for at least `min` frames in a row.
+fn stretches(flags: &[bool], min: usize) -> Vec<std::ops::Range<usize>> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < flags.len() {
+        let end = (i..flags.len()).find(|&j| !flags[j]).unwrap_or(flags.len());
+        if end - i >= min {
+            out.push(i..end);
+        }
+        i = end + 1;
+    }
+    out
+}
+
+/// Per frame, whether the sidecar's `contacts[key]` intervals (`[start, end]`, inclusive) hold.
+fn interval_flags(sidecar: &Value, key: &str, frames: usize) -> Vec<bool> {
+    let mut on = vec![false; frames];
+    for r in sidecar["contacts"][key].as_array().unwrap() {
+        for f in r[0].as_u64().unwrap()..=r[1].as_u64().unwrap() {
+            on[f as usize] = true;
+        }
+    }
+    on
+}
+
 /// Foot skate: over the source's stance phases (the foot within 0.02 h of its lowest height and
 /// slower than 0.1 h/s horizontally, for at least 4 frames), how much further the output's foot
 /// travels horizontally than the source's, on average per phase (h).
@@ -220,25 +253,8 @@ fn skate(take: &Take) -> (usize, f64) {
                 src[i].y <= lowest + 0.02 && speed < 0.1
             })
             .collect();
-        let mut i = 0;
-        while i < stance.len() {
-            if !stance[i] {
-                i += 1;
-                continue;
-            }
-            let mut j = i;
-            while j < stance.len() && stance[j] {
-                j += 1;
-            }
-            if j - i >= 4 {
-                let travel = |p: &[Vector3<f64>]| {
-                    p.windows(2)
-                        .map(|w| (horizontal(&w[1]) - horizontal(&w[0])).norm())
-                        .sum::<f64>()
-                };
-                excess.push(travel(&out[i..j]) - travel(&src[i..j]));
-            }
-            i = j;
+        for phase in stretches(&stance, 4) {
+            excess.push(travel(&out[phase.clone()]) - travel(&src[phase]));
         }
     }
     (
@@ -302,18 +318,8 @@ fn contact_skate(take: &Take) -> (usize, f64) {
             .iter()
             .map(|(_, f)| take.source.contacts[(f.round() as usize).min(last)][side])
             .collect();
-        let travel = |p: &[Vector3<f64>]| {
-            p.windows(2)
-                .map(|w| (horizontal(&w[1]) - horizontal(&w[0])).norm())
-                .sum::<f64>()
-        };
-        let mut i = 0;
-        while i < on.len() {
-            let j = (i..on.len()).find(|&j| !on[j]).unwrap_or(on.len());
-            if j - i >= 2 {
-                excess.push(travel(&out[i..j]) - travel(&src[i..j]));
-            }
-            i = j + 1;
+        for contact in stretches(&on, 2) {
+            excess.push(travel(&out[contact.clone()]) - travel(&src[contact]));
         }
     }
     (
@@ -336,15 +342,7 @@ struct ContactScores {
 
 fn contact_scores(take: &Take) -> ContactScores {
     let frames = take.sidecar["frames"].as_u64().unwrap() as usize;
-    let flags = |key: &str| {
-        let mut on = vec![false; frames];
-        for r in take.sidecar["contacts"][key].as_array().unwrap() {
-            for f in r[0].as_u64().unwrap()..=r[1].as_u64().unwrap() {
-                on[f as usize] = true;
-            }
-        }
-        on
-    };
+    let flags = |key: &str| interval_flags(&take.sidecar, key, frames);
     let output = [flags("left"), flags("right")];
     let output_airborne = flags("airborne");
     let (mut tp, mut fp, mut fn_) = (0usize, 0usize, 0usize);
@@ -473,13 +471,7 @@ fn every_gait_walks_without_sliding() {
     let mut missed = Vec::new();
     for (name, bvh, mapping, skip, backwards) in takes {
         let text = std::fs::read_to_string(&bvh).unwrap();
-        let n: usize = text
-            .lines()
-            .find_map(|l| l.strip_prefix("Frames:"))
-            .unwrap()
-            .trim()
-            .parse()
-            .unwrap();
+        let n = imubake::bvh::parse(text.as_bytes()).unwrap().frame_count();
         let mut runs = vec![(name.clone(), bvh.clone(), skip.then(|| "1:".to_string()))];
         if backwards {
             let file = dir.path().join(format!("{name}_backwards.bvh"));
@@ -626,15 +618,11 @@ fn a_real_lower_body_take_stays_on_the_floor() {
         &std::fs::read(out.join("xio_lower_body_7imu.imubake.json")).unwrap(),
     )
     .unwrap();
-    let contacts = &sidecar["contacts"];
-    let mut planted = vec![false; p.lowest.len()];
-    for side in ["left", "right"] {
-        for r in contacts[side].as_array().unwrap() {
-            for f in r[0].as_u64().unwrap()..=r[1].as_u64().unwrap() {
-                planted[f as usize] = true;
-            }
-        }
-    }
+    let (left, right) = (
+        interval_flags(&sidecar, "left", p.lowest.len()),
+        interval_flags(&sidecar, "right", p.lowest.len()),
+    );
+    let planted: Vec<bool> = left.iter().zip(&right).map(|(l, r)| *l || *r).collect();
     let worst = p
         .lowest
         .iter()
