@@ -81,6 +81,7 @@ mod tests {
             align: vec![UnitQuaternion::identity()],
             alignment: vec![crate::pipeline::calibrate::Alignment::OwnHeading],
             warnings: vec![],
+            heading_from_s: None,
         };
         let out = bone_world(vec![track], &calibration);
         assert!(out[0].values()[0].angle_to(&bone) < 1e-12);

@@ -146,6 +146,10 @@ pub struct Calibration {
     pub align: Vec<UnitQuaternion<f64>>,
     pub alignment: Vec<Alignment>,
     pub warnings: Vec<String>,
+    /// A stream's heading refined as the hinges flexed ([`CalibrationCore::refine`]): the stream
+    /// time (s) from which this heading is in force; frames before it turned with the one before.
+    /// `None`: from the calibration on.
+    pub heading_from_s: Option<f64>,
 }
 
 impl Calibration {
@@ -293,6 +297,7 @@ fn without_window(sensors: &[ResolvedSensor]) -> Calibration {
             .into_iter()
             .collect(),
         alignment,
+        heading_from_s: None,
     }
 }
 
@@ -385,11 +390,13 @@ fn held_poses(
 /// The incremental core of stage 2, for streams: each sensor's samples (rig world) are kept until
 /// the calibration window has passed for every sensor — a sample after its end, or the sensor
 /// declared stale — then the stage solves as [`calibrate`] does, from the same samples (the last
-/// one before the window, those in it, the first after it), but without the heading from the
-/// hinges, which would need the seconds after the window (a stream uses a declared forward axis or a
-/// known mount; one less sure than [`MAX_HEADING_UNCERTAINTY_DEG`] keeps the sensors' north, as
-/// under `heading: sensors`). Before that, [`CalibrationCore::left_s`] says how long the pose is to
-/// be held.
+/// one before the window, those in it, the first after it), but without the hinges, whose seconds
+/// after the window have not come yet: from a declared forward axis, known mounts or a second pose
+/// (one less sure than [`MAX_HEADING_UNCERTAINTY_DEG`] keeps the sensors' north, as under
+/// `heading: sensors`). Before that, [`CalibrationCore::left_s`] says how long the pose is to be
+/// held. After it, [`CalibrationCore::refine`] folds the hinges' flexion as it comes (for
+/// [`HINGE_SEARCH_S`]) and solves again with it once a second, taking the heading it gives when
+/// that is surer ([`REFINED_WHEN`]).
 pub struct CalibrationCore {
     window: Option<CalibrationWindow>,
     sensors: Vec<ResolvedSensor>,
@@ -399,6 +406,46 @@ pub struct CalibrationCore {
     passed: Vec<bool>,
     latest_s: f64,
     result: Option<Calibration>,
+    /// The knees and elbows the rig and the mapping have ([`hinge_pairs`]).
+    pairs: Vec<HingePair>,
+    /// After the window: the hinges being watched for the heading.
+    watch: Option<HingeWatch>,
+}
+
+/// A stream's hinges after calibration ([`CalibrationCore::refine`]).
+struct HingeWatch {
+    /// The poses as held, to solve again with.
+    first: Held,
+    second: Option<Held>,
+    /// The usable pairs, each with its flexion so far.
+    hinges: Vec<(HingePair, HingeFlexion)>,
+    /// Each sensor's latest sample (rig world): the inner segment's, read at the outer's samples.
+    latest: Vec<Option<UnitQuaternion<f64>>>,
+    /// Hinge samples count in (from_s, until_s].
+    from_s: f64,
+    until_s: f64,
+    next_look_s: f64,
+}
+
+/// A stream takes the heading the hinges give when it is surer than the one in force: unsure
+/// before ([`MAX_HEADING_UNCERTAINTY_DEG`]) and sure now, or this fraction of the uncertainty
+/// before or less — a few steps as the flexion piles up, not a turn every second.
+pub const REFINED_WHEN: f64 = 0.8;
+
+/// A stream solves again with the hinges this often, seconds of stream time.
+pub const HINGE_LOOK_EVERY_S: f64 = 1.0;
+
+/// The heading a stream took from the hinges ([`CalibrationCore::refine`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refined {
+    /// Stream time, s.
+    pub at_s: f64,
+    /// The turn about +Y before and now, degrees.
+    pub before_deg: f64,
+    pub heading_deg: f64,
+    /// The uncertainty before (infinite when unknown) and now, degrees.
+    pub before_uncertainty_deg: f64,
+    pub uncertainty_deg: f64,
 }
 
 impl CalibrationCore {
@@ -418,6 +465,10 @@ impl CalibrationCore {
         };
         let n = sensors.len();
         let result = window.is_none().then(|| without_window(&sensors));
+        let pairs = match &window {
+            Some(w) => hinge_pairs(rig, &held_pose(rig, Some(w)), &sensors),
+            None => Vec::new(),
+        };
         Ok(CalibrationCore {
             window,
             sensors,
@@ -427,6 +478,8 @@ impl CalibrationCore {
             passed: vec![false; n],
             latest_s: f64::NEG_INFINITY,
             result,
+            pairs,
+            watch: None,
         })
     }
 
@@ -439,6 +492,11 @@ impl CalibrationCore {
     /// calibration aligns it, as [`calibrate`] does such sensors.
     pub fn set_own_heading(&mut self, i: usize) {
         self.sensors[i].own_heading = true;
+    }
+
+    /// Whether the hinges are watched for a surer heading ([`CalibrationCore::refine`]).
+    pub fn watching_hinges(&self) -> bool {
+        self.watch.is_some()
     }
 
     /// The calibration window, if there is one.
@@ -547,6 +605,86 @@ impl CalibrationCore {
         warnings.extend(calibration.warnings.iter().cloned());
         self.samples = Vec::new();
         self.result = Some(calibration);
+        let hinges: Vec<(HingePair, HingeFlexion)> = self
+            .pairs
+            .iter()
+            .filter(|p| p.usable(&self.sensors))
+            .map(|p| (*p, HingeFlexion::new(p.side, p.flexes_about_left)))
+            .collect();
+        if !hinges.is_empty() {
+            self.watch = Some(HingeWatch {
+                first,
+                second,
+                hinges,
+                latest: vec![None; self.sensors.len()],
+                from_s: w.end_s(),
+                until_s: w.end_s() + HINGE_SEARCH_S,
+                next_look_s: w.end_s() + HINGE_LOOK_EVERY_S,
+            });
+        }
+    }
+
+    /// After the calibration is solved, a sample of sensor `i` at `t` (rig world; times
+    /// increasing per sensor): folded into the hinges whose outer segment it drives (the inner
+    /// segment read at its latest sample, at most a sample period old), and once a
+    /// [`HINGE_LOOK_EVERY_S`] the calibration solved again with the hinges' heading — which
+    /// replaces the one in force when it is surer ([`REFINED_WHEN`]): then `Some`, and
+    /// [`Calibration::heading_from_s`] is `t`. Past [`HINGE_SEARCH_S`] after the window, as in a
+    /// whole take, the hinges are not watched any more.
+    pub fn refine(&mut self, i: usize, t: f64, q: UnitQuaternion<f64>) -> Option<Refined> {
+        let watch = self.watch.as_mut()?;
+        if t > watch.until_s {
+            self.watch = None;
+            return None;
+        }
+        if t <= watch.from_s {
+            watch.latest[i] = Some(q);
+            return None;
+        }
+        watch.latest[i] = Some(q);
+        let held = &watch.first.held;
+        for (pair, flexion) in watch.hinges.iter_mut().filter(|(p, _)| p.outer == i) {
+            if let Some(inner) = watch.latest[pair.inner] {
+                flexion.push(
+                    t,
+                    &(inner * held[pair.inner].inverse()),
+                    &(q * held[i].inverse()),
+                );
+            }
+        }
+        if t < watch.next_look_s {
+            return None;
+        }
+        watch.next_look_s = t + HINGE_LOOK_EVERY_S;
+        let look = heading_from_flexion(watch.hinges.iter().map(|(_, f)| f))?;
+        let candidate = solve(
+            &self.sensors,
+            &watch.first,
+            watch.second.as_ref(),
+            Some(look),
+            HeadingPolicy::Sensors,
+        );
+        let current = self.result.as_ref().expect("watched once solved");
+        let (before, now) = (
+            current.heading_uncertainty_deg,
+            candidate.heading_uncertainty_deg,
+        );
+        let surer = !too_unsure(now) && (too_unsure(before) || now <= REFINED_WHEN * before);
+        if !surer {
+            return None;
+        }
+        let refined = Refined {
+            at_s: t,
+            before_deg: current.heading.scaled_axis().y.to_degrees(),
+            heading_deg: candidate.heading.scaled_axis().y.to_degrees(),
+            before_uncertainty_deg: before,
+            uncertainty_deg: now,
+        };
+        self.result = Some(Calibration {
+            heading_from_s: Some(t),
+            ..candidate
+        });
+        Some(refined)
     }
 }
 
@@ -641,25 +779,32 @@ pub struct HingeSamples {
     pub samples: Vec<(f64, UnitQuaternion<f64>, UnitQuaternion<f64>)>,
 }
 
-/// For every mapped knee and elbow whose two segments' sensors both have a heading of their own
-/// and whose upper segment hangs down in the calibration pose (`pose_local`, the pose's local
-/// rotations), its [`HingeSamples`].
-fn hinge_samples(
+/// A knee or an elbow whose two segments both carry a sensor and hang down in the calibration
+/// pose: the sensors (indices in mapping order) on its inner segment (thigh, upper arm) and its
+/// outer one (shank, forearm).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HingePair {
+    pub side: crate::rig::anatomy::Side,
+    /// +1 for a knee, −1 for an elbow ([`HingeSamples::flexes_about_left`]).
+    pub flexes_about_left: f64,
+    pub inner: usize,
+    pub outer: usize,
+}
+
+/// Every mapped knee and elbow whose segments hang down in the calibration pose (`pose_local`,
+/// the pose's local rotations). Whether both sensors have a heading of their own is left to the
+/// caller ([`HingePair::usable`]): a stream learns it only as fusion starts.
+fn hinge_pairs(
     rig: &Rig,
     pose_local: &[UnitQuaternion<f64>],
     sensors: &[ResolvedSensor],
-    tracks: &[Track<UnitQuaternion<f64>>],
-    held: &[UnitQuaternion<f64>],
-    window: &CalibrationWindow,
-) -> Vec<HingeSamples> {
+) -> Vec<HingePair> {
     use crate::rig::anatomy::{Anatomy, Limb, Side};
-    let start = window.end_s();
-    let end = start + HINGE_SEARCH_S;
     let anatomy = Anatomy::of(rig);
     let pose_world = rig.world_rotations(pose_local);
     let pose_positions = rig.world_positions(pose_local, Vector3::zeros());
     let sensor_of = |bone: usize| sensors.iter().position(|s| s.bone == bone);
-    let mut hinges = Vec::new();
+    let mut pairs = Vec::new();
     for side in Side::BOTH {
         for (inner, outer, sign) in [
             (Limb::Thigh, Limb::Shank, 1.0),
@@ -672,13 +817,46 @@ fn hinge_samples(
             let (Some(i), Some(o)) = (sensor_of(inner), sensor_of(outer)) else {
                 continue;
             };
-            if sensors[i].own_heading
-                || sensors[o].own_heading
-                || !stands_down(rig, &pose_positions, &pose_world, inner)
-                || !stands_down(rig, &pose_positions, &pose_world, outer)
+            if stands_down(rig, &pose_positions, &pose_world, inner)
+                && stands_down(rig, &pose_positions, &pose_world, outer)
             {
-                continue;
+                pairs.push(HingePair {
+                    side,
+                    flexes_about_left: sign,
+                    inner: i,
+                    outer: o,
+                });
             }
+        }
+    }
+    pairs
+}
+
+impl HingePair {
+    /// Both segments' sensors share the world's north (one fused without a magnetometer sits in
+    /// a world of its own, about which the pair's relative turn says nothing of the body).
+    fn usable(&self, sensors: &[ResolvedSensor]) -> bool {
+        !sensors[self.inner].own_heading && !sensors[self.outer].own_heading
+    }
+}
+
+/// For every usable hinge ([`hinge_pairs`], [`HingePair::usable`]), its [`HingeSamples`] over the
+/// [`HINGE_SEARCH_S`] after the window.
+fn hinge_samples(
+    rig: &Rig,
+    pose_local: &[UnitQuaternion<f64>],
+    sensors: &[ResolvedSensor],
+    tracks: &[Track<UnitQuaternion<f64>>],
+    held: &[UnitQuaternion<f64>],
+    window: &CalibrationWindow,
+) -> Vec<HingeSamples> {
+    let start = window.end_s();
+    let end = start + HINGE_SEARCH_S;
+    hinge_pairs(rig, pose_local, sensors)
+        .into_iter()
+        .filter(|p| p.usable(sensors))
+        .map(|p| {
+            let (i, o) = (p.inner, p.outer);
             let samples = tracks[o]
                 .iter()
                 .filter(|(time, _)| *time > start && *time <= end)
@@ -687,14 +865,13 @@ fn hinge_samples(
                     (time, inner * held[i].inverse(), q * held[o].inverse())
                 })
                 .collect();
-            hinges.push(HingeSamples {
-                side,
-                flexes_about_left: sign,
+            HingeSamples {
+                side: p.side,
+                flexes_about_left: p.flexes_about_left,
                 samples,
-            });
-        }
-    }
-    hinges
+            }
+        })
+        .collect()
 }
 
 /// Sign-aligned mean of unit quaternions (accurate for the small spread of a held pose).
@@ -729,40 +906,108 @@ pub fn heading_towards_plus_z(d: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
 /// (toe-out, hip or shoulder rotation) turns its axis one way and the other side's the mirror
 /// way, which their mean cancels. `None` when no hinge flexes for [`MIN_FLEXED_S`].
 pub fn heading_from_hinges(hinges: &[HingeSamples]) -> Option<(UnitQuaternion<f64>, f64)> {
+    let folded: Vec<HingeFlexion> = hinges
+        .iter()
+        .map(|h| {
+            let mut f = HingeFlexion::new(h.side, h.flexes_about_left);
+            for (t, inner, outer) in &h.samples {
+                f.push(*t, inner, outer);
+            }
+            f
+        })
+        .collect();
+    heading_from_flexion(&folded)
+}
+
+/// One hinge's flexion folded sample by sample — all [`heading_from_hinges`] needs of its
+/// samples, so a stream keeps a few numbers per hinge, not the samples.
+#[derive(Debug, Clone)]
+pub struct HingeFlexion {
+    side: crate::rig::anatomy::Side,
+    flexes_about_left: f64,
+    /// Σ of the flexed samples' horizontal rotation vectors (radians, towards the left).
+    sum: Vector3<f64>,
+    /// Σ of their lengths.
+    lengths: f64,
+    flexed: usize,
+    samples: usize,
+    first_s: f64,
+    last_s: f64,
+    /// Whole seconds in which it flexed (samples come in time order, so a change of second
+    /// is a new one).
+    seconds: usize,
+    last_second: Option<i64>,
+}
+
+impl HingeFlexion {
+    pub fn new(side: crate::rig::anatomy::Side, flexes_about_left: f64) -> HingeFlexion {
+        HingeFlexion {
+            side,
+            flexes_about_left,
+            sum: Vector3::zeros(),
+            lengths: 0.0,
+            flexed: 0,
+            samples: 0,
+            first_s: f64::NAN,
+            last_s: f64::NAN,
+            seconds: 0,
+            last_second: None,
+        }
+    }
+
+    /// The sample at `t_s` (times increasing): the inner and the outer segment's rotations since
+    /// calibration (rig world).
+    pub fn push(&mut self, t_s: f64, inner: &UnitQuaternion<f64>, outer: &UnitQuaternion<f64>) {
+        if self.samples == 0 {
+            self.first_s = t_s;
+        }
+        self.samples += 1;
+        self.last_s = t_s;
+        let v = (inner.inverse() * outer).scaled_axis();
+        let v = Vector3::new(v.x, 0.0, v.z) * self.flexes_about_left;
+        if v.norm() < FLEXED_DEG.to_radians() {
+            return;
+        }
+        self.sum += v;
+        self.lengths += v.norm();
+        self.flexed += 1;
+        let second = t_s.floor() as i64;
+        if self.last_second != Some(second) {
+            self.seconds += 1;
+            self.last_second = Some(second);
+        }
+    }
+
+    /// The time it spent flexed, seconds: its share of flexed samples over the time they span.
+    fn flexed_s(&self) -> f64 {
+        if self.samples > 1 {
+            (self.last_s - self.first_s) * self.flexed as f64 / (self.samples - 1) as f64
+        } else {
+            0.0
+        }
+    }
+}
+
+/// [`heading_from_hinges`] from the hinges' folded flexion.
+pub fn heading_from_flexion<'a>(
+    hinges: impl IntoIterator<Item = &'a HingeFlexion>,
+) -> Option<(UnitQuaternion<f64>, f64)> {
     let mut left = Vector3::zeros();
     // Each hinge's axes' spread about its own mean (squared, radians), weighted by its samples.
     let (mut spread_sq, mut count, mut looks) = (0.0, 0usize, 0.0);
     let mut sides = Vec::new();
     for hinge in hinges {
-        let (mut sum, mut lengths, mut n) = (Vector3::zeros(), 0.0, 0usize);
-        let mut seconds = std::collections::BTreeSet::new();
-        for (t, inner, outer) in &hinge.samples {
-            let v = (inner.inverse() * outer).scaled_axis();
-            let v = Vector3::new(v.x, 0.0, v.z) * hinge.flexes_about_left;
-            if v.norm() < FLEXED_DEG.to_radians() {
-                continue;
-            }
-            sum += v;
-            lengths += v.norm();
-            n += 1;
-            seconds.insert(t.floor() as i64);
-        }
-        let flexed_s = match (hinge.samples.first(), hinge.samples.last()) {
-            (Some(a), Some(b)) if hinge.samples.len() > 1 => {
-                (b.0 - a.0) * n as f64 / (hinge.samples.len() - 1) as f64
-            }
-            _ => 0.0,
-        };
-        if n == 0 || flexed_s < MIN_FLEXED_S || sum.norm() == 0.0 {
+        let n = hinge.flexed;
+        if n == 0 || hinge.flexed_s() < MIN_FLEXED_S || hinge.sum.norm() == 0.0 {
             continue;
         }
         // The weighted mean resultant length R gives the circular spread sqrt(-2 ln R).
-        let resultant = (sum.norm() / lengths).clamp(1e-12, 1.0);
+        let resultant = (hinge.sum.norm() / hinge.lengths).clamp(1e-12, 1.0);
         spread_sq += -2.0 * resultant.ln() * n as f64;
         count += n;
-        left += sum.normalize();
+        left += hinge.sum.normalize();
         // One independent look per hinge per second flexed in (about a stride).
-        looks += seconds.len() as f64;
+        looks += hinge.seconds as f64;
         sides.push((hinge.flexes_about_left, hinge.side));
     }
     if count == 0 {
@@ -1122,6 +1367,7 @@ pub fn solve(
         align,
         alignment,
         warnings,
+        heading_from_s: None,
     }
 }
 

@@ -36,6 +36,10 @@ pub struct PipelineRecord {
     /// did are combined into `heading_deg`); empty without any.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub heading_looks: Vec<HeadingLookRecord>,
+    /// Causal mode: the stream time (s) from which `heading_deg` was in force, when the hinges
+    /// refined the heading as the take went on (the frames before turned with the one before).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heading_from_s: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub trim: Option<TrimRecord>,
     /// `"quaternion"`, or `"legacy-euler"` for paper 002's Listing-2 mappings.
@@ -249,6 +253,7 @@ pub fn pipeline_record(
                 })
                 .collect()
         }),
+        heading_from_s: heading.and_then(|(c, _)| c.heading_from_s),
         trim: options.trim.map(|t| TrimRecord {
             start_s: t.start_s,
             end_s: (t.end_s < f64::MAX).then_some(t.end_s),

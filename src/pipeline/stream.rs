@@ -12,8 +12,11 @@
 //!    time, or is stale (held at its last pose, and reported);
 //! 6. relative rotations ([`frame_to_local`]), 7. the root.
 //!
-//! What looks ahead stays with whole takes: zero-phase filters, and the heading from the
-//! hinges (a stream takes its heading from a declared forward axis or a known mount).
+//! What looks ahead stays with whole takes: zero-phase filters. The heading from the hinges,
+//! which a whole take reads over the minute after calibration, a stream refines as the knees and
+//! elbows flex ([`CalibrationCore::refine`]): frames come out with the heading in force (the
+//! sensors' north until one is sure), it changes when a surer one comes, and each change is said
+//! in the warnings with its stream time.
 //! The whole-take path with causal settings ([`super::run`] with `causal`) is this stream fed
 //! the take's samples, so a stream and a file of the same rows give the same frames.
 //!
@@ -220,10 +223,15 @@ impl PoseStream {
             Ok(()) => self.heading_unsure = false,
             Err(e) => {
                 self.heading_unsure = true;
+                let hinges = if self.calibration.watching_hinges() {
+                    " until the knees and elbows, flexing (a few steps, a squat), give a sure one"
+                } else {
+                    ""
+                };
                 self.warnings.push(format!(
-                    "HEADING UNKNOWN: {e}. Streaming with the sensors' own north meanwhile; with a \
-                     second pose in the mapping (`calibration.second`), hold both poses again \
-                     (`c`, or a calibration request) to fix it"
+                    "HEADING UNKNOWN: {e}. Streaming with the sensors' own north meanwhile{hinges}; \
+                     with a second pose in the mapping (`calibration.second`), hold both poses \
+                     again (`c`, or a calibration request) to fix it"
                 ));
             }
         }
@@ -368,8 +376,30 @@ impl PoseStream {
         if self.recalibrating(sensor, t, q, on_pose) {
             return;
         }
-        self.feed(sensor, t, q);
+        self.refine_and_feed(sensor, t, q);
         self.emit(None, on_pose);
+    }
+
+    /// The hinges' look at the heading ([`CalibrationCore::refine`]), said when it changes the
+    /// heading, then stages 3 and 4.
+    fn refine_and_feed(&mut self, sensor: usize, t: f64, q: UnitQuaternion<f64>) {
+        if let Some(r) = self.calibration.refine(sensor, t, q) {
+            let before = if r.before_uncertainty_deg.is_finite() {
+                format!(
+                    "{:.1}° (unsure by {:.1}°)",
+                    r.before_deg, r.before_uncertainty_deg
+                )
+            } else {
+                "the sensors' north".to_string()
+            };
+            self.warnings.push(format!(
+                "from {:.3} s on, the heading is {:.1}° about +Y, unsure by {:.1}°, with the knees and \
+                 elbows flexing (was {before})",
+                r.at_s, r.heading_deg, r.uncertainty_deg
+            ));
+            self.note_heading();
+        }
+        self.feed(sensor, t, q);
     }
 
     /// The end of the stream: the calibration solved with what there is, every sensor's last
@@ -439,7 +469,7 @@ impl PoseStream {
         self.note_heading();
         let pending = std::mem::take(&mut self.pending);
         for &(sensor, t, q) in &pending {
-            self.feed(sensor, t, q);
+            self.refine_and_feed(sensor, t, q);
         }
         self.emit(None, on_pose);
     }
@@ -515,7 +545,7 @@ impl PoseStream {
         self.calibration = r.core;
         self.note_heading();
         for (sensor, t, q) in r.waiting {
-            self.feed(sensor, t, q);
+            self.refine_and_feed(sensor, t, q);
         }
     }
 

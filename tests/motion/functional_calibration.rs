@@ -151,7 +151,11 @@ fn mappings(dir: &Path, motion: &Motion) -> (std::path::PathBuf, std::path::Path
     paths
 }
 
-fn one_run(motion: &Motion, seed: u64, raw: bool) -> Option<Outcome> {
+/// One simulated capture of `motion` converted with the true mounts and with the hinges. `raw`:
+/// from raw readings; `causal`: through the stream (`--causal`), which refines the heading as the
+/// hinges flex — both conversions are then scored only from a second after the stream's heading
+/// became sure (the sidecar's `heading_from_s`; frames before it turned with the sensors' north).
+fn one_run(motion: &Motion, seed: u64, raw: bool, causal: bool) -> Option<Outcome> {
     let bvh = shared(motion.bvh)?;
     let py = python()?;
     let dir = tempfile::tempdir().unwrap();
@@ -191,7 +195,7 @@ fn one_run(motion: &Motion, seed: u64, raw: bool) -> Option<Outcome> {
     }
     let true_mounts_path = dir.path().join("true_mounts.json");
     std::fs::write(&true_mounts_path, true_mounts.to_string()).unwrap();
-    let convert = |mapping: &Path, out: &str| -> (Value, f64) {
+    let convert = |mapping: &Path, out: &str| {
         let out_dir = dir.path().join(out);
         let mut cmd = Command::new(imubake_bin());
         cmd.arg("convert")
@@ -204,23 +208,71 @@ fn one_run(motion: &Motion, seed: u64, raw: bool) -> Option<Outcome> {
         if motion.own_rig.is_some() {
             cmd.args(&rig_args);
         }
+        if causal {
+            cmd.arg("--causal");
+        }
         run(&mut cmd);
         let sidecar: Value =
             serde_json::from_slice(&std::fs::read(out_dir.join("take.imubake.json")).unwrap())
                 .unwrap();
         let output =
             imubake::bvh::parse(&std::fs::read(out_dir.join("take.bvh")).unwrap()).unwrap();
+        (sidecar, output)
+    };
+    // The pose error of an output over the motion's frames after `after_s`, h.
+    let error_h = |output: &imubake::bvh::Bvh, after_s: f64| {
         let out_rig = output
             .to_rig("out", imubake::rig::LengthUnit::Metres)
             .unwrap();
-        let compared = motion_frames(&truth, output.frame_count(), FPS);
+        let compared: Vec<_> = motion_frames(&truth, output.frame_count(), FPS)
+            .into_iter()
+            .filter(|&(k, _)| k as f64 / FPS > after_s)
+            .collect();
         let sensors = truth["sensors"].as_array().unwrap();
-        let error_h = position_error_h(&py, &bvh, &output, &out_rig, sensors, &compared);
-        (sidecar, error_h)
+        position_error_h(&py, &bvh, output, &out_rig, sensors, &compared)
     };
-    let (known_sidecar, known_h) = convert(&true_mounts_path, "true_mounts");
+    let (sidecar, hinges_output) = convert(&hinges, "hinges");
+    let pipeline = &sidecar["pipeline"];
+    assert_eq!(pipeline["heading"], "hinges", "{}", motion.name);
+    let after_s = if causal {
+        let from_s = pipeline["heading_from_s"].as_f64().expect("refined");
+        let motion_start_s = truth["motion_start_s"].as_f64().unwrap();
+        eprintln!(
+            "{}: sure from {from_s:.2} s (the motion from {motion_start_s:.2} s)",
+            motion.name
+        );
+        assert!(from_s <= motion_start_s + 1.5, "{}", motion.name);
+        from_s + 1.0
+    } else {
+        assert!(pipeline.get("heading_from_s").is_none(), "{pipeline}");
+        f64::NEG_INFINITY
+    };
+    let hinges_h = error_h(&hinges_output, after_s);
+    let (known_sidecar, known_output) = convert(&true_mounts_path, "true_mounts");
+    let known_h = error_h(&known_output, after_s);
     assert_eq!(known_sidecar["pipeline"]["heading"], "mounts");
-    // Every known mount and the hinges look at the heading; all agree, and are combined.
+    if causal {
+        // A stream's known mounts are sure from the first frame: the hinges are not needed.
+        assert!(
+            known_sidecar["pipeline"].get("heading_from_s").is_none(),
+            "{known_sidecar}"
+        );
+    } else {
+        known_mounts_and_hinges_agree(motion, &known_sidecar);
+    }
+    let off =
+        |deg: f64| (deg + truth["heading_deg"].as_f64().unwrap() + 540.0).rem_euclid(360.0) - 180.0;
+    Some(Outcome {
+        error_deg: off(pipeline["heading_deg"].as_f64().unwrap()).abs(),
+        uncertainty_deg: pipeline["heading_uncertainty_deg"].as_f64().unwrap(),
+        known_h,
+        hinges_h,
+    })
+}
+
+/// A whole take with the true mounts: every known mount and the hinges look at the heading; all
+/// agree, and are combined.
+fn known_mounts_and_hinges_agree(motion: &Motion, known_sidecar: &Value) {
     let looks = known_sidecar["pipeline"]["heading_looks"]
         .as_array()
         .unwrap();
@@ -232,17 +284,6 @@ fn one_run(motion: &Motion, seed: u64, raw: bool) -> Option<Outcome> {
         .as_f64()
         .unwrap();
     assert!(combined < 3.0, "{combined}");
-    let (sidecar, hinges_h) = convert(&hinges, "hinges");
-    let pipeline = &sidecar["pipeline"];
-    assert_eq!(pipeline["heading"], "hinges", "{}", motion.name);
-    let off =
-        |deg: f64| (deg + truth["heading_deg"].as_f64().unwrap() + 540.0).rem_euclid(360.0) - 180.0;
-    Some(Outcome {
-        error_deg: off(pipeline["heading_deg"].as_f64().unwrap()).abs(),
-        uncertainty_deg: pipeline["heading_uncertainty_deg"].as_f64().unwrap(),
-        known_h,
-        hinges_h,
-    })
 }
 
 fn check(runs: &[(&str, Outcome)]) {
@@ -278,7 +319,7 @@ fn the_hinges_give_the_heading_from_orientations() {
     let mut runs = Vec::new();
     for motion in &MOTIONS {
         for seed in [31, 32, 33] {
-            let Some(outcome) = one_run(motion, seed, false) else {
+            let Some(outcome) = one_run(motion, seed, false, false) else {
                 return;
             };
             runs.push((motion.name, outcome));
@@ -292,10 +333,26 @@ fn the_hinges_give_the_heading_from_orientations() {
 fn the_hinges_give_the_heading_from_raw_readings() {
     let mut runs = Vec::new();
     for motion in &MOTIONS {
-        let Some(outcome) = one_run(motion, 41, true) else {
+        let Some(outcome) = one_run(motion, 41, true, false) else {
             return;
         };
         runs.push((motion.name, outcome));
+    }
+    check(&runs);
+}
+
+/// Through the stream (`convert --causal`, as `live` runs), from orientations and from raw
+/// readings: the heading refined as the hinges flex, and from then on as good as a whole take's.
+#[test]
+fn a_stream_takes_the_heading_from_the_hinges_as_they_flex() {
+    let mut runs = Vec::new();
+    for motion in &MOTIONS {
+        for (seed, raw) in [(51, false), (52, true)] {
+            let Some(outcome) = one_run(motion, seed, raw, true) else {
+                return;
+            };
+            runs.push((motion.name, outcome));
+        }
     }
     check(&runs);
 }
