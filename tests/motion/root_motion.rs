@@ -109,12 +109,28 @@ fn closed_loop(
     closed_loop_on(&shared(bvh_rel)?, mapping, frames, convert_args)
 }
 
+/// The hips and the feet by CMU's names, as every [`Take`] keys them.
+const CMU_JOINTS: [&str; 3] = ["Hips", "LeftFoot", "RightFoot"];
+/// The same on CMU 03_02's Poser-named skeleton.
+const POSER_JOINTS: [&str; 3] = ["hip", "lFoot", "rFoot"];
+
 /// [`closed_loop`] on a BVH file anywhere.
 fn closed_loop_on(
     bvh: &Path,
     mapping: &str,
     frames: Option<&str>,
     convert_args: &[&str],
+) -> Option<Take> {
+    closed_loop_named(bvh, mapping, frames, convert_args, CMU_JOINTS)
+}
+
+/// [`closed_loop_on`] on a skeleton whose hips and feet are `names` (read under CMU's names).
+fn closed_loop_named(
+    bvh: &Path,
+    mapping: &str,
+    frames: Option<&str>,
+    convert_args: &[&str],
+    names: [&str; 3],
 ) -> Option<Take> {
     let py = python()?;
     let dir = tempfile::tempdir().unwrap();
@@ -147,10 +163,17 @@ fn closed_loop_on(
         .args(["--fps", "60", "--format", "bvh", "--out"])
         .arg(&out)
         .args(convert_args));
-    let joints = ["Hips", "LeftFoot", "RightFoot"];
+    let as_cmu = |mut p: Positions| {
+        for (name, cmu) in names.iter().zip(CMU_JOINTS) {
+            let track = p.joints.remove(*name).unwrap();
+            p.joints.insert(cmu.to_string(), track);
+        }
+        p
+    };
+    let feet = Some([names[1], names[2]]);
     Some(Take {
-        source: positions_and_contacts(&py, bvh, &joints, Some(["LeftFoot", "RightFoot"])),
-        output: positions(&py, &out.join("take.bvh"), &joints),
+        source: as_cmu(positions_and_contacts(&py, bvh, &names, feet)),
+        output: as_cmu(positions(&py, &out.join("take.bvh"), &names)),
         output_bvh: std::fs::read(out.join("take.bvh")).unwrap(),
         truth: serde_json::from_slice(&std::fs::read(&truth).unwrap()).unwrap(),
         sidecar: serde_json::from_slice(&std::fs::read(out.join("take.imubake.json")).unwrap())
@@ -494,6 +517,157 @@ fn every_gait_walks_without_sliding() {
         }
     }
     assert!(missed.is_empty(), "{missed:#?}");
+}
+
+/// Issue 50's vertical scores, h: the output's heights against the source's, the two aligned where
+/// both stand at the motion's start (their lowest points' mean difference over its first 0.25 s).
+struct GroundScores {
+    /// The hips' height: RMS difference.
+    hips_rms: f64,
+    /// Each foot joint over the source's contacts (issue 49's rule): RMS difference …
+    feet_rms: f64,
+    contacts: usize,
+    /// … its mean difference per contact: the spread (largest minus smallest) …
+    spread: f64,
+    /// … and the drift: the mean over the last quarter of the contacts (in time) minus the mean
+    /// over the first quarter — on flat ground, how far the stance feet have crept vertically.
+    drift: f64,
+}
+
+fn ground_scores(take: &Take) -> GroundScores {
+    let frames = compared(take);
+    let (src_h, out_h) = (take.source.height, take.output.height);
+    let src_lowest = |f: f64| {
+        let l = &take.source.lowest;
+        let i = (f.floor() as usize).min(l.len() - 1);
+        let j = (i + 1).min(l.len() - 1);
+        l[i] + (l[j] - l[i]) * (f - i as f64)
+    };
+    let start: Vec<f64> = frames
+        .iter()
+        .take_while(|(k, _)| (k - frames[0].0) as f64 * take.output.frame_time < 0.25)
+        .map(|(k, f)| take.output.lowest[*k] / out_h - src_lowest(*f) / src_h)
+        .collect();
+    let offset = start.iter().sum::<f64>() / start.len() as f64;
+    let rms = |e: &[f64]| (e.iter().map(|x| x * x).sum::<f64>() / e.len().max(1) as f64).sqrt();
+    let (src, out) = tracks(take, "Hips");
+    let hips: Vec<f64> = src
+        .iter()
+        .zip(&out)
+        .map(|(s, o)| o.y - s.y - offset)
+        .collect();
+    let last = take.source.contacts.len() - 1;
+    let (mut feet, mut per_contact) = (Vec::new(), Vec::new());
+    for (side, foot) in ["LeftFoot", "RightFoot"].into_iter().enumerate() {
+        let (src, out) = tracks(take, foot);
+        let on: Vec<bool> = frames
+            .iter()
+            .map(|(_, f)| take.source.contacts[(f.round() as usize).min(last)][side])
+            .collect();
+        for contact in stretches(&on, 2) {
+            let start = contact.start;
+            let e: Vec<f64> = contact.map(|i| out[i].y - src[i].y - offset).collect();
+            per_contact.push((start, e.iter().sum::<f64>() / e.len() as f64));
+            feet.extend(e);
+        }
+    }
+    per_contact.sort_by_key(|c| c.0);
+    let per_contact: Vec<f64> = per_contact.into_iter().map(|c| c.1).collect();
+    let quarter = (per_contact.len() / 4).max(1);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let spread = |v: &[f64]| {
+        v.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            - v.iter().copied().fold(f64::INFINITY, f64::min)
+    };
+    GroundScores {
+        hips_rms: rms(&hips),
+        feet_rms: rms(&feet),
+        contacts: per_contact.len(),
+        spread: spread(&per_contact),
+        drift: mean(&per_contact[per_contact.len() - quarter..]) - mean(&per_contact[..quarter]),
+    }
+}
+
+/// Issue 50's takes: CMU 03_02, a walk over uneven ground (the hips rise about 15 cm and drop
+/// about 25 cm), on its Poser-named skeleton, and the other trials of the same subject on the
+/// same ground, fetched (`CMU_MIRROR`'s 03_01, 03_03, 03_04; skipped where not fetched); and the
+/// flat pymo walk and CMU 01_01, whose stance feet must not drift. 16 simulated sensors with their
+/// true mounts, `--root feet`. Targets: on changing ground the hips' path within 3 %, the hips'
+/// height within 0.02 h RMS of the source's, the stance feet within 0.02 h RMS of theirs, skate
+/// ≤ 0.006 h per contact; on flat ground the stance feet's drift ≤ 0.01 h (`ground_scores`).
+/// Printed (`cargo test --test motion -- --ignored changing_ground --nocapture`); ignored until
+/// issue 50 makes it pass.
+#[test]
+#[ignore = "issue 50: root motion on changing ground does not meet the targets yet"]
+fn changing_ground_keeps_each_foot_on_its_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut missed = Vec::new();
+    let Some(uneven) = shared("bvh/cmu_03_02_uneven_terrain.bvh") else {
+        return;
+    };
+    // (label, file, its first frames to skip): CMU 03_02's arms glitch around frames 48–51.
+    let mut terrain = vec![("CMU 03_02 uneven".to_string(), uneven, "60:")];
+    for trial in ["03_01", "03_03", "03_04"] {
+        if let Some(bytes) =
+            common::mirror::fetched(CMU_MIRROR.0, CMU_MIRROR.1, &format!("data/03/{trial}.bvh"))
+        {
+            let file = dir.path().join(format!("{trial}.bvh"));
+            std::fs::write(&file, bytes).unwrap();
+            terrain.push((format!("CMU {trial} uneven (fetched)"), file, "1:"));
+        }
+    }
+    for (label, bvh, frames) in &terrain {
+        let mapping = if label.contains("03_02") {
+            "tests/fixtures/mappings/poser_16imu.json"
+        } else {
+            "tests/fixtures/mappings/cmu_16imu.json"
+        };
+        let names = if label.contains("03_02") {
+            POSER_JOINTS
+        } else {
+            CMU_JOINTS
+        };
+        let Some(take) = closed_loop_named(bvh, mapping, Some(frames), &["--root", "feet"], names)
+        else {
+            return;
+        };
+        let (_, excess) = contact_skate(&take);
+        let (rms, walked) = path_error(&take);
+        let path = 100.0 * rms / walked;
+        let g = ground_scores(&take);
+        eprintln!(
+            "{label}: path {path:.2} %, skate {excess:.4} h, hips height {:.4} h RMS, stance \
+             feet {:.4} h RMS over {} contacts (spread {:.4} h, drift {:+.4} h)",
+            g.hips_rms, g.feet_rms, g.contacts, g.spread, g.drift
+        );
+        if path > 3.0 || excess > 0.006 || g.hips_rms > 0.02 || g.feet_rms > 0.02 {
+            missed.push(label.clone());
+        }
+    }
+    let (cmu, pymo) = (
+        "tests/fixtures/mappings/cmu_16imu.json",
+        "tests/fixtures/mappings/pymo_16imu.json",
+    );
+    for (name, mapping, frames) in [("pymo_walk", pymo, None), ("cmu_01_01", cmu, Some("1:"))] {
+        let Some(take) = closed_loop(
+            &format!("bvh/{name}.bvh"),
+            mapping,
+            frames,
+            &["--root", "feet"],
+        ) else {
+            return;
+        };
+        let g = ground_scores(&take);
+        eprintln!(
+            "{name} (flat): stance feet drift {:+.4} h over {} contacts (spread {:.4} h, {:.4} h \
+             RMS), hips height {:.4} h RMS",
+            g.drift, g.contacts, g.spread, g.feet_rms, g.hips_rms
+        );
+        if g.drift.abs() > 0.01 {
+            missed.push(name.to_string());
+        }
+    }
+    assert!(missed.is_empty(), "{missed:?}");
 }
 
 /// Prints a take's root-motion scores; what misses issue 49's targets, if anything.
