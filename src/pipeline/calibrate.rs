@@ -416,6 +416,8 @@ pub struct CalibrationCore {
 struct HingeWatch {
     /// The poses as held, to solve again with.
     first: Held,
+    /// The heading's uncertainty from the pose's own sources, degrees (infinite without).
+    without_hinges_deg: f64,
     second: Option<Held>,
     /// The usable pairs, each with its flexion so far.
     hinges: Vec<(HingePair, HingeFlexion)>,
@@ -434,6 +436,11 @@ pub const REFINED_WHEN: f64 = 0.8;
 
 /// A stream solves again with the hinges this often, seconds of stream time.
 pub const HINGE_LOOK_EVERY_S: f64 = 1.0;
+
+/// A heading unsure by `now` degrees is surer than one by `before` ([`REFINED_WHEN`]).
+fn surer(before: f64, now: f64) -> bool {
+    !too_unsure(now) && (too_unsure(before) || now <= REFINED_WHEN * before)
+}
 
 /// The heading a stream took from the hinges ([`CalibrationCore::refine`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -613,6 +620,10 @@ impl CalibrationCore {
             .collect();
         if !hinges.is_empty() {
             self.watch = Some(HingeWatch {
+                without_hinges_deg: self
+                    .result
+                    .as_ref()
+                    .map_or(f64::INFINITY, |c| c.heading_uncertainty_deg),
                 first,
                 second,
                 hinges,
@@ -657,6 +668,19 @@ impl CalibrationCore {
         }
         watch.next_look_s = t + HINGE_LOOK_EVERY_S;
         let look = heading_from_flexion(watch.hinges.iter().map(|(_, f)| f))?;
+        let current = self.result.as_ref().expect("watched once solved");
+        // What the look can promise combined with the pose's own sources (when it agrees): solved
+        // again only when that is surer, so a stream whose heading is as sure as it gets does
+        // not allocate once a second (solving is never surer than this: a look that disagrees
+        // leaves one source out).
+        let promised = if watch.without_hinges_deg.is_finite() {
+            (watch.without_hinges_deg.powi(-2) + look.1.powi(-2)).powf(-0.5)
+        } else {
+            look.1
+        };
+        if !surer(current.heading_uncertainty_deg, promised) {
+            return None;
+        }
         let candidate = solve(
             &self.sensors,
             &watch.first,
@@ -664,13 +688,11 @@ impl CalibrationCore {
             Some(look),
             HeadingPolicy::Sensors,
         );
-        let current = self.result.as_ref().expect("watched once solved");
         let (before, now) = (
             current.heading_uncertainty_deg,
             candidate.heading_uncertainty_deg,
         );
-        let surer = !too_unsure(now) && (too_unsure(before) || now <= REFINED_WHEN * before);
-        if !surer {
+        if !surer(before, now) {
             return None;
         }
         let refined = Refined {
@@ -995,7 +1017,9 @@ pub fn heading_from_flexion<'a>(
     let mut left = Vector3::zeros();
     // Each hinge's axes' spread about its own mean (squared, radians), weighted by its samples.
     let (mut spread_sq, mut count, mut looks) = (0.0, 0usize, 0.0);
-    let mut sides = Vec::new();
+    // Which hinges gave an axis: [knee, elbow] × [left, right] (no allocation: a stream looks
+    // once a second).
+    let mut seen = [[false; 2]; 2];
     for hinge in hinges {
         let n = hinge.flexed;
         if n == 0 || hinge.flexed_s() < MIN_FLEXED_S || hinge.sum.norm() == 0.0 {
@@ -1008,7 +1032,8 @@ pub fn heading_from_flexion<'a>(
         left += hinge.sum.normalize();
         // One independent look per hinge per second flexed in (about a stride).
         looks += hinge.seconds as f64;
-        sides.push((hinge.flexes_about_left, hinge.side));
+        let kind = usize::from(hinge.flexes_about_left < 0.0);
+        seen[kind][usize::from(hinge.side == crate::rig::anatomy::Side::Right)] = true;
     }
     if count == 0 {
         return None;
@@ -1017,13 +1042,9 @@ pub fn heading_from_flexion<'a>(
     let spread_deg = (spread_sq / count as f64).sqrt().to_degrees();
     // A kind of hinge seen on both sides cancels its turn-out; else a lone knee bounds it at
     // ONE_LEG_DEG, lone elbows at ONE_ARM_DEG.
-    let both_sides = |sign: f64| {
-        let on = |side| sides.contains(&(sign, side));
-        on(crate::rig::anatomy::Side::Left) && on(crate::rig::anatomy::Side::Right)
-    };
-    let one_side = if both_sides(1.0) || both_sides(-1.0) {
+    let one_side = if seen.iter().any(|[left, right]| *left && *right) {
         0.0
-    } else if sides.iter().any(|(sign, _)| *sign > 0.0) {
+    } else if seen[0].iter().any(|k| *k) {
         ONE_LEG_DEG
     } else {
         ONE_ARM_DEG
@@ -1034,7 +1055,7 @@ pub fn heading_from_flexion<'a>(
     tracing::debug!(
         spread_deg,
         looks,
-        hinges = sides.len(),
+        hinges = seen.iter().flatten().filter(|s| **s).count(),
         uncertainty,
         "the heading from the hinges"
     );
