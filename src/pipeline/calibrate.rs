@@ -416,7 +416,7 @@ pub struct CalibrationCore {
 struct HingeWatch {
     /// The poses as held, to solve again with.
     first: Held,
-    /// The heading's uncertainty from the pose's own sources, degrees (infinite without).
+    /// The surest the pose's own sources could make the heading, degrees (infinite without).
     without_hinges_deg: f64,
     second: Option<Held>,
     /// The usable pairs, each with its flexion so far.
@@ -620,10 +620,14 @@ impl CalibrationCore {
             .collect();
         if !hinges.is_empty() {
             self.watch = Some(HingeWatch {
-                without_hinges_deg: self
-                    .result
-                    .as_ref()
-                    .map_or(f64::INFINITY, |c| c.heading_uncertainty_deg),
+                without_hinges_deg: self.result.as_ref().map_or(f64::INFINITY, |c| {
+                    // Every look, agreeing or not, kept or not: the surest they could combine to.
+                    c.heading_looks
+                        .iter()
+                        .map(|l| l.uncertainty_deg.powi(-2))
+                        .sum::<f64>()
+                        .powf(-0.5)
+                }),
                 first,
                 second,
                 hinges,
