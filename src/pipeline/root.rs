@@ -18,7 +18,8 @@
 //!   than the other, how fast it moves over the ground (its motion relative to the hips plus the
 //!   hips' recent velocity: nil for a planted foot whichever way the body moves — forwards,
 //!   backwards, sideways), how fast it rises relative to the hips (a foot pushing off rises
-//!   first) — and blend smoothly between alike feet (double support), so a switch never jumps.
+//!   first), how fast it goes down over the ground (a foot on its way down has not landed: a
+//!   step down) — and blend smoothly between alike feet (double support), so a switch never jumps.
 //!   Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3 samples), which
 //!   seldom holds on real walks. When the legs throw the hips up faster than
 //!   [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off) the body is airborne: the hips keep
@@ -90,6 +91,13 @@ pub const BAND_H: f64 = 0.004;
 pub const SPEED_H_S: f64 = 0.1;
 /// … and this much rising relative to the hips, × h / s (a foot pushing off rises first).
 pub const RISE_H_S: f64 = 0.1 / 6.0;
+/// … and this much going down over the ground (its motion relative to the hips plus theirs),
+/// × h / s: a foot still on its way down has not landed. Without it the weight passed to a foot
+/// stepping down before it got there, so a step down's height was missed while a step up's
+/// (whose foot cannot go further) was not, and on rough ground the body climbed
+/// (`changing_ground_keeps_each_foot_on_its_own` prints it). Much less lets a walk's landing heel
+/// take the weight too late.
+pub const DESCENT_H_S: f64 = 0.04;
 /// Feet this far apart in height when the weight passes are on different surfaces (a step),
 /// × h; closer, they are on the same one.
 pub const STEP_H: f64 = 0.06;
@@ -452,6 +460,7 @@ impl RootCore {
             (low[f].1 - low[0].1.min(low[1].1)) / (BAND_H * h)
                 + ground.norm() / (SPEED_H_S * h)
                 + relative.y.max(0.0) / (RISE_H_S * h)
+                + (-(relative.y + hips.y)).max(0.0) / (DESCENT_H_S * h)
         };
         let w_left = smooth(score(1) - score(0));
         let weights = [w_left, 1.0 - w_left];
