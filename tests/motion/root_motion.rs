@@ -327,21 +327,33 @@ fn above_floor(take: &Take) -> Vec<f64> {
         .collect()
 }
 
+/// Each foot's source contacts (issue 49's rule, at least two compared frames) as ranges of the
+/// compared frames, with the foot joint's tracks ([`tracks`]).
+type FootTracks = (Vec<Vector3<f64>>, Vec<Vector3<f64>>);
+fn feet_over_contacts(take: &Take) -> Vec<(Vec<std::ops::Range<usize>>, FootTracks)> {
+    let frames = compared(take);
+    let last = take.source.contacts.len() - 1;
+    ["LeftFoot", "RightFoot"]
+        .into_iter()
+        .enumerate()
+        .map(|(side, foot)| {
+            let on: Vec<bool> = frames
+                .iter()
+                .map(|(_, f)| take.source.contacts[(f.round() as usize).min(last)][side])
+                .collect();
+            (stretches(&on, 2), tracks(take, foot))
+        })
+        .collect()
+}
+
 /// Foot skate per contact by issue 49's rule: over each of the source's contacts
 /// (`positions_and_contacts`, at least two compared frames), how much further the output's foot
 /// joint travels horizontally than the source's, on average per contact (h). Unlike [`skate`] it
 /// needs no stance of four frames at the take's lowest height, so a run's short contacts count.
 fn contact_skate(take: &Take) -> (usize, f64) {
-    let frames = compared(take);
-    let last = take.source.contacts.len() - 1;
     let mut excess = Vec::new();
-    for (side, foot) in ["LeftFoot", "RightFoot"].into_iter().enumerate() {
-        let (src, out) = tracks(take, foot);
-        let on: Vec<bool> = frames
-            .iter()
-            .map(|(_, f)| take.source.contacts[(f.round() as usize).min(last)][side])
-            .collect();
-        for contact in stretches(&on, 2) {
+    for (foot, (src, out)) in feet_over_contacts(take) {
+        for contact in foot {
             excess.push(travel(&out[contact.clone()]) - travel(&src[contact]));
         }
     }
@@ -556,15 +568,9 @@ fn ground_scores(take: &Take) -> GroundScores {
         .zip(&out)
         .map(|(s, o)| o.y - s.y - offset)
         .collect();
-    let last = take.source.contacts.len() - 1;
     let (mut feet, mut per_contact) = (Vec::new(), Vec::new());
-    for (side, foot) in ["LeftFoot", "RightFoot"].into_iter().enumerate() {
-        let (src, out) = tracks(take, foot);
-        let on: Vec<bool> = frames
-            .iter()
-            .map(|(_, f)| take.source.contacts[(f.round() as usize).min(last)][side])
-            .collect();
-        for contact in stretches(&on, 2) {
+    for (foot, (src, out)) in feet_over_contacts(take) {
+        for contact in foot {
             let start = contact.start;
             let e: Vec<f64> = contact.map(|i| out[i].y - src[i].y - offset).collect();
             per_contact.push((start, e.iter().sum::<f64>() / e.len() as f64));
