@@ -421,8 +421,8 @@ struct HingeWatch {
     second: Option<Held>,
     /// The usable pairs, each with its flexion so far.
     hinges: Vec<(HingePair, HingeFlexion)>,
-    /// Each sensor's latest sample (rig world): the inner segment's, read at the outer's samples.
-    latest: Vec<Option<UnitQuaternion<f64>>>,
+    /// Each sensor's latest sample (time, rig world): the inner segment's, read at the outer's.
+    latest: Vec<Option<(f64, UnitQuaternion<f64>)>>,
     /// Hinge samples count in (from_s, until_s].
     from_s: f64,
     until_s: f64,
@@ -433,6 +433,11 @@ struct HingeWatch {
 /// before ([`MAX_HEADING_UNCERTAINTY_DEG`]) and sure now, or this fraction of the uncertainty
 /// before or less — a few steps as the flexion piles up, not a turn every second.
 pub const REFINED_WHEN: f64 = 0.8;
+
+/// A stream pairs an outer segment's sample with the inner one's latest when that is at most this
+/// old, seconds (a sample period down to 10 Hz; a sensor gone quiet is not read as a still
+/// joint).
+pub const HINGE_PAIR_S: f64 = 0.1;
 
 /// A stream solves again with the hinges this often, seconds of stream time.
 pub const HINGE_LOOK_EVERY_S: f64 = 1.0;
@@ -641,7 +646,7 @@ impl CalibrationCore {
 
     /// After the calibration is solved, a sample of sensor `i` at `t` (rig world; times
     /// increasing per sensor): folded into the hinges whose outer segment it drives (the inner
-    /// segment read at its latest sample, at most a sample period old), and once a
+    /// segment read at its latest sample, at most [`HINGE_PAIR_S`] old), and once a
     /// [`HINGE_LOOK_EVERY_S`] the calibration solved again with the hinges' heading — which
     /// replaces the one in force when it is surer ([`REFINED_WHEN`]): then `Some`, and
     /// [`Calibration::heading_from_s`] is `t`. Past [`HINGE_SEARCH_S`] after the window, as in a
@@ -652,14 +657,16 @@ impl CalibrationCore {
             self.watch = None;
             return None;
         }
+        watch.latest[i] = Some((t, q));
         if t <= watch.from_s {
-            watch.latest[i] = Some(q);
             return None;
         }
-        watch.latest[i] = Some(q);
         let held = &watch.first.held;
         for (pair, flexion) in watch.hinges.iter_mut().filter(|(p, _)| p.outer == i) {
-            if let Some(inner) = watch.latest[pair.inner] {
+            // An inner sensor gone quiet says nothing of the joint now.
+            if let Some((_, inner)) =
+                watch.latest[pair.inner].filter(|(ti, _)| t - ti <= HINGE_PAIR_S)
+            {
                 flexion.push(
                     t,
                     &(inner * held[pair.inner].inverse()),
