@@ -1975,4 +1975,74 @@ mod tests {
         let pure = rot(Vector3::y(), -120.0);
         assert!(twist_about_y(&pure).angle_to(&pure) < 1e-12);
     }
+
+    /// A stream's core on the mixamo rig, four sensors on the thighs and shanks, the rest pose held
+    /// for the first second; then both knees flex (0–60°, a stride a second, half a stride apart)
+    /// about the subject's left axis, which in the sensors' world points 35° about +Y from +X.
+    /// Streamed at 100 Hz through `push`/`try_solve`, then `refine`: the heading turns that axis
+    /// back onto +X (within 0.5°), sure by the 3° floor, from a stream time in the seconds after
+    /// the window. With the right thigh silent from 1.05 s its stale sample is not read as a still
+    /// thigh: only the left knee gives an axis, so one leg's bound (8°) holds.
+    #[test]
+    fn a_stream_refines_the_heading_as_the_knees_flex() {
+        let rig = crate::rig::load_rig("mixamo").unwrap();
+        let bones = ["LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg"];
+        let sensors: Vec<ResolvedSensor> = bones
+            .iter()
+            .map(|b| ResolvedSensor {
+                sensor: b.to_string(),
+                bone: rig.joint_index(b).unwrap(),
+                mount: Mount::Calibrate,
+                forward: None,
+                own_heading: false,
+            })
+            .collect();
+        let window = CalibrationWindow {
+            pose: PoseRef::Rest,
+            start_s: 0.0,
+            duration_s: 1.0,
+            second: None,
+        };
+        let left = rot(Vector3::y(), 35.0) * Vector3::x();
+        let run = |right_thigh_until_s: f64| {
+            let mut core =
+                CalibrationCore::new(&rig, sensors.clone(), Some(window.clone()), "m.json")
+                    .unwrap();
+            let mut warnings = Vec::new();
+            let mut refined = Vec::new();
+            for k in 0..400 {
+                let t = k as f64 / 100.0;
+                for i in 0..4 {
+                    if i == 2 && t > right_thigh_until_s {
+                        continue;
+                    }
+                    let phase = if i < 2 { 0.0 } else { 0.5 };
+                    let moving = (t - 1.0 - phase).max(0.0);
+                    let flexion = 30.0 * (1.0 - (std::f64::consts::TAU * moving).cos());
+                    let q = if i % 2 == 1 && t > 1.0 {
+                        rot(left, flexion)
+                    } else {
+                        UnitQuaternion::identity()
+                    };
+                    if core.result().is_none() {
+                        core.push(i, t, q);
+                        core.try_solve(|_| false, &mut warnings);
+                    } else if let Some(r) = core.refine(i, t, q) {
+                        refined.push(r);
+                    }
+                }
+            }
+            (core.result().unwrap().clone(), refined)
+        };
+        let (c, refined) = run(f64::INFINITY);
+        assert!(!refined.is_empty());
+        let from_s = c.heading_from_s.unwrap();
+        assert!(from_s > 1.0 && from_s < 4.0, "{from_s}");
+        assert_eq!(c.heading_source, HeadingSource::Hinges);
+        let turned = c.heading * left;
+        assert!(turned.angle(&Vector3::x()).to_degrees() < 0.5, "{turned}");
+        assert!(c.heading_uncertainty_deg <= 3.0 + 1e-9, "{c:?}");
+        let (stale, _) = run(1.05);
+        assert!(stale.heading_uncertainty_deg >= ONE_LEG_DEG, "{stale:?}");
+    }
 }
