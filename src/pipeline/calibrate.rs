@@ -625,13 +625,9 @@ impl CalibrationCore {
             .collect();
         if !hinges.is_empty() {
             self.watch = Some(HingeWatch {
+                // Every look, agreeing or not, kept or not: the surest they could combine to.
                 without_hinges_deg: self.result.as_ref().map_or(f64::INFINITY, |c| {
-                    // Every look, agreeing or not, kept or not: the surest they could combine to.
-                    c.heading_looks
-                        .iter()
-                        .map(|l| l.uncertainty_deg.powi(-2))
-                        .sum::<f64>()
-                        .powf(-0.5)
+                    combined_uncertainty_deg(c.heading_looks.iter().map(|l| l.uncertainty_deg))
                 }),
                 first,
                 second,
@@ -684,11 +680,7 @@ impl CalibrationCore {
         // again only when that is surer, so a stream whose heading is as sure as it gets does
         // not allocate once a second (solving is never surer than this: a look that disagrees
         // leaves one source out).
-        let promised = if watch.without_hinges_deg.is_finite() {
-            (watch.without_hinges_deg.powi(-2) + look.1.powi(-2)).powf(-0.5)
-        } else {
-            look.1
-        };
+        let promised = combined_uncertainty_deg([watch.without_hinges_deg, look.1]);
         if !surer(current.heading_uncertainty_deg, promised) {
             return None;
         }
@@ -1208,15 +1200,22 @@ fn combine_looks(
     }
     let agreeing = looks.iter().filter(|l| l.agrees);
     let first = agreeing.clone().next()?;
-    let uncertainty = agreeing
-        .map(|l| l.uncertainty_deg.powi(-2))
-        .sum::<f64>()
-        .powf(-0.5);
+    let uncertainty = combined_uncertainty_deg(agreeing.map(|l| l.uncertainty_deg));
     Some((
         UnitQuaternion::from_axis_angle(&Vector3::y_axis(), heading_deg.to_radians()),
         first.source.clone(),
         uncertainty,
     ))
+}
+
+/// The uncertainty of looks combined by their weights `1/u²`: `(Σ 1/u²)^(−½)`, degrees (an
+/// infinite one weighs nothing; infinite without any).
+fn combined_uncertainty_deg(uncertainties_deg: impl IntoIterator<Item = f64>) -> f64 {
+    uncertainties_deg
+        .into_iter()
+        .map(|u| u.powi(-2))
+        .sum::<f64>()
+        .powf(-0.5)
 }
 
 /// Less sure than [`MAX_HEADING_UNCERTAINTY_DEG`] (or unknown), degrees.

@@ -109,6 +109,10 @@ fn closed_loop(
     closed_loop_on(&shared(bvh_rel)?, mapping, frames, convert_args)
 }
 
+/// 16 sensors on CMU's and on the pymo walk's skeletons, their true mounts simulated.
+const CMU_MAPPING: &str = "tests/fixtures/mappings/cmu_16imu.json";
+const PYMO_MAPPING: &str = "tests/fixtures/mappings/pymo_16imu.json";
+
 /// The hips and the feet by CMU's names, as every [`Take`] keys them.
 const CMU_JOINTS: [&str; 3] = ["Hips", "LeftFoot", "RightFoot"];
 /// The same on CMU 03_02's Poser-named skeleton.
@@ -197,10 +201,17 @@ fn compared(take: &Take) -> Vec<(usize, f64)> {
         .collect()
 }
 
-fn lerp(track: &[Vector3<f64>], f: f64) -> Vector3<f64> {
+/// A track's value at fractional frame `f`, linearly between its frames (a point or a height).
+fn lerp<T>(track: &[T], f: f64) -> T
+where
+    T: Copy
+        + std::ops::Add<Output = T>
+        + std::ops::Sub<Output = T>
+        + std::ops::Mul<f64, Output = T>,
+{
     let i = (f.floor() as usize).min(track.len() - 1);
     let j = (i + 1).min(track.len() - 1);
-    track[i].lerp(&track[j], f - i as f64)
+    track[i] + (track[j] - track[i]) * (f - i as f64)
 }
 
 /// A joint's track over the compared frames, source and output, in standing heights.
@@ -415,12 +426,8 @@ fn contact_scores(take: &Take) -> ContactScores {
 /// above the floor (the heel, which is no joint, stands on it).
 #[test]
 fn a_walk_walks_without_sliding() {
-    let Some(take) = closed_loop(
-        "bvh/pymo_walk.bvh",
-        "tests/fixtures/mappings/pymo_16imu.json",
-        None,
-        &["--root", "feet"],
-    ) else {
+    let Some(take) = closed_loop("bvh/pymo_walk.bvh", PYMO_MAPPING, None, &["--root", "feet"])
+    else {
         return;
     };
     let (phases, excess) = skate(&take);
@@ -484,10 +491,7 @@ const FETCHED_GAITS: &[(&str, &str)] = &[
 #[ignore = "issue 49: not every gait meets the targets yet"]
 fn every_gait_walks_without_sliding() {
     let dir = tempfile::tempdir().unwrap();
-    let (cmu, pymo) = (
-        "tests/fixtures/mappings/cmu_16imu.json",
-        "tests/fixtures/mappings/pymo_16imu.json",
-    );
+    let (cmu, pymo) = (CMU_MAPPING, PYMO_MAPPING);
     // (label, file, mapping, its first frame is a reference pose, also played backwards)
     let mut takes = Vec::new();
     for (name, mapping, skip) in [("pymo_walk", pymo, false), ("cmu_01_01", cmu, true)] {
@@ -549,16 +553,10 @@ struct GroundScores {
 fn ground_scores(take: &Take) -> GroundScores {
     let frames = compared(take);
     let (src_h, out_h) = (take.source.height, take.output.height);
-    let src_lowest = |f: f64| {
-        let l = &take.source.lowest;
-        let i = (f.floor() as usize).min(l.len() - 1);
-        let j = (i + 1).min(l.len() - 1);
-        l[i] + (l[j] - l[i]) * (f - i as f64)
-    };
     let start: Vec<f64> = frames
         .iter()
         .take_while(|(k, _)| (k - frames[0].0) as f64 * take.output.frame_time < 0.25)
-        .map(|(k, f)| take.output.lowest[*k] / out_h - src_lowest(*f) / src_h)
+        .map(|(k, f)| take.output.lowest[*k] / out_h - lerp(&take.source.lowest, *f) / src_h)
         .collect();
     let offset = start.iter().sum::<f64>() / start.len() as f64;
     let rms = |e: &[f64]| (e.iter().map(|x| x * x).sum::<f64>() / e.len().max(1) as f64).sqrt();
@@ -611,29 +609,31 @@ fn changing_ground_keeps_each_foot_on_its_own() {
     let Some(uneven) = shared("bvh/cmu_03_02_uneven_terrain.bvh") else {
         return;
     };
-    // (label, file, its first frames to skip): CMU 03_02's arms glitch around frames 48–51.
-    let mut terrain = vec![("CMU 03_02 uneven".to_string(), uneven, "60:")];
+    // (label, file, frames: CMU 03_02's arms glitch around frames 48–51, mapping, joint names)
+    let mut terrain = vec![(
+        "CMU 03_02 uneven".to_string(),
+        uneven,
+        "60:",
+        "tests/fixtures/mappings/poser_16imu.json",
+        POSER_JOINTS,
+    )];
     for trial in ["03_01", "03_03", "03_04"] {
         if let Some(bytes) =
             common::mirror::fetched(CMU_MIRROR.0, CMU_MIRROR.1, &format!("data/03/{trial}.bvh"))
         {
             let file = dir.path().join(format!("{trial}.bvh"));
             std::fs::write(&file, bytes).unwrap();
-            terrain.push((format!("CMU {trial} uneven (fetched)"), file, "1:"));
+            terrain.push((
+                format!("CMU {trial} uneven (fetched)"),
+                file,
+                "1:",
+                CMU_MAPPING,
+                CMU_JOINTS,
+            ));
         }
     }
-    for (label, bvh, frames) in &terrain {
-        let mapping = if label.contains("03_02") {
-            "tests/fixtures/mappings/poser_16imu.json"
-        } else {
-            "tests/fixtures/mappings/cmu_16imu.json"
-        };
-        let names = if label.contains("03_02") {
-            POSER_JOINTS
-        } else {
-            CMU_JOINTS
-        };
-        let Some(take) = closed_loop_named(bvh, mapping, Some(frames), &["--root", "feet"], names)
+    for (label, bvh, frames, mapping, names) in terrain {
+        let Some(take) = closed_loop_named(&bvh, mapping, Some(frames), &["--root", "feet"], names)
         else {
             return;
         };
@@ -647,13 +647,10 @@ fn changing_ground_keeps_each_foot_on_its_own() {
             g.hips_rms, g.feet_rms, g.contacts, g.spread, g.drift
         );
         if path > 3.0 || excess > 0.006 || g.hips_rms > 0.02 || g.feet_rms > 0.02 {
-            missed.push(label.clone());
+            missed.push(label);
         }
     }
-    let (cmu, pymo) = (
-        "tests/fixtures/mappings/cmu_16imu.json",
-        "tests/fixtures/mappings/pymo_16imu.json",
-    );
+    let (cmu, pymo) = (CMU_MAPPING, PYMO_MAPPING);
     for (name, mapping, frames) in [("pymo_walk", pymo, None), ("cmu_01_01", cmu, Some("1:"))] {
         let Some(take) = closed_loop(
             &format!("bvh/{name}.bvh"),
@@ -707,7 +704,7 @@ fn gait_report(label: &str, take: &Take) -> Option<String> {
 fn ground_keeps_the_lowest_point_on_the_floor() {
     let Some(take) = closed_loop(
         "bvh/pymo_walk.bvh",
-        "tests/fixtures/mappings/pymo_16imu.json",
+        PYMO_MAPPING,
         None,
         &["--root", "ground"],
     ) else {
@@ -734,12 +731,7 @@ fn ground_keeps_the_lowest_point_on_the_floor() {
 /// carry a flight on, 8.2 % and 0.61.
 #[test]
 fn hops_never_sink_below_the_floor() {
-    let Some(take) = closed_loop(
-        "bvh/cmu_01_01.bvh",
-        "tests/fixtures/mappings/cmu_16imu.json",
-        Some("1:"),
-        &[],
-    ) else {
+    let Some(take) = closed_loop("bvh/cmu_01_01.bvh", CMU_MAPPING, Some("1:"), &[]) else {
         return;
     };
     let (rms, walked) = path_error(&take);
