@@ -93,6 +93,8 @@ impl Motion {
                 orientation,
                 world,
                 heading_aligned_by: None,
+                mount_turned_deg: None,
+                mount_turn_uncertainty_deg: None,
             })
             .collect();
         let mut pipeline = pipeline_record(plan.pipeline(), None, 0, mode, RootMode::Fixed);

@@ -682,6 +682,14 @@ pub struct SensorRecord {
     /// (`mount`, `forward`, `second-pose`), or `none`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub heading_aligned_by: Option<&'static str>,
+    /// A `calibrate` mount on a knee's or an elbow's segment, turned about the segment's long
+    /// axis so that the hinge flexes about the pose's left–right: the turn, degrees
+    /// (anticlockwise seen from above: a left leg turned out, a right leg turned in), and the
+    /// hinge axis's uncertainty, degrees.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mount_turned_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mount_turn_uncertainty_deg: Option<f64>,
 }
 
 #[cfg(test)]

@@ -80,6 +80,7 @@ mod tests {
             mounts: vec![mount],
             align: vec![UnitQuaternion::identity()],
             alignment: vec![crate::pipeline::calibrate::Alignment::OwnHeading],
+            mount_turns: vec![None],
             warnings: vec![],
             heading_from_s: None,
         };

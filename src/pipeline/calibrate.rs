@@ -35,6 +35,15 @@
 //!   `ONE_LEG_DEG` with a knee, else `ONE_ARM_DEG` (a leg or an arm turned out turns its hinge's
 //!   axis, which the other side's mirror turn cancels in their mean).
 //!
+//! A pose held other than as declared — a leg turned out, an arm turned in — turns the `calibrate`
+//! mounts of that limb about its long axis, which no joint position shows but every hip and knee
+//! turn then reads about wrong axes. Each hinge's own axis (its flexed samples' mean, where it stood
+//! at calibration) says how its two segments stood: with `u` the direction up a segment in the
+//! pose, each mount is taken from the pose turned by `T = R(u, ψ)`, `ψ` the angle about `u` from the
+//! pose's left (+X) to the hinge's axis turned by `H`, both seen across `u` ([`hinge_turns`]):
+//! `q_bone_sensor = (T ⊗ P)⁻¹ ⊗ H ⊗ held`. Its uncertainty is the hinge's: the circular spread of
+//! its axes over √(seconds flexed), at least [`HINGE_AXIS_DEG`].
+//!
 //! Sensors without a heading of their own (fused without a magnetometer, "6D") each sit in a world
 //! turned about the vertical by an unknown `A_i⁻¹`, which a mount cannot absorb: it would turn
 //! every rotation axis of the bone about the vertical. Each such sensor is aligned on its own,
@@ -145,6 +154,9 @@ pub struct Calibration {
     /// own (identity for the others).
     pub align: Vec<UnitQuaternion<f64>>,
     pub alignment: Vec<Alignment>,
+    /// Per mapped sensor: the turn about its segment's long axis that its `calibrate` mount
+    /// took from its knee's or elbow's axis ([`MountTurn`]), if any.
+    pub mount_turns: Vec<Option<MountTurn>>,
     pub warnings: Vec<String>,
     /// A stream's heading refined as the hinges flexed ([`CalibrationCore::refine`]): the stream
     /// time (s) from which this heading is in force; frames before it turned with the one before.
@@ -293,6 +305,7 @@ fn without_window(sensors: &[ResolvedSensor]) -> Calibration {
             })
             .collect(),
         align: vec![UnitQuaternion::identity(); sensors.len()],
+        mount_turns: vec![None; sensors.len()],
         warnings: unaligned_warning(sensors, &alignment, false)
             .into_iter()
             .collect(),
@@ -621,7 +634,7 @@ impl CalibrationCore {
             .pairs
             .iter()
             .filter(|p| p.usable(&self.sensors))
-            .map(|p| (*p, HingeFlexion::new(p.side, p.flexes_about_left)))
+            .map(|p| (*p, HingeFlexion::new(*p)))
             .collect();
         if !hinges.is_empty() {
             self.watch = Some(HingeWatch {
@@ -680,7 +693,7 @@ impl CalibrationCore {
         // again only when that is surer, so a stream whose heading is as sure as it gets does
         // not allocate once a second (solving is never surer than this: a look that disagrees
         // leaves one source out).
-        let promised = combined_uncertainty_deg([watch.without_hinges_deg, look.1]);
+        let promised = combined_uncertainty_deg([watch.without_hinges_deg, look.uncertainty_deg]);
         if !surer(current.heading_uncertainty_deg, promised) {
             return None;
         }
@@ -766,17 +779,16 @@ pub const MIN_FLEXED_S: f64 = 0.5;
 /// A limb segment hanging down in the calibration pose, as a hinge's axis needs to mean
 /// left–right: in the pose's world (`pose_positions`, the joints' positions with the pose held),
 /// the joint is above the segment's joint below it (or its end site) and the segment points mostly
-/// down. Read in the pose, not in the rig's zero pose, which need not stand.
+/// down. Read in the pose, not in the rig's zero pose, which need not stand. `Some`: the unit
+/// direction down the segment (pose world).
 fn stands_down(
     rig: &Rig,
     pose_positions: &[Vector3<f64>],
     pose_world: &[UnitQuaternion<f64>],
     joint: usize,
-) -> bool {
+) -> Option<Vector3<f64>> {
     let j = &rig.joints()[joint];
-    if j.parent.is_none() {
-        return false;
-    }
+    j.parent?;
     let below = rig
         .children(joint)
         .map(|c| pose_positions[c])
@@ -784,12 +796,9 @@ fn stands_down(
             j.end_site
                 .map(|e| pose_positions[joint] + pose_world[joint] * e),
         )
-        .next();
-    let Some(below) = below else {
-        return false;
-    };
+        .next()?;
     let v = below - pose_positions[joint];
-    v.norm() > 0.0 && -v.y > 0.8 * v.norm()
+    (v.norm() > 0.0 && -v.y > 0.8 * v.norm()).then(|| v.normalize())
 }
 
 /// One hinge joint's samples for the heading (a knee: thigh and shank; an elbow: upper arm and
@@ -797,23 +806,24 @@ fn stands_down(
 /// the time (s) and the inner and the outer segment's rotations since calibration (rig world).
 #[derive(Debug, Clone)]
 pub struct HingeSamples {
-    pub side: crate::rig::anatomy::Side,
-    /// +1 for a knee (it flexes about the subject's left: the foot swings back), −1 for an
-    /// elbow (about the right: the hand comes forward).
-    pub flexes_about_left: f64,
+    pub pair: HingePair,
     pub samples: Vec<(f64, UnitQuaternion<f64>, UnitQuaternion<f64>)>,
 }
 
 /// A knee or an elbow whose two segments both carry a sensor and hang down in the calibration
 /// pose: the sensors (indices in mapping order) on its inner segment (thigh, upper arm) and its
-/// outer one (shank, forearm).
+/// outer one (shank, forearm), and the unit directions down each segment in the pose (pose
+/// world: the long axes a turn-out turns the segments about, [`solve`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HingePair {
     pub side: crate::rig::anatomy::Side,
-    /// +1 for a knee, −1 for an elbow ([`HingeSamples::flexes_about_left`]).
+    /// +1 for a knee (it flexes about the subject's left: the foot swings back), −1 for an
+    /// elbow (about the right: the hand comes forward).
     pub flexes_about_left: f64,
     pub inner: usize,
     pub outer: usize,
+    pub inner_down: Vector3<f64>,
+    pub outer_down: Vector3<f64>,
 }
 
 /// Every mapped knee and elbow whose segments hang down in the calibration pose (`pose_local`,
@@ -842,14 +852,17 @@ fn hinge_pairs(
             let (Some(i), Some(o)) = (sensor_of(inner), sensor_of(outer)) else {
                 continue;
             };
-            if stands_down(rig, &pose_positions, &pose_world, inner)
-                && stands_down(rig, &pose_positions, &pose_world, outer)
-            {
+            if let (Some(inner_down), Some(outer_down)) = (
+                stands_down(rig, &pose_positions, &pose_world, inner),
+                stands_down(rig, &pose_positions, &pose_world, outer),
+            ) {
                 pairs.push(HingePair {
                     side,
                     flexes_about_left: sign,
                     inner: i,
                     outer: o,
+                    inner_down,
+                    outer_down,
                 });
             }
         }
@@ -890,11 +903,7 @@ fn hinge_samples(
                     (time, inner * held[i].inverse(), q * held[o].inverse())
                 })
                 .collect();
-            HingeSamples {
-                side: p.side,
-                flexes_about_left: p.flexes_about_left,
-                samples,
-            }
+            HingeSamples { pair: p, samples }
         })
         .collect()
 }
@@ -930,11 +939,11 @@ pub fn heading_towards_plus_z(d: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
 /// = left × up. Each hinge's mean axis counts once: with both sides, a leg or arm turned out
 /// (toe-out, hip or shoulder rotation) turns its axis one way and the other side's the mirror
 /// way, which their mean cancels. `None` when no hinge flexes for [`MIN_FLEXED_S`].
-pub fn heading_from_hinges(hinges: &[HingeSamples]) -> Option<(UnitQuaternion<f64>, f64)> {
+pub fn heading_from_hinges(hinges: &[HingeSamples]) -> Option<HingeLook> {
     let folded: Vec<HingeFlexion> = hinges
         .iter()
         .map(|h| {
-            let mut f = HingeFlexion::new(h.side, h.flexes_about_left);
+            let mut f = HingeFlexion::new(h.pair);
             for (t, inner, outer) in &h.samples {
                 f.push(*t, inner, outer);
             }
@@ -948,8 +957,7 @@ pub fn heading_from_hinges(hinges: &[HingeSamples]) -> Option<(UnitQuaternion<f6
 /// samples, so a stream keeps a few numbers per hinge, not the samples.
 #[derive(Debug, Clone)]
 pub struct HingeFlexion {
-    side: crate::rig::anatomy::Side,
-    flexes_about_left: f64,
+    pair: HingePair,
     /// Σ of the flexed samples' horizontal rotation vectors (radians, towards the left).
     sum: Vector3<f64>,
     /// Σ of their lengths.
@@ -965,10 +973,9 @@ pub struct HingeFlexion {
 }
 
 impl HingeFlexion {
-    pub fn new(side: crate::rig::anatomy::Side, flexes_about_left: f64) -> HingeFlexion {
+    pub fn new(pair: HingePair) -> HingeFlexion {
         HingeFlexion {
-            side,
-            flexes_about_left,
+            pair,
             sum: Vector3::zeros(),
             lengths: 0.0,
             flexed: 0,
@@ -989,7 +996,7 @@ impl HingeFlexion {
         self.samples += 1;
         self.last_s = t_s;
         let v = (inner.inverse() * outer).scaled_axis();
-        let v = Vector3::new(v.x, 0.0, v.z) * self.flexes_about_left;
+        let v = Vector3::new(v.x, 0.0, v.z) * self.pair.flexes_about_left;
         if v.norm() < FLEXED_DEG.to_radians() {
             return;
         }
@@ -1013,16 +1020,50 @@ impl HingeFlexion {
     }
 }
 
+/// What the hinges say: the heading and its uncertainty (degrees), and each hinge's own axis
+/// ([`HingeAxis`]; `[knee, elbow] × [left, right]`, fixed so that a stream looking once a second
+/// does not allocate).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HingeLook {
+    pub heading: UnitQuaternion<f64>,
+    pub uncertainty_deg: f64,
+    pub axes: [Option<HingeAxis>; 4],
+}
+
+impl HingeLook {
+    /// A heading alone, no hinge's own axis (tests, and sources that give only that).
+    pub fn heading_only(heading: UnitQuaternion<f64>, uncertainty_deg: f64) -> HingeLook {
+        HingeLook {
+            heading,
+            uncertainty_deg,
+            axes: [None; 4],
+        }
+    }
+}
+
+/// One hinge's axis where it stood at calibration: the mean of its flexed samples' horizontal
+/// rotation vectors (rig world before the heading, towards the subject's left for a knee and an
+/// elbow alike), and how sure (degrees): its samples' circular spread over √(seconds flexed),
+/// never below [`HINGE_AXIS_DEG`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HingeAxis {
+    pub pair: HingePair,
+    pub left: Vector3<f64>,
+    pub uncertainty_deg: f64,
+}
+
+/// The least uncertainty of one hinge's own axis, degrees: how far sensor noise and the skin's
+/// give over a minute of flexion may still leave it.
+pub const HINGE_AXIS_DEG: f64 = 1.0;
+
 /// [`heading_from_hinges`] from the hinges' folded flexion.
 pub fn heading_from_flexion<'a>(
     hinges: impl IntoIterator<Item = &'a HingeFlexion>,
-) -> Option<(UnitQuaternion<f64>, f64)> {
+) -> Option<HingeLook> {
     let mut left = Vector3::zeros();
     // Each hinge's axes' spread about its own mean (squared, radians), weighted by its samples.
     let (mut spread_sq, mut count, mut looks) = (0.0, 0usize, 0.0);
-    // Which hinges gave an axis: [knee, elbow] × [left, right] (no allocation: a stream looks
-    // once a second).
-    let mut seen = [[false; 2]; 2];
+    let mut axes = [None; 4];
     for hinge in hinges {
         let n = hinge.flexed;
         if n == 0 || hinge.flexed_s() < MIN_FLEXED_S || hinge.sum.norm() == 0.0 {
@@ -1030,13 +1071,23 @@ pub fn heading_from_flexion<'a>(
         }
         // The weighted mean resultant length R gives the circular spread sqrt(-2 ln R).
         let resultant = (hinge.sum.norm() / hinge.lengths).clamp(1e-12, 1.0);
-        spread_sq += -2.0 * resultant.ln() * n as f64;
+        let hinge_spread_sq = -2.0 * resultant.ln();
+        spread_sq += hinge_spread_sq * n as f64;
         count += n;
-        left += hinge.sum.normalize();
+        let axis = hinge.sum.normalize();
+        left += axis;
         // One independent look per hinge per second flexed in (about a stride).
+        let seconds = hinge.seconds.max(1) as f64;
         looks += hinge.seconds as f64;
-        let kind = usize::from(hinge.flexes_about_left < 0.0);
-        seen[kind][usize::from(hinge.side == crate::rig::anatomy::Side::Right)] = true;
+        let pair = hinge.pair;
+        let kind = usize::from(pair.flexes_about_left < 0.0);
+        let side = usize::from(pair.side == crate::rig::anatomy::Side::Right);
+        axes[2 * kind + side] = Some(HingeAxis {
+            pair,
+            left: axis,
+            uncertainty_deg: (hinge_spread_sq.sqrt().to_degrees() / seconds.sqrt())
+                .max(HINGE_AXIS_DEG),
+        });
     }
     if count == 0 {
         return None;
@@ -1045,9 +1096,10 @@ pub fn heading_from_flexion<'a>(
     let spread_deg = (spread_sq / count as f64).sqrt().to_degrees();
     // A kind of hinge seen on both sides cancels its turn-out; else a lone knee bounds it at
     // ONE_LEG_DEG, lone elbows at ONE_ARM_DEG.
-    let one_side = if seen.iter().any(|[left, right]| *left && *right) {
+    let seen = |kind: usize, side: usize| axes[2 * kind + side].is_some();
+    let one_side = if (0..2).any(|kind| seen(kind, 0) && seen(kind, 1)) {
         0.0
-    } else if seen[0].iter().any(|k| *k) {
+    } else if seen(0, 0) || seen(0, 1) {
         ONE_LEG_DEG
     } else {
         ONE_ARM_DEG
@@ -1058,11 +1110,15 @@ pub fn heading_from_flexion<'a>(
     tracing::debug!(
         spread_deg,
         looks,
-        hinges = seen.iter().flatten().filter(|s| **s).count(),
+        hinges = axes.iter().flatten().count(),
         uncertainty,
         "the heading from the hinges"
     );
-    Some((heading, uncertainty))
+    Some(HingeLook {
+        heading,
+        uncertainty_deg: uncertainty,
+        axes,
+    })
 }
 
 /// The horizontal fraction of `d` (1 when horizontal, 0 when vertical).
@@ -1237,7 +1293,7 @@ pub fn solve(
     sensors: &[ResolvedSensor],
     first: &Held,
     second: Option<&Held>,
-    hinges: Option<(UnitQuaternion<f64>, f64)>,
+    hinges: Option<HingeLook>,
     policy: HeadingPolicy,
 ) -> Calibration {
     let (held, pose_world) = (&first.held, &first.pose_world);
@@ -1287,8 +1343,12 @@ pub fn solve(
     if let Some((h, u)) = second.and_then(|p| heading_from_second_pose(sensors, first, p)) {
         looks.push(HeadingLook::new(HeadingSource::SecondPose, &h, u));
     }
-    if let Some((h, u)) = hinges {
-        looks.push(HeadingLook::new(HeadingSource::Hinges, &h, u));
+    if let Some(look) = &hinges {
+        looks.push(HeadingLook::new(
+            HeadingSource::Hinges,
+            &look.heading,
+            look.uncertainty_deg,
+        ));
     }
     let combined = match combine_looks(&mut looks, &mut warnings) {
         // Kept deliberately, the sensors' north is not traded for a heading this unsure.
@@ -1371,21 +1431,37 @@ pub fn solve(
     } else {
         (heading_source, heading_uncertainty_deg)
     };
+    // 6. The segments of the knees and elbows, each turned about its long axis by its hinge.
+    let mount_turns = match &hinges {
+        Some(look) if heading_source != HeadingSource::None => {
+            hinge_turns(sensors, look, &heading, &mut warnings)
+        }
+        _ => vec![None; sensors.len()],
+    };
     let axes_uncertainty_deg = sensors
         .iter()
-        .zip(&aligned_within)
-        .map(|(s, within)| match (s.own_heading, &s.mount) {
-            (true, _) => *within,
-            (false, Mount::Calibrate) => heading_uncertainty_deg,
-            (false, Mount::Fixed(_)) => 0.0,
-        })
+        .zip(aligned_within.iter().zip(&mount_turns))
+        .map(
+            |(s, (within, turn))| match (s.own_heading, &s.mount, turn) {
+                (true, _, _) => *within,
+                (false, Mount::Calibrate, Some(turn)) => turn.uncertainty_deg,
+                (false, Mount::Calibrate, None) => heading_uncertainty_deg,
+                (false, Mount::Fixed(_), _) => 0.0,
+            },
+        )
         .collect();
     let mounts = sensors
         .iter()
         .enumerate()
         .map(|(i, s)| match s.mount {
             Mount::Fixed(q) => q,
-            Mount::Calibrate => pose_world[i].inverse() * heading * align[i] * held[i],
+            Mount::Calibrate => {
+                let pose = match &mount_turns[i] {
+                    Some(turn) => turn.turn * pose_world[i],
+                    None => pose_world[i],
+                };
+                pose.inverse() * heading * align[i] * held[i]
+            }
         })
         .collect();
     Calibration {
@@ -1397,9 +1473,77 @@ pub fn solve(
         mounts,
         align,
         alignment,
+        mount_turns,
         warnings,
         heading_from_s: None,
     }
+}
+
+/// How far a hinge's axis may stand from the pose's left before the pose held is taken to be
+/// another than the one declared rather than a segment turned in or out, degrees.
+pub const MAX_MOUNT_TURN_DEG: f64 = 45.0;
+
+/// A `calibrate` mount's turn from its hinge: the segment stood in the pose turned about its
+/// long axis by `deg` (anticlockwise seen from above: the right-hand rule about the direction up
+/// the segment; a left leg turned out, a right leg turned in), so its mount is
+/// `(T ⊗ P)⁻¹ ⊗ H ⊗ A ⊗ held` with `T` that turn (module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MountTurn {
+    pub turn: UnitQuaternion<f64>,
+    pub deg: f64,
+    /// Its hinge axis's uncertainty ([`HingeAxis`]), degrees.
+    pub uncertainty_deg: f64,
+}
+
+/// The turns of the `calibrate` mounts on the hinges' segments (sensors with the world's north,
+/// as the hinges' are): each segment turned about the direction up it, `u` (pose world), by the
+/// angle from the pose's left (+X, facing +Z) to its hinge's axis turned by the heading, `H ⊗ a`,
+/// both seen across `u`: `atan2(u · (x⊥ × a⊥), x⊥ · a⊥)`. A hinge less sure than
+/// [`MAX_HEADING_UNCERTAINTY_DEG`] turns nothing; one further than [`MAX_MOUNT_TURN_DEG`] is
+/// warned about and turns nothing.
+fn hinge_turns(
+    sensors: &[ResolvedSensor],
+    look: &HingeLook,
+    heading: &UnitQuaternion<f64>,
+    warnings: &mut Vec<String>,
+) -> Vec<Option<MountTurn>> {
+    let across = |d: &Vector3<f64>, v: Vector3<f64>| v - d * d.dot(&v);
+    let mut turns = vec![None; sensors.len()];
+    for axis in look.axes.iter().flatten() {
+        if too_unsure(axis.uncertainty_deg) {
+            continue;
+        }
+        let pair = &axis.pair;
+        let a = heading * axis.left;
+        for (i, d) in [(pair.inner, pair.inner_down), (pair.outer, pair.outer_down)] {
+            let s = &sensors[i];
+            if s.mount != Mount::Calibrate || s.own_heading {
+                continue;
+            }
+            // Up the segment, so that a turn reads as seen from above.
+            let up = -d;
+            let (x, a) = (across(&up, Vector3::x()), across(&up, a));
+            let deg = up.dot(&x.cross(&a)).atan2(x.dot(&a)).to_degrees();
+            if deg.abs() > MAX_MOUNT_TURN_DEG {
+                warnings.push(format!(
+                    "sensor `{}`: its {} flexes about an axis {deg:.0}° from the pose's left–right; \
+                     was the pose held the one declared? Its mount is taken from the pose as declared",
+                    s.sensor,
+                    if pair.flexes_about_left > 0.0 { "knee" } else { "elbow" },
+                ));
+                continue;
+            }
+            turns[i] = Some(MountTurn {
+                turn: UnitQuaternion::from_axis_angle(
+                    &nalgebra::Unit::new_normalize(up),
+                    deg.to_radians(),
+                ),
+                deg,
+                uncertainty_deg: axis.uncertainty_deg,
+            });
+        }
+    }
+    turns
 }
 
 /// The warning for sensors without a heading of their own that could not be aligned.
@@ -1484,7 +1628,7 @@ mod tests {
     /// the look is applied and the pipeline refuses the take.
     #[test]
     fn an_unsure_heading_keeps_the_sensors_north_under_heading_sensors() {
-        let hinges = Some((rot(Vector3::y(), 40.0), 24.0));
+        let hinges = Some(HingeLook::heading_only(rot(Vector3::y(), 40.0), 24.0));
         let s = [sensor(Mount::Calibrate, None)];
         let first = self::held(UnitQuaternion::identity(), UnitQuaternion::identity());
         let kept = solve(&s, &first, None, hinges, HeadingPolicy::Sensors);
@@ -1517,7 +1661,7 @@ mod tests {
             &s,
             &first,
             None,
-            Some((rot(Vector3::y(), 40.0), 3.0)),
+            Some(HingeLook::heading_only(rot(Vector3::y(), 40.0), 3.0)),
             HeadingPolicy::Sensors,
         );
         assert_eq!(sure.heading_source, HeadingSource::Hinges);
@@ -1574,10 +1718,21 @@ mod tests {
         samples: Vec<(f64, UnitQuaternion<f64>, UnitQuaternion<f64>)>,
     ) -> HingeSamples {
         HingeSamples {
-            side,
-            flexes_about_left: sign,
+            pair: HingePair {
+                side,
+                flexes_about_left: sign,
+                inner: 0,
+                outer: 1,
+                inner_down: -Vector3::y(),
+                outer_down: -Vector3::y(),
+            },
             samples,
         }
+    }
+
+    /// The heading and its uncertainty from the hinges' samples.
+    fn hinges_heading(hinges: &[HingeSamples]) -> Option<(UnitQuaternion<f64>, f64)> {
+        heading_from_hinges(hinges).map(|l| (l.heading, l.uncertainty_deg))
     }
 
     #[test]
@@ -1595,11 +1750,11 @@ mod tests {
             })
             .collect();
         let knee = |side, samples| hinge(side, 1.0, samples);
-        let (h, u) = heading_from_hinges(&[knee(Side::Left, leg.clone())]).unwrap();
+        let (h, u) = hinges_heading(&[knee(Side::Left, leg.clone())]).unwrap();
         assert!((h * turn * Vector3::z() - Vector3::z()).norm() < 1e-9);
         // Straight knees: no heading.
         let still = vec![(0.0, UnitQuaternion::identity(), rot(Vector3::x(), 2.0)); 10];
-        assert!(heading_from_hinges(&[knee(Side::Left, still)]).is_none());
+        assert!(hinges_heading(&[knee(Side::Left, still)]).is_none());
         // One leg alone: it may be turned out.
         assert!((u - ONE_LEG_DEG).abs() < 1e-9, "{u}");
         // Both legs turned out by 12°, mirror-wise (toe-out): their bisector still faces +Z,
@@ -1610,7 +1765,7 @@ mod tests {
                 .map(|(t, a, b)| (*t, out * a * out.inverse(), out * b * out.inverse()))
                 .collect::<Vec<_>>()
         };
-        let (h, u) = heading_from_hinges(&[
+        let (h, u) = hinges_heading(&[
             knee(Side::Left, turned(12.0)),
             knee(Side::Right, turned(-12.0)),
         ])
@@ -1627,9 +1782,97 @@ mod tests {
             })
             .collect();
         let (_, u) =
-            heading_from_hinges(&[knee(Side::Left, wobbly.clone()), knee(Side::Right, wobbly)])
-                .unwrap();
+            hinges_heading(&[knee(Side::Left, wobbly.clone()), knee(Side::Right, wobbly)]).unwrap();
         assert!(u > KNEE_AXIS_DEG && u < 30.0, "{u}");
+    }
+
+    /// Knees flexing in a subject whose legs stood turned out by 15° in a pose declared with them
+    /// straight: each leg's `calibrate` mounts turn about the leg by its knee's axis (left +15°,
+    /// right −15°), so every segment's world rotation is the true one through the flexion (within
+    /// 0.01°); with the heading alone (no hinge's own axis) the legs are 15° off.
+    #[test]
+    fn legs_turned_out_in_the_pose_turn_their_mounts() {
+        let turn = rot(Vector3::y(), 70.0);
+        let out = [rot(Vector3::y(), 15.0), rot(Vector3::y(), -15.0)];
+        let mounts = [
+            rot(Vector3::new(1.0, 2.0, 3.0), 70.0),
+            rot(Vector3::new(-2.0, 1.0, 0.5), 120.0),
+            rot(Vector3::new(0.3, -1.0, 2.0), 40.0),
+            rot(Vector3::new(1.0, 1.0, -1.0), 160.0),
+        ];
+        // Sensor 2·leg is the thigh, 2·leg + 1 the shank: their bones at time t (facing +Z).
+        let bone = |i: usize, t: f64| {
+            let hip = rot(Vector3::x(), -25.0 * (3.0 * t).sin());
+            let knee = rot(Vector3::x(), 30.0 * (1.0 - (3.0 * t).cos()));
+            out[i / 2] * if i.is_multiple_of(2) { hip } else { hip * knee }
+        };
+        let reading = |i: usize, t: f64| turn * bone(i, t) * mounts[i];
+        let held: Vec<_> = (0..4).map(|i| reading(i, 0.0)).collect();
+        let pair = |leg: usize| HingePair {
+            side: if leg == 0 { Side::Left } else { Side::Right },
+            flexes_about_left: 1.0,
+            inner: 2 * leg,
+            outer: 2 * leg + 1,
+            inner_down: -Vector3::y(),
+            outer_down: -Vector3::y(),
+        };
+        let hinges: Vec<HingeSamples> = (0..2)
+            .map(|leg| HingeSamples {
+                pair: pair(leg),
+                samples: (1..300)
+                    .map(|k| {
+                        let t = k as f64 * 0.01;
+                        let since = |i: usize| reading(i, t) * held[i].inverse();
+                        (t, since(2 * leg), since(2 * leg + 1))
+                    })
+                    .collect(),
+            })
+            .collect();
+        let look = heading_from_hinges(&hinges).unwrap();
+        let sensors: Vec<ResolvedSensor> = (0..4).map(|_| sensor(Mount::Calibrate, None)).collect();
+        let first = Held {
+            held: held.clone(),
+            pose_world: vec![UnitQuaternion::identity(); 4],
+        };
+        let worst_deg = |c: &Calibration| {
+            (0..4)
+                .flat_map(|i| (0..30).map(move |k| (i, k as f64 * 0.1)))
+                .map(|(i, t)| {
+                    c.bone_world(i, &reading(i, t))
+                        .angle_to(&bone(i, t))
+                        .to_degrees()
+                })
+                .fold(0.0, f64::max)
+        };
+        let c = solve(&sensors, &first, None, Some(look), HeadingPolicy::Estimate);
+        assert!((c.heading * turn).angle().to_degrees() < 0.01, "{c:?}");
+        for (i, want) in [15.0, 15.0, -15.0, -15.0].into_iter().enumerate() {
+            let t = c.mount_turns[i].expect("turned");
+            assert!((t.deg - want).abs() < 0.01, "{i}: {t:?}");
+            assert!((t.uncertainty_deg - HINGE_AXIS_DEG).abs() < 1e-9, "{t:?}");
+            assert_eq!(c.axes_uncertainty_deg[i], t.uncertainty_deg);
+        }
+        assert!(worst_deg(&c) < 0.01, "{}", worst_deg(&c));
+        let heading_only = HingeLook::heading_only(look.heading, look.uncertainty_deg);
+        let c = solve(
+            &sensors,
+            &first,
+            None,
+            Some(heading_only),
+            HeadingPolicy::Estimate,
+        );
+        assert!(c.mount_turns.iter().all(Option::is_none));
+        assert!(worst_deg(&c) > 14.9, "{}", worst_deg(&c));
+        // A pose far from the one declared (the knee's axis 60° off): warned, not turned.
+        let mut far = look;
+        far.axes[0].as_mut().unwrap().left = rot(Vector3::y(), 60.0) * look.axes[0].unwrap().left;
+        let c = solve(&sensors, &first, None, Some(far), HeadingPolicy::Estimate);
+        assert!(c.mount_turns[0].is_none() && c.mount_turns[2].is_some());
+        assert!(
+            c.warnings
+                .iter()
+                .any(|w| w.contains("was the pose held the one declared"))
+        );
     }
 
     /// Every source's look is weighed by its uncertainty; one that disagrees by more than three
@@ -1711,7 +1954,7 @@ mod tests {
             hinge(Side::Left, 1.0, leg.clone()),
             hinge(Side::Right, 1.0, leg),
         ];
-        let (h, _) = heading_from_hinges(&knees).unwrap();
+        let (h, _) = hinges_heading(&knees).unwrap();
         assert!(h.angle().to_degrees() < 1e-6, "{}", h.angle().to_degrees());
     }
 
@@ -1738,10 +1981,10 @@ mod tests {
             hinge(Side::Left, -1.0, arm.clone()),
             hinge(Side::Right, -1.0, arm.clone()),
         ];
-        let (h, u) = heading_from_hinges(&elbows).unwrap();
+        let (h, u) = hinges_heading(&elbows).unwrap();
         assert!((h * -Vector3::x() - Vector3::z()).norm() < 1e-9);
         assert!((u - KNEE_AXIS_DEG).abs() < 1e-9, "{u}");
-        let (_, u) = heading_from_hinges(&elbows[..1]).unwrap();
+        let (_, u) = hinges_heading(&elbows[..1]).unwrap();
         assert!((u - ONE_ARM_DEG).abs() < 1e-9, "{u}");
         assert!(u > MAX_HEADING_UNCERTAINTY_DEG);
         // A twitch shorter than MIN_FLEXED_S gives nothing.
@@ -1752,7 +1995,7 @@ mod tests {
                 (t, a, if bent { rot(-Vector3::z(), 60.0) } else { a })
             })
             .collect();
-        assert!(heading_from_hinges(&[hinge(Side::Left, -1.0, twitch)]).is_none());
+        assert!(hinges_heading(&[hinge(Side::Left, -1.0, twitch)]).is_none());
     }
 
     #[test]

@@ -154,7 +154,8 @@ pub fn mapping_record(
             .iter()
             .zip(&converted.calibration.mounts)
             .zip(converted.origins.iter().zip(&converted.calibration.alignment))
-            .map(|((s, q), (origin, alignment))| SensorRecord {
+            .zip(&converted.calibration.mount_turns)
+            .map(|(((s, q), (origin, alignment)), turn)| SensorRecord {
                 sensor: s.sensor.clone(),
                 bone: rig.joints()[s.bone].name.clone(),
                 mount_source: match s.mount {
@@ -174,6 +175,8 @@ pub fn mapping_record(
                 },
                 world: origin.world(),
                 heading_aligned_by: alignment.label(),
+                mount_turned_deg: turn.map(|t| t.deg),
+                mount_turn_uncertainty_deg: turn.map(|t| t.uncertainty_deg),
             })
             .collect(),
         legacy: None,

@@ -14,6 +14,8 @@ use crate::closed_loop::{motion_frames, position_error_h};
 use crate::common;
 
 use common::{imubake_bin, python, run, shared};
+use imubake::rotation::angle_between;
+use nalgebra::{Quaternion, UnitQuaternion};
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
@@ -121,11 +123,17 @@ const MOTIONS: [Motion; 4] = [
 ];
 
 struct Outcome {
+    /// The sidecar's turns of the mounts by their hinges, (sensor, degrees).
+    turns: Vec<(String, f64)>,
     error_deg: f64,
     uncertainty_deg: f64,
     /// The pose error with the true mounts, h.
     known_h: f64,
     hinges_h: f64,
+    /// With a pose held other than the one declared ([`held_run`]): the hips' and knees' local
+    /// rotations' mean error, degrees, with the true mounts and with the hinges.
+    known_legs_deg: Option<f64>,
+    hinges_legs_deg: Option<f64>,
 }
 
 /// The mapping with and without the pelvis's forward axis, written to `dir`.
@@ -156,21 +164,37 @@ fn mappings(dir: &Path, motion: &Motion) -> (std::path::PathBuf, std::path::Path
 /// hinges flex — both conversions are then scored only from a second after the stream's heading
 /// became sure (the sidecar's `heading_from_s`; frames before it turned with the sensors' north).
 fn one_run(motion: &Motion, seed: u64, raw: bool, causal: bool) -> Option<Outcome> {
+    held_run(motion, seed, raw, causal, None)
+}
+
+/// [`one_run`], the subject holding frame 0 of `held` (the same skeleton and motion, a pose
+/// other than the one the mapping declares) instead of the source's own.
+fn held_run(
+    motion: &Motion,
+    seed: u64,
+    raw: bool,
+    causal: bool,
+    held: Option<&Path>,
+) -> Option<Outcome> {
     let bvh = shared(motion.bvh)?;
     let py = python()?;
     let dir = tempfile::tempdir().unwrap();
     let (known, hinges) = mappings(dir.path(), motion);
-    let rig_args: Vec<String> = if motion.own_rig.is_some() {
-        vec!["--rig".into(), bvh.display().to_string()]
-    } else {
-        vec!["--bone-map".into(), "Spine2=Spine".into()]
+    let rig_args = |bvh: &Path| -> Vec<String> {
+        if motion.own_rig.is_some() {
+            vec!["--rig".into(), bvh.display().to_string()]
+        } else {
+            vec!["--bone-map".into(), "Spine2=Spine".into()]
+        }
     };
+    // The subject holds the held BVH's frame 0, and its motion is the source's from there.
+    let played = held.unwrap_or(&bvh);
     let capture = dir.path().join("take.csv");
     let truth_path = dir.path().join("truth.json");
     let mut simulate = Command::new(imubake_bin());
     simulate
         .arg("simulate")
-        .arg(&bvh)
+        .arg(played)
         .arg("--mapping")
         .arg(&known)
         .arg("--output")
@@ -178,7 +202,7 @@ fn one_run(motion: &Motion, seed: u64, raw: bool, causal: bool) -> Option<Outcom
         .arg("--truth")
         .arg(&truth_path)
         .args(["--seed", &seed.to_string(), "--noise-deg", "0.5"])
-        .args(&rig_args);
+        .args(rig_args(played));
     if let Some(frames) = motion.frames {
         simulate.args(["--frames", frames]);
     }
@@ -206,7 +230,7 @@ fn one_run(motion: &Motion, seed: u64, raw: bool, causal: bool) -> Option<Outcom
             .arg(&out_dir)
             .args(["--fps", "60", "--format", "bvh", "--smooth", "none"]);
         if motion.own_rig.is_some() {
-            cmd.args(&rig_args);
+            cmd.args(rig_args(&bvh));
         }
         if causal {
             cmd.arg("--causal");
@@ -231,6 +255,54 @@ fn one_run(motion: &Motion, seed: u64, raw: bool, causal: bool) -> Option<Outcom
         let sensors = truth["sensors"].as_array().unwrap();
         position_error_h(&py, &bvh, output, &out_rig, sensors, &compared)
     };
+    // The hips' and knees' mean error (thigh against pelvis, shank against thigh) against the
+    // source's by scipy's reader, degrees: what a joint angle or a hinge-limited rig reads, and
+    // what a segment turned about its own long axis changes while leaving every joint in place.
+    let legs_deg = |output: &imubake::bvh::Bvh| {
+        let out_rig = output
+            .to_rig("out", imubake::rig::LengthUnit::Metres)
+            .unwrap();
+        let compared = motion_frames(&truth, output.frame_count(), FPS);
+        let sensors = truth["sensors"].as_array().unwrap();
+        let joint_of = |sensor: &str| {
+            let s = sensors.iter().find(|s| s["sensor"] == sensor).unwrap();
+            (
+                s["bone"].as_str().unwrap(),
+                s["source_joint"].as_str().unwrap(),
+            )
+        };
+        let chain = ["pelvis", "l_thigh", "l_shank", "r_thigh", "r_shank"].map(joint_of);
+        let frames: Vec<String> = compared.iter().map(|(_, f)| format!("{f:.9}")).collect();
+        let names: Vec<&str> = chain.iter().map(|c| c.1).collect();
+        let out = run(Command::new(&py)
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/bvh_world_rotations.py"))
+            .arg(&bvh)
+            .arg(names.join(","))
+            .arg(frames.join(",")));
+        let source: Value = serde_json::from_slice(&out.stdout).unwrap();
+        let source_at = |joint: &str, i: usize| {
+            let q: Vec<f64> = source[joint][i]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect();
+            UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+        };
+        // (parent, child) in `chain`: the hips, then the knees.
+        let joints = [(0, 1), (1, 2), (0, 3), (3, 4)];
+        let mut sum = 0.0;
+        for (i, (k, _)) in compared.iter().enumerate() {
+            let world = out_rig.world_rotations(&output.local_rotations(*k));
+            for (p, c) in joints {
+                let bone = |n: usize| world[out_rig.joint_index(chain[n].0).unwrap()];
+                let ours = bone(p).inverse() * bone(c);
+                let theirs = source_at(chain[p].1, i).inverse() * source_at(chain[c].1, i);
+                sum += angle_between(&ours, &theirs).to_degrees();
+            }
+        }
+        sum / (compared.len() * joints.len()) as f64
+    };
     let (sidecar, hinges_output) = convert(&hinges, "hinges");
     let pipeline = &sidecar["pipeline"];
     assert_eq!(pipeline["heading"], "hinges", "{}", motion.name);
@@ -250,6 +322,13 @@ fn one_run(motion: &Motion, seed: u64, raw: bool, causal: bool) -> Option<Outcom
     let hinges_h = error_h(&hinges_output, after_s);
     let (known_sidecar, known_output) = convert(&true_mounts_path, "true_mounts");
     let known_h = error_h(&known_output, after_s);
+    let (known_legs_deg, hinges_legs_deg) = match held {
+        Some(_) => (
+            Some(legs_deg(&known_output)),
+            Some(legs_deg(&hinges_output)),
+        ),
+        None => (None, None),
+    };
     assert_eq!(known_sidecar["pipeline"]["heading"], "mounts");
     if causal {
         // A stream's known mounts are sure from the first frame: the hinges are not needed.
@@ -257,16 +336,31 @@ fn one_run(motion: &Motion, seed: u64, raw: bool, causal: bool) -> Option<Outcom
             known_sidecar["pipeline"].get("heading_from_s").is_none(),
             "{known_sidecar}"
         );
-    } else {
+    } else if held.is_none() {
+        // (A pose held other than the one declared turns the legs' known-mount looks away.)
         known_mounts_and_hinges_agree(motion, &known_sidecar);
     }
     let off =
         |deg: f64| (deg + truth["heading_deg"].as_f64().unwrap() + 540.0).rem_euclid(360.0) - 180.0;
+    let turns = sidecar["mapping"]["sensors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|s| {
+            Some((
+                s["sensor"].as_str()?.to_string(),
+                s["mount_turned_deg"].as_f64()?,
+            ))
+        })
+        .collect();
     Some(Outcome {
+        turns,
         error_deg: off(pipeline["heading_deg"].as_f64().unwrap()).abs(),
         uncertainty_deg: pipeline["heading_uncertainty_deg"].as_f64().unwrap(),
         known_h,
         hinges_h,
+        known_legs_deg,
+        hinges_legs_deg,
     })
 }
 
@@ -322,6 +416,69 @@ fn the_hinges_give_the_heading_from_orientations() {
             let Some(outcome) = one_run(motion, seed, false, false) else {
                 return;
             };
+            runs.push((motion.name, outcome));
+        }
+    }
+    check(&runs);
+}
+
+/// The subject holds the pose with the legs turned about the vertical at the hips — left +15°,
+/// right −15°, toes out (frame 0 of the source turned by `turn_joints_in_frame.py`, scipy) — while
+/// the mapping declares the source's own frame 0, legs straight: the pose gives the legs' mounts
+/// 15° off, and the knees' axes turn them back. Each thigh's and shank's turn within 1° of the
+/// truth, and the heading and the pose error as in the other runs, from orientations and from
+/// raw readings.
+#[test]
+fn legs_turned_out_in_the_pose_are_turned_back_by_their_knees() {
+    let Some(py) = python() else {
+        return;
+    };
+    let mut runs = Vec::new();
+    for (motion, thighs, seed) in [
+        (&MOTIONS[0], ["LeftUpLeg", "RightUpLeg"], 61),
+        (&MOTIONS[3], ["lThigh", "rThigh"], 63),
+    ] {
+        let Some(bvh) = shared(motion.bvh) else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let held = dir.path().join("held.bvh");
+        run(Command::new(&py)
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/turn_joints_in_frame.py"))
+            .arg(&bvh)
+            .arg(&held)
+            .arg("0")
+            .arg(format!("{}=15,{}=-15", thighs[0], thighs[1])));
+        for raw in [false, true] {
+            let outcome = held_run(motion, seed + u64::from(raw), raw, false, Some(&held)).unwrap();
+            for (sensor, want) in [
+                ("l_thigh", 15.0),
+                ("l_shank", 15.0),
+                ("r_thigh", -15.0),
+                ("r_shank", -15.0),
+            ] {
+                let turn = outcome.turns.iter().find(|(s, _)| s == sensor).map(|t| t.1);
+                eprintln!("{} (raw: {raw}): {sensor} turned {turn:?}°", motion.name);
+                let turn = turn.unwrap_or(f64::NAN);
+                assert!(
+                    (turn - want).abs() < 1.0,
+                    "{}: {sensor} {turn}",
+                    motion.name
+                );
+            }
+            let (known, hinges) = (
+                outcome.known_legs_deg.unwrap(),
+                outcome.hinges_legs_deg.unwrap(),
+            );
+            eprintln!(
+                "{} (raw: {raw}): hips and knees {hinges:.2}° off, {known:.2}° with the true mounts",
+                motion.name
+            );
+            assert!(
+                hinges <= known + 1.0,
+                "{}: {hinges}° against {known}°",
+                motion.name
+            );
             runs.push((motion.name, outcome));
         }
     }
