@@ -55,7 +55,12 @@
 //!   `D_b = P2_i ⊗ P1_i⁻¹` and the sensor by `D_s = held2_i ⊗ held_i⁻¹` (both world-frame turns), so
 //!   `D_b = Y_i ⊗ D_s ⊗ Y_i⁻¹`: `Y_i` turns the horizontal part of `D_s`'s axis onto `D_b`'s. It
 //!   needs every such bone to turn about a non-vertical axis between the poses — the `skiing` pose
-//!   after `npose` turns every segment about the subject's left–right axis.
+//!   after `npose` turns every segment about the subject's left–right axis;
+//! - a knee or an elbow ([`SixDHinge`]): the turn `D` from the outer sensor's world into the inner
+//!   one's ([`super::hinge_axis`]); with a partner that has north, `Y = H ⊗ D` (outer) or
+//!   `H ⊗ D⁻¹` (inner); of two 6D sensors, the hinge's flexion folded in the inner sensor's world
+//!   (the outer's turned into it by `D`) faces it as [`heading_from_hinges`] faces a shared world:
+//!   `Y` for the inner, `Y ⊗ D` for the outer.
 
 use super::PipelineError;
 use super::sources::Sources;
@@ -117,6 +122,8 @@ pub enum Alignment {
     Mount,
     Forward,
     SecondPose,
+    /// By its knee's or elbow's flexion ([`SixDHinge`]).
+    Hinge,
     /// Could not be aligned: its bone turns about a wrong vertical axis.
     None,
 }
@@ -129,6 +136,7 @@ impl Alignment {
             Alignment::Mount => Some("mount"),
             Alignment::Forward => Some("forward"),
             Alignment::SecondPose => Some("second-pose"),
+            Alignment::Hinge => Some("hinge"),
             Alignment::None => Some("none"),
         }
     }
@@ -268,7 +276,8 @@ pub fn calibrate(
         &first.held,
         w,
     ));
-    let calibration = solve(sensors, &first, second.as_ref(), hinges, policy);
+    let six_d = six_d_hinges(rig, &pose_local, sensors, tracks, &first.held, w);
+    let calibration = solve_aligning(sensors, &first, second.as_ref(), hinges, &six_d, policy);
     warnings.extend(calibration.warnings.iter().cloned());
     Ok(calibration)
 }
@@ -908,6 +917,148 @@ fn hinge_samples(
         .collect()
 }
 
+/// A knee or an elbow with a sensor without a heading of its own ("6D") on one or both segments:
+/// the turn between the two sensors' worlds ([`super::hinge_axis`]) and, when the hinge flexed
+/// for [`MIN_FLEXED_S`], the turn `Y` about +Y that faces the inner sensor's world to +Z with the
+/// hinge's axis to the subject's left (as [`heading_from_hinges`] does a shared world's), with its
+/// axis's uncertainty, degrees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SixDHinge {
+    pub pair: HingePair,
+    pub outer_to_inner: UnitQuaternion<f64>,
+    pub facing: Option<(UnitQuaternion<f64>, f64)>,
+}
+
+impl SixDHinge {
+    /// `Y_k` for sensor `k` (`q_world_bone = Y_k ⊗ q_rig_sensor ⊗ q_bone_sensor⁻¹`) and its
+    /// uncertainty, if `k` is on this hinge: a sensor whose partner keeps the world's north is
+    /// turned into that world and the heading `H` applied to it (`north`: `H` and its
+    /// uncertainty, infinite when unknown), `H ⊗ D` (outer) or `H ⊗ D⁻¹` (inner); of two 6D
+    /// sensors, by the hinge's facing `Y`: `Y` (inner) or `Y ⊗ D` (outer).
+    fn align(
+        &self,
+        k: usize,
+        sensors: &[ResolvedSensor],
+        (h, u): (UnitQuaternion<f64>, f64),
+    ) -> Option<(UnitQuaternion<f64>, f64)> {
+        let (inner, outer) = (self.pair.inner, self.pair.outer);
+        let d = self.outer_to_inner;
+        if k == inner {
+            if sensors[outer].own_heading {
+                self.facing.filter(|(_, u)| !too_unsure(*u))
+            } else {
+                Some((h * d.inverse(), u))
+            }
+        } else if k == outer {
+            if sensors[inner].own_heading {
+                self.facing
+                    .filter(|(_, u)| !too_unsure(*u))
+                    .map(|(y, u)| (y * d, u))
+            } else {
+                Some((h * d, u))
+            }
+        } else {
+            None
+        }
+    }
+}
+
+/// The least horizontal fraction of a hinge's fitted axis at calibration for a 6D sensor to be
+/// aligned by it (the axis within 30° of horizontal).
+pub const HINGE_HORIZONTAL: f64 = 0.866;
+
+/// Two candidate turns between a hinge's worlds whose residuals differ by more than this, degrees,
+/// are told apart by them ([`six_d_hinges`]).
+pub const HINGE_RESIDUAL_APART_DEG: f64 = 1.0;
+
+/// Every knee and elbow ([`hinge_pairs`]) with a 6D sensor on it, over the [`HINGE_SEARCH_S`]
+/// after the window: the turn between its sensors' worlds, then its flexion folded in the inner
+/// sensor's world with the outer one's turned into it ([`SixDHinge`]).
+fn six_d_hinges(
+    rig: &Rig,
+    pose_local: &[UnitQuaternion<f64>],
+    sensors: &[ResolvedSensor],
+    tracks: &[Track<UnitQuaternion<f64>>],
+    held: &[UnitQuaternion<f64>],
+    window: &CalibrationWindow,
+) -> Vec<SixDHinge> {
+    let (start, end) = (window.end_s(), window.end_s() + HINGE_SEARCH_S);
+    hinge_pairs(rig, pose_local, sensors)
+        .into_iter()
+        .filter(|p| !p.usable(sensors))
+        .filter_map(|pair| {
+            let (i, o) = (pair.inner, pair.outer);
+            let samples: Vec<(f64, UnitQuaternion<f64>, UnitQuaternion<f64>)> = tracks[o]
+                .iter()
+                .filter(|(t, _)| *t > start && *t <= end)
+                .map(|(t, q)| (t, tracks[i].sample_at(t), *q))
+                .collect();
+            let mut fit = super::hinge_axis::HingeFit::new();
+            for (_, inner, outer) in &samples {
+                fit.push(inner, outer);
+            }
+            let fitted = fit.solve()?;
+            // A segment hanging down flexes about a horizontal axis; one that turns about a
+            // steeper one is not this hinge's flexion (a forearm twisting, say).
+            let horizontal = horizontal_fraction(&(held[i] * fitted.inner));
+            if horizontal < HINGE_HORIZONTAL {
+                return None;
+            }
+            let fitted = fitted.outer_to_inner;
+            // A hinge's axis that stays horizontal fits a half turn about the vertical as well:
+            // the outer segment turned round, its hinge flexing the other way as much as the inner
+            // segment swings — a knee that bends backwards. Of the two: the one a single axis
+            // explains better, when the other is clearly worse (an axis that tilts tells them
+            // apart); else the one whose hinge bends least the wrong way from the pose (Σ of the
+            // squared turns against its mean axis).
+            let half_turn =
+                UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI);
+            let sign = pair.flexes_about_left;
+            let fold = |d: UnitQuaternion<f64>| {
+                let (held_i, held_o) = (held[i].inverse(), held[o].inverse() * d.inverse());
+                let turns = samples
+                    .iter()
+                    .map(move |(t, inner, outer)| (*t, inner * held_i, d * outer * held_o));
+                let mut flexion = HingeFlexion::new(pair);
+                for (t, inner, outer) in turns.clone() {
+                    flexion.push(t, &inner, &outer);
+                }
+                let look = heading_from_flexion([&flexion])?;
+                let axis = *look.axes.iter().flatten().next()?;
+                let backwards: f64 = turns
+                    .map(|(_, inner, outer)| {
+                        let v = (inner.inverse() * outer).scaled_axis() * sign;
+                        v.dot(&axis.left).min(0.0).powi(2)
+                    })
+                    .sum();
+                Some((
+                    (fit.residual_deg_at(&d), backwards),
+                    d,
+                    (look.heading, axis.uncertainty_deg / horizontal),
+                ))
+            };
+            let candidates = [fitted, half_turn * fitted].map(fold);
+            let chosen = candidates.iter().flatten().min_by(|a, b| {
+                let ((ra, ba), (rb, bb)) = (a.0, b.0);
+                if (ra - rb).abs() > HINGE_RESIDUAL_APART_DEG {
+                    ra.total_cmp(&rb)
+                } else {
+                    ba.total_cmp(&bb)
+                }
+            });
+            let (d, facing) = match chosen {
+                Some((_, d, facing)) => (*d, Some(*facing)),
+                None => (fitted, None),
+            };
+            Some(SixDHinge {
+                pair,
+                outer_to_inner: d,
+                facing,
+            })
+        })
+        .collect()
+}
+
 /// Sign-aligned mean of unit quaternions (accurate for the small spread of a held pose).
 pub fn mean_rotation(samples: &[UnitQuaternion<f64>]) -> UnitQuaternion<f64> {
     let first = samples[0].into_inner();
@@ -1296,6 +1447,20 @@ pub fn solve(
     hinges: Option<HingeLook>,
     policy: HeadingPolicy,
 ) -> Calibration {
+    solve_aligning(sensors, first, second, hinges, &[], policy)
+}
+
+/// [`solve`], with the knees and elbows that sensors without a heading of their own drive
+/// ([`six_d_hinges`]) to align those sensors by, after a known mount, a declared forward axis and
+/// a second pose.
+pub fn solve_aligning(
+    sensors: &[ResolvedSensor],
+    first: &Held,
+    second: Option<&Held>,
+    hinges: Option<HingeLook>,
+    six_d: &[SixDHinge],
+    policy: HeadingPolicy,
+) -> Calibration {
     let (held, pose_world) = (&first.held, &first.pose_world);
     let mut warnings = Vec::new();
     let mut looks = Vec::new();
@@ -1406,12 +1571,19 @@ pub fn solve(
                 look.yaw
             })
         };
+        let by_hinge = || {
+            six_d
+                .iter()
+                .find_map(|h| h.align(i, sensors, (heading, heading_uncertainty_deg)))
+        };
         let (y, how) = if let Some(y) = by_mount {
             (Some(y), Alignment::Mount)
         } else if let Some(y) = by_forward() {
             (Some(y), Alignment::Forward)
         } else if let Some(y) = by_second_pose() {
             (Some(y), Alignment::SecondPose)
+        } else if let Some(y) = by_hinge() {
+            (Some(y), Alignment::Hinge)
         } else {
             (None, Alignment::None)
         };
@@ -1564,7 +1736,8 @@ fn unaligned_warning(
     let how = if had_second_pose {
         "give their mounts or a `forward` axis in the mapping, or hold a second pose in which their bones turn about a horizontal axis"
     } else {
-        "give their mounts or a `forward` axis in the mapping, or a second calibration pose (`calibration.second`, e.g. `skiing` after `npose`)"
+        "give their mounts or a `forward` axis in the mapping, or a second calibration pose (`calibration.second`, e.g. `skiing` after `npose`); \
+         a thigh, shank, upper arm or forearm is aligned by its knee or elbow flexing after calibration, when both segments hang down in the pose"
     };
     Some(format!(
         "sensor(s) {} have no magnetometer (6D): their heading is their own and could not be aligned, \
@@ -1873,6 +2046,79 @@ mod tests {
                 .iter()
                 .any(|w| w.contains("was the pose held the one declared"))
         );
+    }
+
+    /// Four leg sensors without a heading of their own, each in a world turned by its own yaw,
+    /// on the mixamo rig held in its rest pose (legs down): the knees' flexion aligns each one
+    /// (`hinge`), and every segment's world rotation is the true one through a walk that turns.
+    #[test]
+    fn six_d_legs_are_aligned_by_their_knees() {
+        let rig = crate::rig::load_rig("mixamo").unwrap();
+        let bones = ["LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg"];
+        let sensors: Vec<ResolvedSensor> = bones
+            .iter()
+            .map(|b| ResolvedSensor {
+                sensor: b.to_string(),
+                bone: rig.joint_index(b).unwrap(),
+                mount: Mount::Calibrate,
+                forward: None,
+                own_heading: true,
+            })
+            .collect();
+        let window = CalibrationWindow {
+            pose: PoseRef::Rest,
+            start_s: 0.0,
+            duration_s: 1.0,
+            second: None,
+        };
+        let mounts = [
+            rot(Vector3::new(1.0, 2.0, 3.0), 70.0),
+            rot(Vector3::new(-2.0, 1.0, 0.5), 120.0),
+            rot(Vector3::new(0.3, -1.0, 2.0), 40.0),
+            rot(Vector3::new(1.0, 1.0, -1.0), 160.0),
+        ];
+        let worlds = [10.0, -100.0, 170.0, 45.0].map(|deg| rot(Vector3::y(), deg));
+        let pose_world = rig.world_rotations(&held_pose(&rig, Some(&window)));
+        // The subject faces +Z; from 1.5 s it walks, turning 15°/s.
+        let bone = |i: usize, t: f64| {
+            let m = (t - 1.5).max(0.0);
+            let phase = if i < 2 { 0.0 } else { std::f64::consts::PI };
+            let body = rot(Vector3::y(), 15.0 * m);
+            let hip = rot(Vector3::x(), -25.0 * (3.0 * m + phase).sin());
+            let knee = rot(Vector3::x(), 30.0 * (1.0 - (3.0 * m).cos()));
+            let local = if i.is_multiple_of(2) { hip } else { hip * knee };
+            body * local * pose_world[sensors[i].bone]
+        };
+        let reading = |i: usize, t: f64| worlds[i] * bone(i, t) * mounts[i];
+        let times: Vec<f64> = (0..1500).map(|k| k as f64 * 0.01).collect();
+        let tracks: Vec<Track<UnitQuaternion<f64>>> = (0..4)
+            .map(|i| {
+                Track::new(
+                    times.clone(),
+                    times.iter().map(|t| reading(i, *t)).collect(),
+                )
+                .unwrap()
+            })
+            .collect();
+        let mut warnings = Vec::new();
+        let first = Held {
+            held: held_poses(&sensors, &tracks, 0.0, 1.0, &mut warnings),
+            pose_world: sensors.iter().map(|s| pose_world[s.bone]).collect(),
+        };
+        let pose_local = held_pose(&rig, Some(&window));
+        let six_d = six_d_hinges(&rig, &pose_local, &sensors, &tracks, &first.held, &window);
+        assert_eq!(six_d.len(), 2, "{six_d:?}");
+        let c = solve_aligning(&sensors, &first, None, None, &six_d, HeadingPolicy::Sensors);
+        assert!(c.alignment.iter().all(|a| *a == Alignment::Hinge), "{c:?}");
+        for i in 0..4 {
+            for t in [2.0, 5.0, 9.0, 14.0] {
+                let off = c
+                    .bone_world(i, &reading(i, t))
+                    .angle_to(&bone(i, t))
+                    .to_degrees();
+                assert!(off < 0.01, "{i} at {t}: {off}°");
+            }
+        }
     }
 
     /// Every source's look is weighed by its uncertainty; one that disagrees by more than three

@@ -18,6 +18,7 @@
 pub mod bone_world;
 pub mod calibrate;
 mod error;
+pub mod hinge_axis;
 pub mod legacy;
 mod options;
 pub(crate) mod parallel;

@@ -143,7 +143,12 @@ fn x_imu3_lower_body_converts_from_its_raw_files() {
 /// The qmt 16-sensor body (a MATLAB file, converted by tests/python/qmt_to_csv.py with scipy's
 /// loadmat) through `convert` with mappings/qmt_full_body_16imu_mixamo.json: raw readings only,
 /// no magnetometer, so every sensor is fused 6D with the default filter; the mapping knows no
-/// mounts and no second pose, so imubake says that the headings could not be aligned.
+/// mounts and no second pose. The thighs, shanks, upper arms and forearms are aligned by their
+/// knees and elbows (`hinge`); the torso, head, hands and feet cannot be, and imubake says so.
+/// With the limbs aligned the knees and elbows bend as joints do (the independent numpy/scipy
+/// joint angles of the output): neither knee bends backwards (5th percentile of flexion at least
+/// −10°; −46° and −86° before the hinges aligned them) nor either elbow (at least −12°; −17° and
+/// −34° before), and the knees' abduction stays small (RMS at most 12°; 20° and 19° before).
 #[test]
 fn qmt_full_body_converts_as_a_6d_body() {
     let Some(mat) = common::shared("fullbody/qmt_full_body_16imu.mat") else {
@@ -154,7 +159,7 @@ fn qmt_full_body_converts_as_a_6d_body() {
     };
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("qmt.csv");
-    let status = std::process::Command::new(python)
+    let status = std::process::Command::new(&python)
         .arg(common::repo_file("tests/python/qmt_to_csv.py"))
         .arg(&mat)
         .arg(&csv)
@@ -196,13 +201,49 @@ fn qmt_full_body_converts_as_a_6d_body() {
         !warnings.contains("moved by up to"),
         "the npose window is still: {warnings}"
     );
-    assert!(
-        sidecar["mapping"]["sensors"]
-            .as_array()
-            .unwrap()
+    for s in sidecar["mapping"]["sensors"].as_array().unwrap() {
+        let name = s["sensor"].as_str().unwrap();
+        let limb = ["upper_arm", "forearm", "upper_leg", "lower_leg"]
             .iter()
-            .all(|s| s["heading_aligned_by"] == "none")
-    );
+            .any(|l| name.starts_with(l));
+        let want = if limb { "hinge" } else { "none" };
+        assert_eq!(s["heading_aligned_by"], want, "{name}");
+    }
     let bvh = imubake::bvh::parse(&std::fs::read(out.join("qmt.bvh")).unwrap()).unwrap();
     assert_eq!(bvh.frame_count(), 3000);
+    let angles = dir.path().join("angles.csv");
+    let status = std::process::Command::new(python)
+        .arg(common::repo_file("tests/python/joint_angles.py"))
+        .arg(out.join("qmt.bvh"))
+        .arg(&angles)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let table = crate::joint_angles::read_table(&angles);
+    let percentile = |col: &str, p: f64| {
+        let mut v: Vec<f64> = table[col]
+            .iter()
+            .copied()
+            .filter(|x| x.is_finite())
+            .collect();
+        v.sort_by(f64::total_cmp);
+        v[((v.len() - 1) as f64 * p) as usize]
+    };
+    let rms = |col: &str| {
+        let v = &table[col];
+        (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+    };
+    for side in ["left", "right"] {
+        let (knee, elbow) = (
+            percentile(&format!("{side}_knee_flexion"), 0.05),
+            percentile(&format!("{side}_elbow_flexion"), 0.05),
+        );
+        let abduction = rms(&format!("{side}_knee_abduction"));
+        eprintln!(
+            "{side}: knee flexion p5 {knee:.1}°, elbow flexion p5 {elbow:.1}°, knee abduction RMS {abduction:.1}°"
+        );
+        assert!(knee >= -10.0, "{side} knee: {knee}");
+        assert!(elbow >= -12.0, "{side} elbow: {elbow}");
+        assert!(abduction <= 12.0, "{side} knee abduction: {abduction}");
+    }
 }

@@ -11,7 +11,7 @@ use std::path::Path;
 use std::process::Command;
 
 /// A CSV table: header and columns.
-fn read_table(path: &Path) -> BTreeMap<String, Vec<f64>> {
+pub(crate) fn read_table(path: &Path) -> BTreeMap<String, Vec<f64>> {
     let text = std::fs::read_to_string(path).unwrap();
     let mut lines = text.lines();
     let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
