@@ -679,7 +679,7 @@ pub struct SensorRecord {
     /// The world its orientation was in (a fused one is `enu`).
     pub world: World,
     /// For a sensor without a heading of its own (fused 6D): how calibration aligned it
-    /// (`mount`, `forward`, `second-pose`), or `none`.
+    /// (`mount`, `forward`, `second-pose`, `hinge`), or `none`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub heading_aligned_by: Option<&'static str>,
     /// A `calibrate` mount on a knee's or an elbow's segment, turned about the segment's long
