@@ -60,7 +60,10 @@
 //!   one's ([`super::hinge_axis`]); with a partner that has north, `Y = H ⊗ D` (outer) or
 //!   `H ⊗ D⁻¹` (inner); of two 6D sensors, the hinge's flexion folded in the inner sensor's world
 //!   (the outer's turned into it by `D`) faces it as [`heading_from_hinges`] faces a shared world:
-//!   `Y` for the inner, `Y ⊗ D` for the outer.
+//!   `Y` for the inner, `Y ⊗ D` for the outer. Unsure by `√(u_a² + u_D²)`: the hinge axis's
+//!   uncertainty over its horizontal fraction and `D`'s from the fit's curvature
+//!   ([`super::hinge_axis::HingeFit::delta_uncertainty_deg`]); taken only within
+//!   [`MAX_HEADING_UNCERTAINTY_DEG`].
 
 use super::PipelineError;
 use super::sources::Sources;
@@ -434,6 +437,9 @@ pub struct CalibrationCore {
     watch: Option<HingeWatch>,
 }
 
+/// A hinge's sample: the time (s) and the inner and the outer sensor's orientations (rig world).
+type HingeSample = (f64, UnitQuaternion<f64>, UnitQuaternion<f64>);
+
 /// A stream's hinges after calibration ([`CalibrationCore::refine`]).
 struct HingeWatch {
     /// The poses as held, to solve again with.
@@ -443,6 +449,13 @@ struct HingeWatch {
     second: Option<Held>,
     /// The usable pairs, each with its flexion so far.
     hinges: Vec<(HingePair, HingeFlexion)>,
+    /// The pairs with a 6D sensor, each with its samples so far (time, inner, outer; rig world,
+    /// at most one per [`SIX_D_SAMPLE_S`]): [`six_d_hinge`] needs the turn between the worlds
+    /// before it can fold the flexion, so it reads them again at each look.
+    six_d: Vec<(HingePair, Vec<HingeSample>)>,
+    /// What the stream took last: the hinges' heading and the 6D hinges (solved again with both).
+    taken_look: Option<HingeLook>,
+    taken_six_d: Vec<SixDHinge>,
     /// Each sensor's latest sample (time, rig world): the inner segment's, read at the outer's.
     latest: Vec<Option<(f64, UnitQuaternion<f64>)>>,
     /// Hinge samples count in (from_s, until_s].
@@ -464,6 +477,11 @@ pub const HINGE_PAIR_S: f64 = 0.1;
 /// A stream solves again with the hinges this often, seconds of stream time.
 pub const HINGE_LOOK_EVERY_S: f64 = 1.0;
 
+/// A stream keeps a 6D hinge's samples at most this often, seconds (125 Hz, so that a 100 Hz
+/// sensor's jittered samples all count: at most 7500 over [`HINGE_SEARCH_S`], whatever the
+/// sensors' rate).
+pub const SIX_D_SAMPLE_S: f64 = 0.008;
+
 /// A heading unsure by `now` degrees is surer than one by `before` ([`REFINED_WHEN`]).
 fn surer(before: f64, now: f64) -> bool {
     !too_unsure(now) && (too_unsure(before) || now <= REFINED_WHEN * before)
@@ -480,6 +498,11 @@ pub struct Refined {
     /// The uncertainty before (infinite when unknown) and now, degrees.
     pub before_uncertainty_deg: f64,
     pub uncertainty_deg: f64,
+    /// Whether the heading is the hinges' now (else only sensors were aligned).
+    pub heading_taken: bool,
+    /// The sensors without a heading of their own that their knees or elbows aligned now (or
+    /// aligned surer), each with its alignment's uncertainty, degrees.
+    pub aligned: Vec<(String, f64)>,
 }
 
 impl CalibrationCore {
@@ -645,7 +668,13 @@ impl CalibrationCore {
             .filter(|p| p.usable(&self.sensors))
             .map(|p| (*p, HingeFlexion::new(*p)))
             .collect();
-        if !hinges.is_empty() {
+        let six_d: Vec<_> = self
+            .pairs
+            .iter()
+            .filter(|p| !p.usable(&self.sensors))
+            .map(|p| (*p, Vec::new()))
+            .collect();
+        if !hinges.is_empty() || !six_d.is_empty() {
             self.watch = Some(HingeWatch {
                 // Every look, agreeing or not, kept or not: the surest they could combine to.
                 without_hinges_deg: self.result.as_ref().map_or(f64::INFINITY, |c| {
@@ -654,6 +683,9 @@ impl CalibrationCore {
                 first,
                 second,
                 hinges,
+                six_d,
+                taken_look: None,
+                taken_six_d: Vec::new(),
                 latest: vec![None; self.sensors.len()],
                 from_s: w.end_s(),
                 until_s: w.end_s() + HINGE_SEARCH_S,
@@ -667,7 +699,8 @@ impl CalibrationCore {
     /// segment read at its latest sample, at most [`HINGE_PAIR_S`] old), and once a
     /// [`HINGE_LOOK_EVERY_S`] the calibration solved again with the hinges' heading — which
     /// replaces the one in force when it is surer ([`REFINED_WHEN`]): then `Some`, and
-    /// [`Calibration::heading_from_s`] is `t`. Past [`HINGE_SEARCH_S`] after the window, as in a
+    /// [`Calibration::heading_from_s`] is `t` — and, while a 6D sensor on a hinge is unaligned,
+    /// with the 6D hinges ([`six_d_hinge`]): `Some` too when they align one. Past [`HINGE_SEARCH_S`] after the window, as in a
     /// whole take, the hinges are not watched any more.
     pub fn refine(&mut self, i: usize, t: f64, q: UnitQuaternion<f64>) -> Option<Refined> {
         let watch = self.watch.as_mut()?;
@@ -692,32 +725,90 @@ impl CalibrationCore {
                 );
             }
         }
+        for (pair, samples) in watch.six_d.iter_mut().filter(|(p, _)| p.outer == i) {
+            let due = samples
+                .last()
+                .is_none_or(|(last, _, _)| t - last >= SIX_D_SAMPLE_S);
+            if let Some((_, inner)) =
+                watch.latest[pair.inner].filter(|(ti, _)| due && t - ti <= HINGE_PAIR_S)
+            {
+                samples.push((t, inner, q));
+            }
+        }
         if t < watch.next_look_s {
             return None;
         }
         watch.next_look_s = t + HINGE_LOOK_EVERY_S;
-        let look = heading_from_flexion(watch.hinges.iter().map(|(_, f)| f))?;
         let current = self.result.as_ref().expect("watched once solved");
+        let look = heading_from_flexion(watch.hinges.iter().map(|(_, f)| f));
         // What the look can promise combined with the pose's own sources (when it agrees): solved
-        // again only when that is surer, so a stream whose heading is as sure as it gets does
-        // not allocate once a second (solving is never surer than this: a look that disagrees
-        // leaves one source out).
-        let promised = combined_uncertainty_deg([watch.without_hinges_deg, look.uncertainty_deg]);
-        if !surer(current.heading_uncertainty_deg, promised) {
+        // again for the heading only when that is surer, so a stream whose heading is as sure as
+        // it gets does not allocate once a second (solving is never surer than this: a look that
+        // disagrees leaves one source out).
+        let heading_due = look.is_some_and(|look| {
+            let promised =
+                combined_uncertainty_deg([watch.without_hinges_deg, look.uncertainty_deg]);
+            surer(current.heading_uncertainty_deg, promised)
+        });
+        // The 6D hinges are read again at each look, and solved with when one promises a sensor
+        // a surer alignment than it has (aligned where it was not, or REFINED_WHEN as unsure).
+        let six_d: Vec<SixDHinge> = watch
+            .six_d
+            .iter()
+            .filter_map(|(pair, samples)| six_d_hinge(*pair, samples, held))
+            .collect();
+        let north = (current.heading, current.heading_uncertainty_deg);
+        let align_due = six_d.iter().any(|h| {
+            [h.pair.inner, h.pair.outer].into_iter().any(|k| {
+                self.sensors[k].own_heading
+                    && h.align(k, &self.sensors, north)
+                        .is_some_and(|(_, u)| surer(current.axes_uncertainty_deg[k], u))
+            })
+        });
+        if !heading_due && !align_due {
             return None;
         }
-        let candidate = solve(
-            &self.sensors,
-            &watch.first,
-            watch.second.as_ref(),
-            Some(look),
-            HeadingPolicy::Sensors,
-        );
-        let (before, now) = (
-            current.heading_uncertainty_deg,
-            candidate.heading_uncertainty_deg,
-        );
-        if !surer(before, now) {
+        let solve_with = |look: Option<HingeLook>, six_d: &[SixDHinge]| {
+            solve_aligning(
+                &self.sensors,
+                &watch.first,
+                watch.second.as_ref(),
+                look,
+                six_d,
+                HeadingPolicy::Sensors,
+            )
+        };
+        let six_d = if align_due {
+            six_d
+        } else {
+            watch.taken_six_d.clone()
+        };
+        let hinges = if heading_due { look } else { watch.taken_look };
+        let candidate = solve_with(hinges, &six_d);
+        let before = current.heading_uncertainty_deg;
+        let heading_taken = heading_due && surer(before, candidate.heading_uncertainty_deg);
+        // A heading not surer is not taken, even with a sensor aligned better now.
+        let candidate = if heading_due && !heading_taken {
+            solve_with(watch.taken_look, &six_d)
+        } else {
+            candidate
+        };
+        let now = candidate.heading_uncertainty_deg;
+        let aligned: Vec<(String, f64)> = self
+            .sensors
+            .iter()
+            .enumerate()
+            .filter(|(k, s)| {
+                s.own_heading
+                    && candidate.alignment[*k] == Alignment::Hinge
+                    && surer(
+                        current.axes_uncertainty_deg[*k],
+                        candidate.axes_uncertainty_deg[*k],
+                    )
+            })
+            .map(|(k, s)| (s.sensor.clone(), candidate.axes_uncertainty_deg[k]))
+            .collect();
+        if !heading_taken && aligned.is_empty() {
             return None;
         }
         let refined = Refined {
@@ -726,9 +817,22 @@ impl CalibrationCore {
             heading_deg: candidate.heading.scaled_axis().y.to_degrees(),
             before_uncertainty_deg: before,
             uncertainty_deg: now,
+            heading_taken,
+            aligned,
+        };
+        if heading_taken {
+            watch.taken_look = hinges;
+        }
+        if !refined.aligned.is_empty() {
+            watch.taken_six_d = six_d;
+        }
+        let heading_from_s = if heading_taken {
+            Some(t)
+        } else {
+            current.heading_from_s
         };
         self.result = Some(Calibration {
-            heading_from_s: Some(t),
+            heading_from_s,
             ..candidate
         });
         Some(refined)
@@ -920,12 +1024,16 @@ fn hinge_samples(
 /// A knee or an elbow with a sensor without a heading of its own ("6D") on one or both segments:
 /// the turn between the two sensors' worlds ([`super::hinge_axis`]) and, when the hinge flexed
 /// for [`MIN_FLEXED_S`], the turn `Y` about +Y that faces the inner sensor's world to +Z with the
-/// hinge's axis to the subject's left (as [`heading_from_hinges`] does a shared world's), with its
-/// axis's uncertainty, degrees.
+/// hinge's axis to the subject's left (as [`heading_from_hinges`] does a shared world's), unsure
+/// by its axis's uncertainty (over the axis's horizontal fraction) and `D`'s, combined as
+/// independent (`√(u_a² + u_D²)`), degrees.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SixDHinge {
     pub pair: HingePair,
     pub outer_to_inner: UnitQuaternion<f64>,
+    /// How far off `D` may be, degrees ([`super::hinge_axis::HingeFit::delta_uncertainty_deg`],
+    /// one independent look per second the samples span).
+    pub outer_to_inner_deg: f64,
     pub facing: Option<(UnitQuaternion<f64>, f64)>,
 }
 
@@ -943,23 +1051,24 @@ impl SixDHinge {
     ) -> Option<(UnitQuaternion<f64>, f64)> {
         let (inner, outer) = (self.pair.inner, self.pair.outer);
         let d = self.outer_to_inner;
-        if k == inner {
+        let north = u.hypot(self.outer_to_inner_deg);
+        let y = if k == inner {
             if sensors[outer].own_heading {
-                self.facing.filter(|(_, u)| !too_unsure(*u))
+                self.facing?
             } else {
-                Some((h * d.inverse(), u))
+                (h * d.inverse(), north)
             }
         } else if k == outer {
             if sensors[inner].own_heading {
-                self.facing
-                    .filter(|(_, u)| !too_unsure(*u))
-                    .map(|(y, u)| (y * d, u))
+                self.facing.map(|(y, u)| (y * d, u))?
             } else {
-                Some((h * d, u))
+                (h * d, north)
             }
         } else {
-            None
-        }
+            return None;
+        };
+        // An alignment less sure than a heading may be is none (the sensor is warned about).
+        (!too_unsure(self.outer_to_inner_deg) && !too_unsure(y.1)).then_some(y)
     }
 }
 
@@ -972,8 +1081,7 @@ pub const HINGE_HORIZONTAL: f64 = 0.866;
 pub const HINGE_RESIDUAL_APART_DEG: f64 = 1.0;
 
 /// Every knee and elbow ([`hinge_pairs`]) with a 6D sensor on it, over the [`HINGE_SEARCH_S`]
-/// after the window: the turn between its sensors' worlds, then its flexion folded in the inner
-/// sensor's world with the outer one's turned into it ([`SixDHinge`]).
+/// after the window ([`six_d_hinge`]).
 fn six_d_hinges(
     rig: &Rig,
     pose_local: &[UnitQuaternion<f64>],
@@ -988,75 +1096,94 @@ fn six_d_hinges(
         .filter(|p| !p.usable(sensors))
         .filter_map(|pair| {
             let (i, o) = (pair.inner, pair.outer);
-            let samples: Vec<(f64, UnitQuaternion<f64>, UnitQuaternion<f64>)> = tracks[o]
+            let samples: Vec<HingeSample> = tracks[o]
                 .iter()
                 .filter(|(t, _)| *t > start && *t <= end)
                 .map(|(t, q)| (t, tracks[i].sample_at(t), *q))
                 .collect();
-            let mut fit = super::hinge_axis::HingeFit::new();
-            for (_, inner, outer) in &samples {
-                fit.push(inner, outer);
-            }
-            let fitted = fit.solve()?;
-            // A segment hanging down flexes about a horizontal axis; one that turns about a
-            // steeper one is not this hinge's flexion (a forearm twisting, say).
-            let horizontal = horizontal_fraction(&(held[i] * fitted.inner));
-            if horizontal < HINGE_HORIZONTAL {
-                return None;
-            }
-            let fitted = fitted.outer_to_inner;
-            // A hinge's axis that stays horizontal fits a half turn about the vertical as well:
-            // the outer segment turned round, its hinge flexing the other way as much as the inner
-            // segment swings — a knee that bends backwards. Of the two: the one a single axis
-            // explains better, when the other is clearly worse (an axis that tilts tells them
-            // apart); else the one whose hinge bends least the wrong way from the pose (Σ of the
-            // squared turns against its mean axis).
-            let half_turn =
-                UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI);
-            let sign = pair.flexes_about_left;
-            let fold = |d: UnitQuaternion<f64>| {
-                let (held_i, held_o) = (held[i].inverse(), held[o].inverse() * d.inverse());
-                let turns = samples
-                    .iter()
-                    .map(move |(t, inner, outer)| (*t, inner * held_i, d * outer * held_o));
-                let mut flexion = HingeFlexion::new(pair);
-                for (t, inner, outer) in turns.clone() {
-                    flexion.push(t, &inner, &outer);
-                }
-                let look = heading_from_flexion([&flexion])?;
-                let axis = *look.axes.iter().flatten().next()?;
-                let backwards: f64 = turns
-                    .map(|(_, inner, outer)| {
-                        let v = (inner.inverse() * outer).scaled_axis() * sign;
-                        v.dot(&axis.left).min(0.0).powi(2)
-                    })
-                    .sum();
-                Some((
-                    (fit.residual_deg_at(&d), backwards),
-                    d,
-                    (look.heading, axis.uncertainty_deg / horizontal),
-                ))
-            };
-            let candidates = [fitted, half_turn * fitted].map(fold);
-            let chosen = candidates.iter().flatten().min_by(|a, b| {
-                let ((ra, ba), (rb, bb)) = (a.0, b.0);
-                if (ra - rb).abs() > HINGE_RESIDUAL_APART_DEG {
-                    ra.total_cmp(&rb)
-                } else {
-                    ba.total_cmp(&bb)
-                }
-            });
-            let (d, facing) = match chosen {
-                Some((_, d, facing)) => (*d, Some(*facing)),
-                None => (fitted, None),
-            };
-            Some(SixDHinge {
-                pair,
-                outer_to_inner: d,
-                facing,
-            })
+            six_d_hinge(pair, &samples, held)
         })
         .collect()
+}
+
+/// A hinge with a 6D sensor from its samples after the window (time, inner, outer: rig world,
+/// each in its own) and the poses as held: the turn between its sensors' worlds, then its
+/// flexion folded in the inner sensor's world with the outer one's turned into it
+/// ([`SixDHinge`]). `None` without samples, or when the axis fitted is over 30° from horizontal
+/// at calibration ([`HINGE_HORIZONTAL`]).
+fn six_d_hinge(
+    pair: HingePair,
+    samples: &[HingeSample],
+    held: &[UnitQuaternion<f64>],
+) -> Option<SixDHinge> {
+    let (i, o) = (pair.inner, pair.outer);
+    let mut fit = super::hinge_axis::HingeFit::new();
+    for (_, inner, outer) in samples {
+        fit.push(inner, outer);
+    }
+    let fitted = fit.solve()?;
+    // A segment hanging down flexes about a horizontal axis; one that turns about a
+    // steeper one is not this hinge's flexion (a forearm twisting, say).
+    let horizontal = horizontal_fraction(&(held[i] * fitted.inner));
+    if horizontal < HINGE_HORIZONTAL {
+        return None;
+    }
+    let fitted = fitted.outer_to_inner;
+    // A hinge's axis that stays horizontal fits a half turn about the vertical as well:
+    // the outer segment turned round, its hinge flexing the other way as much as the inner
+    // segment swings — a knee that bends backwards. Of the two: the one a single axis
+    // explains better, when the other is clearly worse (an axis that tilts tells them
+    // apart); else the one whose hinge bends least the wrong way from the pose (Σ of the
+    // squared turns against its mean axis).
+    let half_turn = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI);
+    let sign = pair.flexes_about_left;
+    let fold = |d: UnitQuaternion<f64>| {
+        let (held_i, held_o) = (held[i].inverse(), held[o].inverse() * d.inverse());
+        let turns = samples
+            .iter()
+            .map(move |(t, inner, outer)| (*t, inner * held_i, d * outer * held_o));
+        let mut flexion = HingeFlexion::new(pair);
+        for (t, inner, outer) in turns.clone() {
+            flexion.push(t, &inner, &outer);
+        }
+        let look = heading_from_flexion([&flexion])?;
+        let axis = *look.axes.iter().flatten().next()?;
+        let backwards: f64 = turns
+            .map(|(_, inner, outer)| {
+                let v = (inner.inverse() * outer).scaled_axis() * sign;
+                v.dot(&axis.left).min(0.0).powi(2)
+            })
+            .sum();
+        Some((
+            (fit.residual_deg_at(&d), backwards),
+            d,
+            (look.heading, axis.uncertainty_deg / horizontal),
+        ))
+    };
+    let span_s = match (samples.first(), samples.last()) {
+        (Some(first), Some(last)) => last.0 - first.0,
+        _ => 0.0,
+    };
+    let candidates = [fitted, half_turn * fitted].map(fold);
+    let chosen = candidates.iter().flatten().min_by(|a, b| {
+        let ((ra, ba), (rb, bb)) = (a.0, b.0);
+        if (ra - rb).abs() > HINGE_RESIDUAL_APART_DEG {
+            ra.total_cmp(&rb)
+        } else {
+            ba.total_cmp(&bb)
+        }
+    });
+    let (d, facing) = match chosen {
+        Some((_, d, facing)) => (*d, Some(*facing)),
+        None => (fitted, None),
+    };
+    let outer_to_inner_deg = fit.delta_uncertainty_deg(&d, span_s);
+    Some(SixDHinge {
+        pair,
+        outer_to_inner: d,
+        outer_to_inner_deg,
+        facing: facing.map(|(y, u)| (y, u.hypot(outer_to_inner_deg))),
+    })
 }
 
 /// Sign-aligned mean of unit quaternions (accurate for the small spread of a held pose).

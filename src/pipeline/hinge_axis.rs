@@ -79,6 +79,27 @@ impl HingeFit {
         self.b(delta).singular_values().max()
     }
 
+    /// How far off `δ` may be, degrees, were the samples `independent` independent looks (of
+    /// all of them; the rest repeat them): from the least-squares cost `S(δ) = 2(N − σ₁(B(δ)))`
+    /// near its minimum, `var δ = 2 (S/N) / (S'' · independent/N)` (`S''` by central differences).
+    pub fn delta_uncertainty_deg(&self, d: &UnitQuaternion<f64>, independent: f64) -> f64 {
+        let n = self.samples as f64;
+        if n == 0.0 || independent <= 0.0 {
+            return f64::INFINITY;
+        }
+        let delta = d.scaled_axis().y;
+        let h = 1f64.to_radians();
+        let cost = |x: f64| 2.0 * (n - self.sigma(x));
+        let curvature = (cost(delta + h) - 2.0 * cost(delta) + cost(delta - h)) / (h * h);
+        if curvature <= 0.0 {
+            return f64::INFINITY;
+        }
+        let mean_sq = cost(delta).max(0.0) / n;
+        (2.0 * mean_sq / (curvature * independent / n))
+            .sqrt()
+            .to_degrees()
+    }
+
     /// The residual ([`HingeAxes::residual_deg`]) were the turn between the worlds `d`.
     pub fn residual_deg_at(&self, d: &UnitQuaternion<f64>) -> f64 {
         let n = self.samples.max(1) as f64;

@@ -384,19 +384,31 @@ impl PoseStream {
     /// heading, then stages 3 and 4.
     fn refine_and_feed(&mut self, sensor: usize, t: f64, q: UnitQuaternion<f64>) {
         if let Some(r) = self.calibration.refine(sensor, t, q) {
-            let before = if r.before_uncertainty_deg.is_finite() {
-                format!(
-                    "{:.1}° (unsure by {:.1}°)",
-                    r.before_deg, r.before_uncertainty_deg
-                )
-            } else {
-                "the sensors' north".to_string()
-            };
-            self.warnings.push(format!(
-                "from {:.3} s on, the heading is {:.1}° about +Y, unsure by {:.1}°, with the knees and \
-                 elbows flexing (was {before})",
-                r.at_s, r.heading_deg, r.uncertainty_deg
-            ));
+            if r.heading_taken {
+                let before = if r.before_uncertainty_deg.is_finite() {
+                    format!(
+                        "{:.1}° (unsure by {:.1}°)",
+                        r.before_deg, r.before_uncertainty_deg
+                    )
+                } else {
+                    "the sensors' north".to_string()
+                };
+                self.warnings.push(format!(
+                    "from {:.3} s on, the heading is {:.1}° about +Y, unsure by {:.1}°, with the knees and \
+                     elbows flexing (was {before})",
+                    r.at_s, r.heading_deg, r.uncertainty_deg
+                ));
+            }
+            if !r.aligned.is_empty() {
+                let names: Vec<&str> = r.aligned.iter().map(|(s, _)| s.as_str()).collect();
+                let worst = r.aligned.iter().map(|(_, u)| *u).fold(0.0, f64::max);
+                self.warnings.push(format!(
+                    "from {:.3} s on, sensor(s) {} (no magnetometer) are aligned by their knees and elbows flexing, \
+                     unsure by up to {worst:.1}°",
+                    r.at_s,
+                    names.join(", ")
+                ));
+            }
             self.note_heading();
         }
         self.feed(sensor, t, q);
