@@ -699,8 +699,9 @@ impl CalibrationCore {
     /// segment read at its latest sample, at most [`HINGE_PAIR_S`] old), and once a
     /// [`HINGE_LOOK_EVERY_S`] the calibration solved again with the hinges' heading — which
     /// replaces the one in force when it is surer ([`REFINED_WHEN`]): then `Some`, and
-    /// [`Calibration::heading_from_s`] is `t` — and, while a 6D sensor on a hinge is unaligned,
-    /// with the 6D hinges ([`six_d_hinge`]): `Some` too when they align one. Past [`HINGE_SEARCH_S`] after the window, as in a
+    /// [`Calibration::heading_from_s`] is `t` — and with the 6D hinges read again
+    /// ([`six_d_hinge`]): `Some` too when they align a sensor surer than it was (aligned where it
+    /// was not, or [`REFINED_WHEN`] as unsure). Past [`HINGE_SEARCH_S`] after the window, as in a
     /// whole take, the hinges are not watched any more.
     pub fn refine(&mut self, i: usize, t: f64, q: UnitQuaternion<f64>) -> Option<Refined> {
         let watch = self.watch.as_mut()?;
@@ -1051,24 +1052,29 @@ impl SixDHinge {
     ) -> Option<(UnitQuaternion<f64>, f64)> {
         let (inner, outer) = (self.pair.inner, self.pair.outer);
         let d = self.outer_to_inner;
+        // A turn between the worlds or a facing less sure than a heading may be aligns nothing
+        // (the sensor is warned about); turned into its partner's world, a sensor is as sure as
+        // the partner's heading too, whatever that is (`heading: sensors` keeps an unknown one).
+        if too_unsure(self.outer_to_inner_deg) {
+            return None;
+        }
+        let facing = || self.facing.filter(|(_, u)| !too_unsure(*u));
         let north = u.hypot(self.outer_to_inner_deg);
-        let y = if k == inner {
+        if k == inner {
             if sensors[outer].own_heading {
-                self.facing?
+                facing()
             } else {
-                (h * d.inverse(), north)
+                Some((h * d.inverse(), north))
             }
         } else if k == outer {
             if sensors[inner].own_heading {
-                self.facing.map(|(y, u)| (y * d, u))?
+                facing().map(|(y, u)| (y * d, u))
             } else {
-                (h * d, north)
+                Some((h * d, north))
             }
         } else {
-            return None;
-        };
-        // An alignment less sure than a heading may be is none (the sensor is warned about).
-        (!too_unsure(self.outer_to_inner_deg) && !too_unsure(y.1)).then_some(y)
+            None
+        }
     }
 }
 
@@ -2175,21 +2181,18 @@ mod tests {
         );
     }
 
-    /// Four leg sensors without a heading of their own, each in a world turned by its own yaw,
-    /// on the mixamo rig held in its rest pose (legs down): the knees' flexion aligns each one
-    /// (`hinge`), and every segment's world rotation is the true one through a walk that turns.
-    #[test]
-    fn six_d_legs_are_aligned_by_their_knees() {
+    /// The mixamo rig, `calibrate` sensors on its thighs and shanks (left, then right; each with
+    /// a heading of its own or not), and a window holding its rest pose (legs down) for 1 s.
+    fn mixamo_legs(own_heading: bool) -> (Rig, Vec<ResolvedSensor>, CalibrationWindow) {
         let rig = crate::rig::load_rig("mixamo").unwrap();
-        let bones = ["LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg"];
-        let sensors: Vec<ResolvedSensor> = bones
+        let sensors = ["LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg"]
             .iter()
             .map(|b| ResolvedSensor {
                 sensor: b.to_string(),
                 bone: rig.joint_index(b).unwrap(),
                 mount: Mount::Calibrate,
                 forward: None,
-                own_heading: true,
+                own_heading,
             })
             .collect();
         let window = CalibrationWindow {
@@ -2198,6 +2201,15 @@ mod tests {
             duration_s: 1.0,
             second: None,
         };
+        (rig, sensors, window)
+    }
+
+    /// Four leg sensors without a heading of their own, each in a world turned by its own yaw,
+    /// on the mixamo rig held in its rest pose (legs down): the knees' flexion aligns each one
+    /// (`hinge`), and every segment's world rotation is the true one through a walk that turns.
+    #[test]
+    fn six_d_legs_are_aligned_by_their_knees() {
+        let (rig, sensors, window) = mixamo_legs(true);
         let mounts = [
             rot(Vector3::new(1.0, 2.0, 3.0), 70.0),
             rot(Vector3::new(-2.0, 1.0, 0.5), 120.0),
@@ -2600,24 +2612,7 @@ mod tests {
     /// thigh: only the left knee gives an axis, so one leg's bound (8°) holds.
     #[test]
     fn a_stream_refines_the_heading_as_the_knees_flex() {
-        let rig = crate::rig::load_rig("mixamo").unwrap();
-        let bones = ["LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg"];
-        let sensors: Vec<ResolvedSensor> = bones
-            .iter()
-            .map(|b| ResolvedSensor {
-                sensor: b.to_string(),
-                bone: rig.joint_index(b).unwrap(),
-                mount: Mount::Calibrate,
-                forward: None,
-                own_heading: false,
-            })
-            .collect();
-        let window = CalibrationWindow {
-            pose: PoseRef::Rest,
-            start_s: 0.0,
-            duration_s: 1.0,
-            second: None,
-        };
+        let (rig, sensors, window) = mixamo_legs(false);
         let left = rot(Vector3::y(), 35.0) * Vector3::x();
         let run = |right_thigh_until_s: f64| {
             let mut core =

@@ -243,8 +243,8 @@ fn held_run(
             imubake::bvh::parse(&std::fs::read(out_dir.join("take.bvh")).unwrap()).unwrap();
         (sidecar, output)
     };
-    // The pose error of an output over the motion's frames after `after_s`, h.
-    let error_h = |output: &imubake::bvh::Bvh, after_s: f64| {
+    // An output's rig and its motion frames after `after_s`, each with the source's frame.
+    let motion_after = |output: &imubake::bvh::Bvh, after_s: f64| {
         let out_rig = output
             .to_rig("out", imubake::rig::LengthUnit::Metres)
             .unwrap();
@@ -252,6 +252,11 @@ fn held_run(
             .into_iter()
             .filter(|&(k, _)| k as f64 / FPS > after_s)
             .collect();
+        (out_rig, compared)
+    };
+    // The pose error of an output over the motion's frames after `after_s`, h.
+    let error_h = |output: &imubake::bvh::Bvh, after_s: f64| {
+        let (out_rig, compared) = motion_after(output, after_s);
         let sensors = truth["sensors"].as_array().unwrap();
         position_error_h(&py, &bvh, output, &out_rig, sensors, &compared)
     };
@@ -259,13 +264,7 @@ fn held_run(
     // source's by scipy's reader, degrees: what a joint angle or a hinge-limited rig reads, and
     // what a segment turned about its own long axis changes while leaving every joint in place.
     let legs_deg = |output: &imubake::bvh::Bvh, after_s: f64| {
-        let out_rig = output
-            .to_rig("out", imubake::rig::LengthUnit::Metres)
-            .unwrap();
-        let compared: Vec<_> = motion_frames(&truth, output.frame_count(), FPS)
-            .into_iter()
-            .filter(|&(k, _)| k as f64 / FPS > after_s)
-            .collect();
+        let (out_rig, compared) = motion_after(output, after_s);
         let sensors = truth["sensors"].as_array().unwrap();
         let joint_of = |sensor: &str| {
             let s = sensors.iter().find(|s| s["sensor"] == sensor).unwrap();
