@@ -271,15 +271,12 @@ pub fn calibrate(
         }),
     };
     let pose_local = held_pose(rig, Some(w));
-    let hinges = heading_from_hinges(&hinge_samples(
-        rig,
-        &pose_local,
-        sensors,
-        tracks,
-        &first.held,
-        w,
-    ));
-    let six_d = six_d_hinges(rig, &pose_local, sensors, tracks, &first.held, w);
+    let after = |usable| hinges_after(rig, &pose_local, sensors, tracks, w, usable);
+    let hinges = heading_from_hinges(&since_calibration(after(true), &first.held));
+    let six_d: Vec<SixDHinge> = after(false)
+        .iter()
+        .filter_map(|(pair, samples)| six_d_hinge(*pair, samples, &first.held))
+        .collect();
     let calibration = solve_aligning(sensors, &first, second.as_ref(), hinges, &six_d, policy);
     warnings.extend(calibration.warnings.iter().cloned());
     Ok(calibration)
@@ -992,32 +989,47 @@ impl HingePair {
     }
 }
 
-/// For every usable hinge ([`hinge_pairs`], [`HingePair::usable`]), its [`HingeSamples`] over the
-/// [`HINGE_SEARCH_S`] after the window.
-fn hinge_samples(
+/// Every hinge ([`hinge_pairs`]) that is [`HingePair::usable`] or not, as `usable` says, with its
+/// samples over the [`HINGE_SEARCH_S`] after the window: at each of the outer sensor's, the inner
+/// one's read at that time ([`HingeSample`]).
+fn hinges_after(
     rig: &Rig,
     pose_local: &[UnitQuaternion<f64>],
     sensors: &[ResolvedSensor],
     tracks: &[Track<UnitQuaternion<f64>>],
-    held: &[UnitQuaternion<f64>],
     window: &CalibrationWindow,
-) -> Vec<HingeSamples> {
-    let start = window.end_s();
-    let end = start + HINGE_SEARCH_S;
+    usable: bool,
+) -> Vec<(HingePair, Vec<HingeSample>)> {
+    let (start, end) = (window.end_s(), window.end_s() + HINGE_SEARCH_S);
     hinge_pairs(rig, pose_local, sensors)
         .into_iter()
-        .filter(|p| p.usable(sensors))
+        .filter(|p| p.usable(sensors) == usable)
         .map(|p| {
-            let (i, o) = (p.inner, p.outer);
-            let samples = tracks[o]
+            let samples = tracks[p.outer]
                 .iter()
-                .filter(|(time, _)| *time > start && *time <= end)
-                .map(|(time, q)| {
-                    let inner = tracks[i].sample_at(time);
-                    (time, inner * held[i].inverse(), q * held[o].inverse())
-                })
+                .filter(|(t, _)| *t > start && *t <= end)
+                .map(|(t, q)| (t, tracks[p.inner].sample_at(t), *q))
                 .collect();
-            HingeSamples { pair: p, samples }
+            (p, samples)
+        })
+        .collect()
+}
+
+/// Usable hinges' samples ([`hinges_after`]) as [`HingeSamples`]: each segment's rotation since
+/// calibration (`held`, the poses as held).
+fn since_calibration(
+    hinges: Vec<(HingePair, Vec<HingeSample>)>,
+    held: &[UnitQuaternion<f64>],
+) -> Vec<HingeSamples> {
+    hinges
+        .into_iter()
+        .map(|(pair, samples)| {
+            let (i, o) = (pair.inner, pair.outer);
+            let samples = samples
+                .into_iter()
+                .map(|(t, inner, outer)| (t, inner * held[i].inverse(), outer * held[o].inverse()))
+                .collect();
+            HingeSamples { pair, samples }
         })
         .collect()
 }
@@ -1083,34 +1095,8 @@ impl SixDHinge {
 pub const HINGE_HORIZONTAL: f64 = 0.866;
 
 /// Two candidate turns between a hinge's worlds whose residuals differ by more than this, degrees,
-/// are told apart by them ([`six_d_hinges`]).
+/// are told apart by them ([`six_d_hinge`]).
 pub const HINGE_RESIDUAL_APART_DEG: f64 = 1.0;
-
-/// Every knee and elbow ([`hinge_pairs`]) with a 6D sensor on it, over the [`HINGE_SEARCH_S`]
-/// after the window ([`six_d_hinge`]).
-fn six_d_hinges(
-    rig: &Rig,
-    pose_local: &[UnitQuaternion<f64>],
-    sensors: &[ResolvedSensor],
-    tracks: &[Track<UnitQuaternion<f64>>],
-    held: &[UnitQuaternion<f64>],
-    window: &CalibrationWindow,
-) -> Vec<SixDHinge> {
-    let (start, end) = (window.end_s(), window.end_s() + HINGE_SEARCH_S);
-    hinge_pairs(rig, pose_local, sensors)
-        .into_iter()
-        .filter(|p| !p.usable(sensors))
-        .filter_map(|pair| {
-            let (i, o) = (pair.inner, pair.outer);
-            let samples: Vec<HingeSample> = tracks[o]
-                .iter()
-                .filter(|(t, _)| *t > start && *t <= end)
-                .map(|(t, q)| (t, tracks[i].sample_at(t), *q))
-                .collect();
-            six_d_hinge(pair, &samples, held)
-        })
-        .collect()
-}
 
 /// A hinge with a 6D sensor from its samples after the window (time, inner, outer: rig world,
 /// each in its own) and the poses as held: the turn between its sensors' worlds, then its
@@ -1584,7 +1570,7 @@ pub fn solve(
 }
 
 /// [`solve`], with the knees and elbows that sensors without a heading of their own drive
-/// ([`six_d_hinges`]) to align those sensors by, after a known mount, a declared forward axis and
+/// ([`six_d_hinge`]) to align those sensors by, after a known mount, a declared forward axis and
 /// a second pose.
 pub fn solve_aligning(
     sensors: &[ResolvedSensor],
@@ -2245,7 +2231,11 @@ mod tests {
             pose_world: sensors.iter().map(|s| pose_world[s.bone]).collect(),
         };
         let pose_local = held_pose(&rig, Some(&window));
-        let six_d = six_d_hinges(&rig, &pose_local, &sensors, &tracks, &first.held, &window);
+        let six_d: Vec<SixDHinge> =
+            hinges_after(&rig, &pose_local, &sensors, &tracks, &window, false)
+                .iter()
+                .filter_map(|(pair, samples)| six_d_hinge(*pair, samples, &first.held))
+                .collect();
         assert_eq!(six_d.len(), 2, "{six_d:?}");
         let c = solve_aligning(&sensors, &first, None, None, &six_d, HeadingPolicy::Sensors);
         assert!(c.alignment.iter().all(|a| *a == Alignment::Hinge), "{c:?}");
