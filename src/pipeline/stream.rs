@@ -380,8 +380,9 @@ impl PoseStream {
         self.emit(None, on_pose);
     }
 
-    /// The hinges' look at the heading ([`CalibrationCore::refine`]), said when it changes the
-    /// heading, then stages 3 and 4.
+    /// The hinges' look at the heading and at the 6D sensors on them
+    /// ([`CalibrationCore::refine`]), said when it changes the heading or aligns a sensor, then
+    /// stages 3 and 4.
     fn refine_and_feed(&mut self, sensor: usize, t: f64, q: UnitQuaternion<f64>) {
         if let Some(r) = self.calibration.refine(sensor, t, q) {
             if r.heading_taken {
