@@ -14,9 +14,10 @@
 //! so for each `δ` the best axes are `B(δ)`'s first singular pair (with the same sign: both the
 //! same physical direction) and the residual is `2(N − σ₁(B(δ)))`; `δ` is the turn that maximises
 //! `σ₁`. Since `D = cos δ (I − yyᵀ) + sin δ [y]ₓ + yyᵀ`, `B(δ) = cos δ B_c + sin δ B_s + B_y`
-//! with three sums folded sample by sample. `δ` is known once the axis stands in more than
-//! one direction over the samples, or — the common case — it lies off the vertical: a hinge whose
-//! axis stays vertical (an elbow in a T-pose turning only in the horizontal plane) cannot tell it.
+//! with three sums folded sample by sample. A hinge whose axis stays vertical (an elbow in a T-pose
+//! turning only in the horizontal plane) cannot tell `δ`; one whose axis stays horizontal fits
+//! `δ + 180°` as well (both views flip), which only a tilt of the axis tells apart here — the
+//! caller decides between them ([`HingeFit::residual_deg_at`] gives each one's residual).
 //!
 //! This is the orientation form of the joint-axis identification of Seel, Raisch & Schauer (2014),
 //! whose gyroscope form `|ω_i × j_i| = |ω_o × j_o|` needs no orientations but leaves each axis's sign
