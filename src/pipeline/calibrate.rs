@@ -274,8 +274,10 @@ pub fn calibrate(
     let after = |usable| hinges_after(rig, &pose_local, sensors, tracks, w, usable);
     let hinges = heading_from_hinges(&since_calibration(after(true), &first.held));
     let six_d: Vec<SixDHinge> = after(false)
-        .iter()
-        .filter_map(|(pair, samples)| six_d_hinge(*pair, samples, &first.held))
+        .into_iter()
+        .filter_map(|(pair, samples)| {
+            six_d_hinge(pair, &samples.into_iter().collect(), &first.held)
+        })
         .collect();
     let calibration = solve_aligning(sensors, &first, second.as_ref(), hinges, &six_d, policy);
     warnings.extend(calibration.warnings.iter().cloned());
@@ -446,10 +448,10 @@ struct HingeWatch {
     second: Option<Held>,
     /// The usable pairs, each with its flexion so far.
     hinges: Vec<(HingePair, HingeFlexion)>,
-    /// The pairs with a 6D sensor, each with its samples so far (time, inner, outer; rig world,
-    /// at most one per [`SIX_D_SAMPLE_S`]): [`six_d_hinge`] needs the turn between the worlds
-    /// before it can fold the flexion, so it reads them again at each look.
-    six_d: Vec<(HingePair, Vec<HingeSample>)>,
+    /// The pairs with a 6D sensor, each with its samples so far (at most one per
+    /// [`SIX_D_SAMPLE_S`]): [`six_d_hinge`] needs the turn between the worlds before it can fold
+    /// the flexion, so it reads them again at each look.
+    six_d: Vec<(HingePair, SixDSamples)>,
     /// What the stream took last: the hinges' heading and the 6D hinges (solved again with both).
     taken_look: Option<HingeLook>,
     taken_six_d: Vec<SixDHinge>,
@@ -669,7 +671,7 @@ impl CalibrationCore {
             .pairs
             .iter()
             .filter(|p| !p.usable(&self.sensors))
-            .map(|p| (*p, Vec::new()))
+            .map(|p| (*p, SixDSamples::default()))
             .collect();
         if !hinges.is_empty() || !six_d.is_empty() {
             self.watch = Some(HingeWatch {
@@ -725,6 +727,7 @@ impl CalibrationCore {
         }
         for (pair, samples) in watch.six_d.iter_mut().filter(|(p, _)| p.outer == i) {
             let due = samples
+                .samples
                 .last()
                 .is_none_or(|(last, _, _)| t - last >= SIX_D_SAMPLE_S);
             if let Some((_, inner)) =
@@ -1098,21 +1101,43 @@ pub const HINGE_HORIZONTAL: f64 = 0.866;
 /// are told apart by them ([`six_d_hinge`]).
 pub const HINGE_RESIDUAL_APART_DEG: f64 = 1.0;
 
-/// A hinge with a 6D sensor from its samples after the window (time, inner, outer: rig world,
-/// each in its own) and the poses as held: the turn between its sensors' worlds, then its
-/// flexion folded in the inner sensor's world with the outer one's turned into it
-/// ([`SixDHinge`]). `None` without samples, or when the axis fitted is over 30° from horizontal
-/// at calibration ([`HINGE_HORIZONTAL`]).
+/// A 6D hinge's samples after the window (time, inner, outer: rig world, each in its own) and
+/// their [`HingeFit`](super::hinge_axis::HingeFit) sums, folded as they come (a stream reads the
+/// samples again at each look, the sums not).
+#[derive(Debug, Clone, Default)]
+struct SixDSamples {
+    fit: super::hinge_axis::HingeFit,
+    samples: Vec<HingeSample>,
+}
+
+impl SixDSamples {
+    fn push(&mut self, sample: HingeSample) {
+        self.fit.push(&sample.1, &sample.2);
+        self.samples.push(sample);
+    }
+}
+
+impl FromIterator<HingeSample> for SixDSamples {
+    fn from_iter<I: IntoIterator<Item = HingeSample>>(samples: I) -> SixDSamples {
+        let mut folded = SixDSamples::default();
+        for sample in samples {
+            folded.push(sample);
+        }
+        folded
+    }
+}
+
+/// A hinge with a 6D sensor from its samples after the window and the poses as held: the turn
+/// between its sensors' worlds, then its flexion folded in the inner sensor's world with the
+/// outer one's turned into it ([`SixDHinge`]). `None` without samples, or when the axis fitted is
+/// over 30° from horizontal at calibration ([`HINGE_HORIZONTAL`]).
 fn six_d_hinge(
     pair: HingePair,
-    samples: &[HingeSample],
+    hinge: &SixDSamples,
     held: &[UnitQuaternion<f64>],
 ) -> Option<SixDHinge> {
     let (i, o) = (pair.inner, pair.outer);
-    let mut fit = super::hinge_axis::HingeFit::new();
-    for (_, inner, outer) in samples {
-        fit.push(inner, outer);
-    }
+    let (fit, samples) = (&hinge.fit, &hinge.samples);
     let fitted = fit.solve()?;
     // A segment hanging down flexes about a horizontal axis; one that turns about a
     // steeper one is not this hinge's flexion (a forearm twisting, say).
@@ -1301,7 +1326,8 @@ pub struct HingeLook {
 }
 
 impl HingeLook {
-    /// A heading alone, no hinge's own axis (tests, and sources that give only that).
+    /// A heading alone, no hinge's own axis (tests).
+    #[cfg(test)]
     pub fn heading_only(heading: UnitQuaternion<f64>, uncertainty_deg: f64) -> HingeLook {
         HingeLook {
             heading,
@@ -2233,8 +2259,10 @@ mod tests {
         let pose_local = held_pose(&rig, Some(&window));
         let six_d: Vec<SixDHinge> =
             hinges_after(&rig, &pose_local, &sensors, &tracks, &window, false)
-                .iter()
-                .filter_map(|(pair, samples)| six_d_hinge(*pair, samples, &first.held))
+                .into_iter()
+                .filter_map(|(pair, samples)| {
+                    six_d_hinge(pair, &samples.into_iter().collect(), &first.held)
+                })
                 .collect();
         assert_eq!(six_d.len(), 2, "{six_d:?}");
         let c = solve_aligning(&sensors, &first, None, None, &six_d, HeadingPolicy::Sensors);
