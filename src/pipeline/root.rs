@@ -21,9 +21,15 @@
 //!   first), how fast it goes down over the ground (a foot on its way down has not landed: a
 //!   step down) — and blend smoothly between alike feet (double support), so a switch never jumps.
 //!   Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3 samples), which
-//!   seldom holds on real walks. When the legs throw the hips up faster than
-//!   [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off) the body is airborne: the hips keep
-//!   their horizontal velocity and follow gravity. While they still rise the legs may be
+//!   seldom holds on real walks. A foot's points are its joints, their end sites and a heel
+//!   (a skeleton has none: below the ankle at the sole's height, [`HEEL_BACK`] of the foot
+//!   behind it). The body leaves the ground in two ways: the legs throw the hips up faster than
+//!   [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off), or the feet fall [`FLIGHT_H`] below
+//!   the ballistic path the hips would have taken from the last frame the feet held them (the
+//!   ground only pushes: a body cannot be pulled down faster than gravity, so feet that would
+//!   pull it have left the ground — a run's flight, which rises too little for the first way).
+//!   Airborne, the hips keep the horizontal velocity of their last stance (its mean over up to
+//!   [`STANCE_S`]) and follow gravity. While they still rise the legs may be
 //!   unfolding under the push-off: a foot at its surface then carries them higher and faster
 //!   (the take-off velocity is the push's last, not the smoothed one at its start); on the way
 //!   down the first foot to reach its surface lands. Nothing goes below the planted foot's
@@ -107,6 +113,18 @@ pub const TAKEOFF_H_S: f64 = 0.45;
 pub const TAKEOFF_S: f64 = 0.04;
 /// Gravity in standing heights per s² (9.81 m/s² on a 1.75 m body).
 pub const GRAVITY_H_S2: f64 = 9.80665 / 1.75;
+/// The feet's support falling this far below the path the body would have followed had it left
+/// the ground (ballistic) is a flight, × h: the ground only pushes, so a body whose feet would
+/// pull it down faster than gravity has left it (a run's flight, which rises too little for
+/// [`TAKEOFF_H_S`]). Less is not a flight: a toe without a sensor stays rigid where a real one
+/// bends, and a toe about 0.04 h long bent 45° at a walk's push-off hides about 0.03 h.
+pub const FLIGHT_H: f64 = 0.03;
+/// … only after the feet have held the body this long, s (a run's stance lasts 0.1 s or more):
+/// the take-off's horizontal velocity is the hips' mean over it.
+pub const STANCE_S: f64 = 0.1;
+/// The heel behind the ankle, as a fraction of the foot's reach from its joint to its toes
+/// (the ankle stands about a quarter of the foot's length in front of the heel).
+pub const HEEL_BACK: f64 = 0.25;
 /// A foot whose lowest point is this close to its surface, × h …
 pub const PLANT_H: f64 = 0.01;
 /// … and slower than this over the ground, × h / s, is reported planted (released at twice
@@ -120,9 +138,10 @@ pub const MIN_FRAMES: usize = 3;
 struct Foot {
     /// The joints whose positions (and end sites) make the foot's contact points.
     joints: Vec<usize>,
-    /// The heel: the sole's point below the foot joint in the standing pose, in the foot joint's
-    /// frame — a skeleton has no heel joint, and without it a foot rolling onto its heel (the end
-    /// of a backwards step, a heel pivot) pivots on its ankle, which swings.
+    /// The heel: the sole's point below the foot joint in the standing pose, [`HEEL_BACK`] of the
+    /// foot's reach behind it, in the foot joint's frame — a skeleton has no heel joint, and
+    /// without it a foot rolling onto its heel (the end of a backwards step, a heel pivot) pivots
+    /// on its ankle, which swings.
     heel: Vector3<f64>,
 }
 
@@ -212,6 +231,12 @@ struct FeetState {
     level: [f64; 2],
     /// Frames the hips have been rising faster than a walk's.
     rising: usize,
+    /// Where the hips would be and how fast they would go (position, velocity) had the body left
+    /// the ground when the feet last held it at or above that path: ballistic since.
+    ballistic: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// The hips' positions over the last [`STANCE_S`] on the ground, oldest first; emptied in the
+    /// air.
+    stance: std::collections::VecDeque<Vector3<f64>>,
     /// The foot that carried most weight at the previous frame.
     dominant: usize,
     /// The hips' velocity over the last frames (smoothed), rig units per second.
@@ -339,7 +364,14 @@ impl RootCore {
                 let mut points = Vec::new();
                 foot_points(rig, &foot, &positions, &world, &mut points);
                 let sole = lowest(&points).1 - positions[f].y;
-                foot.heel = world[f].inverse() * Vector3::new(0.0, sole.min(0.0), 0.0);
+                // The foot's reach: its farthest point from the joint horizontally (the toes).
+                let reach = points
+                    .iter()
+                    .map(|p| Vector3::new(p.x - positions[f].x, 0.0, p.z - positions[f].z))
+                    .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))
+                    .unwrap_or_default();
+                foot.heel = world[f].inverse()
+                    * (Vector3::new(0.0, sole.min(0.0), 0.0) - HEEL_BACK * reach);
                 foot
             };
             [subtree(l), subtree(r)]
@@ -429,6 +461,8 @@ impl RootCore {
                 previous: now.map(<[Vector3<f64>]>::to_vec),
                 level: [self.floor; 2],
                 rising: 0,
+                ballistic: None,
+                stance: std::collections::VecDeque::new(),
                 dominant: usize::from(w_left < 0.5),
                 velocity: Vector3::zeros(),
                 airborne: false,
@@ -465,6 +499,7 @@ impl RootCore {
         let w_left = smooth(score(1) - score(0));
         let weights = [w_left, 1.0 - w_left];
         let before = state.hips;
+        let was_airborne = state.airborne;
         // A foot still pushing off under a take-off: airborne, but not off the ground yet.
         let mut pushing = false;
         if state.airborne {
@@ -516,6 +551,10 @@ impl RootCore {
             if state.rising as f64 * dt >= TAKEOFF_S {
                 state.airborne = true;
                 state.rising = 0;
+                if let Some(mean) = state.stance_velocity(dt) {
+                    state.velocity.x = mean.x;
+                    state.velocity.z = mean.z;
+                }
             }
         }
         // Nothing below the planted foot's surface.
@@ -527,10 +566,21 @@ impl RootCore {
                 state.airborne = false;
             }
         }
+        if !state.airborne && !was_airborne {
+            self.fall_behind_flight(before);
+        }
+        let frames = self.stance_frames();
+        let state = self.state.as_mut().expect("set above");
         let v = (state.hips - before) / dt;
-        if !state.airborne {
+        if state.airborne {
+            state.stance.clear();
+        } else {
             // Smoothed over about three frames: the velocity a take-off carries.
             state.velocity += (v - state.velocity) * (2.0 / 3.0);
+            state.stance.push_back(state.hips);
+            if state.stance.len() > frames + 1 {
+                state.stance.pop_front();
+            }
         }
         // Reported contacts: a foot near its surface and nearly still over the ground, engaged
         // and released at different thresholds so that noise does not flicker them.
@@ -556,6 +606,56 @@ impl RootCore {
             contact: state.planted,
             airborne: state.airborne && !pushing,
         }
+    }
+}
+
+impl FeetState {
+    /// The hips' mean velocity over the stance kept (up to [`STANCE_S`]), if it has two frames:
+    /// what a take-off carries horizontally, steadier than the last frames' (`velocity`), which
+    /// a push-off's foot rolling disturbs.
+    fn stance_velocity(&self, dt: f64) -> Option<Vector3<f64>> {
+        let (first, last) = (self.stance.front()?, self.stance.back()?);
+        let n = self.stance.len() - 1;
+        (n > 0).then(|| (last - first) / (n as f64 * dt))
+    }
+}
+
+impl RootCore {
+    /// Frames in [`STANCE_S`].
+    fn stance_frames(&self) -> usize {
+        (STANCE_S / self.dt).round().max(1.0) as usize
+    }
+
+    /// The flight the feet cannot see, on a frame the body was on the ground before and after:
+    /// where the feet put the hips this frame (`state.hips`) against the ballistic path from the
+    /// last frame they held them at or above it (`before`, the hips a frame ago, starts a new
+    /// one) — started only after a stance of [`STANCE_S`] with the hips going up, at their mean
+    /// horizontal velocity over it. Once the feet fall [`FLIGHT_H`] below that path the body is
+    /// airborne on it.
+    fn fall_behind_flight(&mut self, before: Vector3<f64>) {
+        let (h, dt, frames) = (self.height, self.dt, self.stance_frames());
+        let state = self.state.as_mut().expect("feet mode has a state");
+        let start = match state.ballistic {
+            Some(path) => Some(path),
+            None if state.stance.len() > frames && state.velocity.y > 0.0 => {
+                let mean = state.stance_velocity(dt).unwrap_or_default();
+                Some((before, Vector3::new(mean.x, state.velocity.y, mean.z)))
+            }
+            None => None,
+        };
+        state.ballistic = start.and_then(|(mut p, mut v)| {
+            v.y -= GRAVITY_H_S2 * h * dt;
+            p += v * dt;
+            let below = p.y - state.hips.y;
+            if below >= FLIGHT_H * h {
+                state.hips = p;
+                state.velocity = v;
+                state.airborne = true;
+                None
+            } else {
+                (below > 0.0).then_some((p, v))
+            }
+        });
     }
 }
 
@@ -779,6 +879,75 @@ mod tests {
                 );
                 assert!(!f.airborne);
             }
+        }
+    }
+
+    /// Both knees, flexed 40°, straighten to 15° over 0.3 s (too slowly for a hop's take-off,
+    /// [`TAKEOFF_H_S`]: the slow fold never flies) and then fold to 90° in `fold_s`: folded in
+    /// 0.1 s the feet rise
+    /// faster than a body can fall, so it has left the ground — airborne from then on, on a
+    /// parabola (second differences −g·dt², horizontally still), rising first, until a foot
+    /// reaches the floor. Folded over 1 s the body sinks on its feet and never leaves them.
+    #[test]
+    fn legs_folding_faster_than_gravity_leave_the_ground() {
+        let rig = load_rig("mixamo").unwrap();
+        let anatomy = Anatomy::of(&rig);
+        let knees = Side::BOTH.map(|s| anatomy.limb(s, Limb::Shank).unwrap());
+        let rest = vec![UnitQuaternion::identity(); rig.len()];
+        let dt = 1.0 / 60.0;
+        let pose = |knee_deg: f64| {
+            let mut pose = rest.clone();
+            for &k in &knees {
+                pose[k] =
+                    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), knee_deg.to_radians());
+            }
+            pose
+        };
+        for (fold_s, flies) in [(0.1, true), (1.0, false)] {
+            let mut core = RootCore::new(&rig, RootMode::Feet, dt, &rest);
+            let h = core.standing_height();
+            let mut knee = Vec::new();
+            knee.extend((0..30).map(|_| 40.0));
+            knee.extend((1..=18).map(|i| 40.0 - 25.0 * i as f64 / 18.0));
+            let fold_from = knee.len();
+            let fold = (fold_s / dt).round() as usize;
+            knee.extend((1..=fold).map(|i| 15.0 + 75.0 * i as f64 / fold as f64));
+            knee.extend((0..60).map(|_| 90.0));
+            let frames: Vec<RootFrame> = knee.iter().map(|&k| core.push(&pose(k))).collect();
+            let air: Vec<usize> = (0..frames.len()).filter(|&i| frames[i].airborne).collect();
+            if !flies {
+                assert!(
+                    air.is_empty(),
+                    "folded over {fold_s} s: airborne at {air:?}"
+                );
+                continue;
+            }
+            assert!(!air.is_empty(), "folded in {fold_s} s: never airborne");
+            let (first, last) = (air[0], air[air.len() - 1]);
+            assert!(first > fold_from && first <= fold_from + fold, "{air:?}");
+            assert_eq!(last - first + 1, air.len(), "one flight: {air:?}");
+            assert!(!frames[frames.len() - 1].airborne);
+            for i in first + 1..last {
+                let (a, b, c) = (
+                    frames[i - 1].position,
+                    frames[i].position,
+                    frames[i + 1].position,
+                );
+                let second = (c - 2.0 * b + a) / h;
+                assert!(
+                    (second.y + GRAVITY_H_S2 * dt * dt).abs() < 1e-9,
+                    "{i}: {second}"
+                );
+                assert!(
+                    second.x.abs() < 1e-9 && second.z.abs() < 1e-9,
+                    "{i}: {second}"
+                );
+            }
+            let peak = frames[first..=last]
+                .iter()
+                .map(|f| f.position.y)
+                .fold(f64::MIN, f64::max);
+            assert!(peak > frames[first - 1].position.y, "it rose first");
         }
     }
 }
