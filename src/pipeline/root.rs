@@ -234,6 +234,12 @@ struct FeetState {
     /// Where the hips would be and how fast they would go (position, velocity) had the body left
     /// the ground when the feet last held it at or above that path: ballistic since.
     ballistic: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// That path's positions at the frames since it started, oldest first (given out on the
+    /// feet).
+    path: Vec<Vector3<f64>>,
+    /// Frames before the last one that were found in the air only at it: their positions on the
+    /// path, oldest first (see [`RootCore::revised`]).
+    revised: Vec<Vector3<f64>>,
     /// The hips' positions over the last [`STANCE_S`] on the ground, oldest first; emptied in the
     /// air.
     stance: std::collections::VecDeque<Vector3<f64>>,
@@ -405,6 +411,15 @@ impl RootCore {
         self.height
     }
 
+    /// After a [`push`](Self::push): the frames before it that were found in the air only at it
+    /// (a flight the feet could not see until they fell behind its path), the root's positions
+    /// on that path, oldest first — the last `revised().len()` frames before the one pushed. A
+    /// whole take puts them there; a stream, which has sent those frames, cannot, and its body
+    /// jumps onto the path at most [`FLIGHT_H`] up (and by what the feet moved it aside).
+    pub fn revised(&self) -> &[Vector3<f64>] {
+        self.state.as_ref().map_or(&[], |s| &s.revised)
+    }
+
     /// The next frame, from its local rotations (one per joint).
     pub fn push(&mut self, local: &[UnitQuaternion<f64>]) -> RootFrame {
         match self.mode {
@@ -462,6 +477,8 @@ impl RootCore {
                 level: [self.floor; 2],
                 rising: 0,
                 ballistic: None,
+                path: Vec::new(),
+                revised: Vec::new(),
                 stance: std::collections::VecDeque::new(),
                 dominant: usize::from(w_left < 0.5),
                 velocity: Vector3::zeros(),
@@ -474,6 +491,7 @@ impl RootCore {
                 airborne: false,
             };
         };
+        state.revised.clear();
         // How each foot's previously lowest point (`pivot`) moved relative to the hips.
         let pivot = [0, 1].map(|f| lowest(&state.previous[f]).0);
         let mut moved = [Vector3::zeros(); 2];
@@ -639,6 +657,7 @@ impl RootCore {
             Some(path) => Some(path),
             None if state.stance.len() > frames && state.velocity.y > 0.0 => {
                 let mean = state.stance_velocity(dt).unwrap_or_default();
+                state.path.clear();
                 Some((before, Vector3::new(mean.x, state.velocity.y, mean.z)))
             }
             None => None,
@@ -651,9 +670,14 @@ impl RootCore {
                 state.hips = p;
                 state.velocity = v;
                 state.airborne = true;
+                // The frames since the path started were in the air too.
+                std::mem::swap(&mut state.revised, &mut state.path);
                 None
+            } else if below > 0.0 {
+                state.path.push(p);
+                Some((p, v))
             } else {
-                (below > 0.0).then_some((p, v))
+                None
             }
         });
     }
@@ -764,6 +788,17 @@ pub fn root_positions(
                     ],
                 ),
             };
+            // A flight found late: the frames since it started were in the air, on its path.
+            let revised = core.revised();
+            let from = out.len() - revised.len();
+            for (k, p) in (from..).zip(revised) {
+                out[k] = *p;
+                all[k] = RootFrame {
+                    position: *p,
+                    contact: [false; 2],
+                    airborne: true,
+                };
+            }
             out.push(f.position);
             all.push(f);
         }
@@ -887,7 +922,9 @@ mod tests {
     /// 0.1 s the feet rise
     /// faster than a body can fall, so it has left the ground — airborne from then on, on a
     /// parabola (second differences −g·dt², horizontally still), rising first, until a foot
-    /// reaches the floor. Folded over 1 s the body sinks on its feet and never leaves them.
+    /// reaches the floor. A stream jumps onto that path when it sees the flight; a whole take
+    /// ([`root_positions`]) puts the frames since the flight began on it. Folded over 1 s the body
+    /// sinks on its feet and never leaves them.
     #[test]
     fn legs_folding_faster_than_gravity_leave_the_ground() {
         let rig = load_rig("mixamo").unwrap();
@@ -948,6 +985,30 @@ mod tests {
                 .map(|f| f.position.y)
                 .fold(f64::MIN, f64::max);
             assert!(peak > frames[first - 1].position.y, "it rose first");
+            // A whole take puts the frames the stream gave out on the feet before it saw the
+            // flight on its path: the same flight from an earlier frame, one parabola throughout
+            // (the stream jumped onto it), the same positions before and after.
+            let local: Vec<Vec<UnitQuaternion<f64>>> = (0..rig.len())
+                .map(|j| knee.iter().map(|&k| pose(k)[j]).collect())
+                .collect();
+            let (positions, contacts) = root_positions(&rig, RootMode::Feet, &local, dt, &rest);
+            let flights = contacts.unwrap().airborne;
+            assert_eq!(flights.len(), 1, "{flights:?}");
+            let [start, end] = flights[0];
+            assert!(
+                start < first && start > fold_from && end == last,
+                "{flights:?} vs {air:?}"
+            );
+            for i in start + 1..end {
+                let second = (positions[i + 1] - 2.0 * positions[i] + positions[i - 1]) / h;
+                assert!(
+                    (second.y + GRAVITY_H_S2 * dt * dt).abs() < 1e-9,
+                    "{i}: {second}"
+                );
+            }
+            for i in (0..start).chain(first..frames.len()) {
+                assert!((positions[i] - frames[i].position).norm() < 1e-12, "{i}");
+            }
         }
     }
 }
