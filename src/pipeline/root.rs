@@ -119,8 +119,10 @@ pub const GRAVITY_H_S2: f64 = 9.80665 / 1.75;
 /// [`TAKEOFF_H_S`]). Less is not a flight: a toe without a sensor stays rigid where a real one
 /// bends, and a toe about 0.04 h long bent 45° at a walk's push-off hides about 0.03 h.
 pub const FLIGHT_H: f64 = 0.03;
-/// … only after the feet have held the body this long, s (a run's stance lasts 0.1 s or more):
-/// the take-off's horizontal velocity is the hips' mean over it.
+/// … only after the feet have held the body this long, s (a run's stance lasts 0.1 s or more),
+/// with the hips going up no faster than [`TAKEOFF_H_S`] (faster is a hop's, seen the first
+/// way, or the weight passing to a foot a step higher): the take-off's horizontal velocity is
+/// the hips' mean over the stance.
 pub const STANCE_S: f64 = 0.1;
 /// The heel behind the ankle, as a fraction of the foot's reach from its joint to its toes
 /// (the ankle stands about a quarter of the foot's length in front of the heel).
@@ -647,15 +649,18 @@ impl RootCore {
     /// The flight the feet cannot see, on a frame the body was on the ground before and after:
     /// where the feet put the hips this frame (`state.hips`) against the ballistic path from the
     /// last frame they held them at or above it (`before`, the hips a frame ago, starts a new
-    /// one) — started only after a stance of [`STANCE_S`] with the hips going up, at their mean
-    /// horizontal velocity over it. Once the feet fall [`FLIGHT_H`] below that path the body is
+    /// one) — started only after a stance of [`STANCE_S`] with the hips going up (no faster than
+    /// [`TAKEOFF_H_S`]), at their mean horizontal velocity over it. Once the feet fall [`FLIGHT_H`] below that path the body is
     /// airborne on it.
     fn fall_behind_flight(&mut self, before: Vector3<f64>) {
         let (h, dt, frames) = (self.height, self.dt, self.stance_frames());
         let state = self.state.as_mut().expect("feet mode has a state");
         let start = match state.ballistic {
             Some(path) => Some(path),
-            None if state.stance.len() > frames && state.velocity.y > 0.0 => {
+            None if state.stance.len() > frames
+                && state.velocity.y > 0.0
+                && state.velocity.y <= TAKEOFF_H_S * h =>
+            {
                 let mean = state.stance_velocity(dt).unwrap_or_default();
                 state.path.clear();
                 Some((before, Vector3::new(mean.x, state.velocity.y, mean.z)))

@@ -788,7 +788,7 @@ fn hops_never_sink_below_the_floor() {
 /// draws of the sensors' noise (seeds 3, 4, 5), `--root feet`: a run's flights rise too little
 /// for a hop's take-off, and were walked on the lower foot — 09_01's path 10.3–12.2 % off, its
 /// airborne frames found 0.00–0.27. The feet falling behind the ballistic path finds them.
-/// Measured 2026-12-05: 09_01 path 0.95 / 6.08 / 0.95 %, airborne recall 0.73 / 0.53 / 0.73;
+/// Measured 2026-12-05: 09_01 path 1.02 / 6.15 / 1.08 %, airborne recall 0.73 / 0.53 / 0.73;
 /// 02_03 0.97 / 0.90 / 0.95 %, 0.69 on each. Asserted: every path within 7 %, 09_01's airborne
 /// recall at least 0.45 on every seed and its mean path within 3 %.
 #[test]
