@@ -649,14 +649,14 @@ impl RootCore {
     /// The flight the feet cannot see, on a frame the body was on the ground before and after:
     /// where the feet put the hips this frame (`state.hips`) against the ballistic path from the
     /// last frame they held them at or above it (`before`, the hips a frame ago, starts a new
-    /// one) — started only after a stance of [`STANCE_S`] with the hips going up (no faster than
-    /// [`TAKEOFF_H_S`]), at their mean horizontal velocity over it. Once the feet fall [`FLIGHT_H`] below that path the body is
-    /// airborne on it.
+    /// one) — started only after a stance of [`STANCE_S`] with the hips going up (no faster
+    /// than [`TAKEOFF_H_S`]), at their mean horizontal velocity over it. Once the feet fall
+    /// [`FLIGHT_H`] below that path the body is airborne on it.
     fn fall_behind_flight(&mut self, before: Vector3<f64>) {
         let (h, dt, frames) = (self.height, self.dt, self.stance_frames());
         let state = self.state.as_mut().expect("feet mode has a state");
         let start = match state.ballistic {
-            Some(path) => Some(path),
+            Some(going) => Some(going),
             None if state.stance.len() > frames
                 && state.velocity.y > 0.0
                 && state.velocity.y <= TAKEOFF_H_S * h =>
