@@ -103,8 +103,13 @@ impl HingeFit {
 
     /// The residual ([`HingeAxes::residual_deg`]) were the turn between the worlds `d`.
     pub fn residual_deg_at(&self, d: &UnitQuaternion<f64>) -> f64 {
+        self.residual_deg(self.sigma(d.scaled_axis().y))
+    }
+
+    /// The residual for `B(δ)`'s first singular value `sigma`: the mean squared chord between
+    /// the views is 2(1 − σ₁/N), for small angles the angle squared.
+    fn residual_deg(&self, sigma: f64) -> f64 {
         let n = self.samples.max(1) as f64;
-        let sigma = self.sigma(d.scaled_axis().y);
         (2.0 * (1.0 - sigma / n)).max(0.0).sqrt().to_degrees()
     }
 
@@ -134,14 +139,11 @@ impl HingeFit {
         let (u, v_t) = (svd.u?, svd.v_t?);
         let first = svd.singular_values.imax();
         let sigma = svd.singular_values[first];
-        let n = self.samples as f64;
         Some(HingeAxes {
             outer_to_inner: UnitQuaternion::from_axis_angle(&Vector3::y_axis(), delta),
             inner: u.column(first).into_owned(),
             outer: v_t.row(first).transpose(),
-            // The mean squared chord between the views is 2(1 − σ₁/N); for small angles it is
-            // the angle squared.
-            residual_deg: (2.0 * (1.0 - sigma / n)).max(0.0).sqrt().to_degrees(),
+            residual_deg: self.residual_deg(sigma),
         })
     }
 }

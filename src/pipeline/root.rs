@@ -776,8 +776,7 @@ pub fn root_positions(
         .into_par_iter()
         .map(|start| measure_frames(&core, local, start..(start + block).min(frames)))
         .collect();
-    let mut out = Vec::with_capacity(frames);
-    let mut all = Vec::with_capacity(frames);
+    let mut all: Vec<RootFrame> = Vec::with_capacity(frames);
     for m in &measured {
         for (i, &low) in m.low.iter().enumerate() {
             let f = match &m.feet {
@@ -795,21 +794,19 @@ pub fn root_positions(
             };
             // A flight found late: the frames since it started were in the air, on its path.
             let revised = core.revised();
-            let from = out.len() - revised.len();
+            let from = all.len() - revised.len();
             for (k, p) in (from..).zip(revised) {
-                out[k] = *p;
                 all[k] = RootFrame {
                     position: *p,
                     contact: [false; 2],
                     airborne: true,
                 };
             }
-            out.push(f.position);
             all.push(f);
         }
     }
     let contacts = (core.mode() == RootMode::Feet).then(|| Contacts::from_frames(&all));
-    (out, contacts)
+    (all.iter().map(|f| f.position).collect(), contacts)
 }
 
 /// A block of frames as [`measure_feet`] (feet mode) or [`pose_relative_to_hips`] (ground mode)
