@@ -32,8 +32,11 @@ Engine conventions (README, "Batch export for game engines", gives the same with
           facing +Z). For FBX (Godot 4.3+ reads it with ufbx), the same settings as Unity: Y up,
           metres, identity armature node. No "-loop" suffix: mocap takes do not loop.
 
-For glb, the engine changes nothing: glTF fixes axes (Y up, +Z front) and units (metres) by spec,
-and every engine's glTF importer converts from them.
+For glb, the engine changes nothing in the file: glTF fixes axes (Y up, +Z front) and units
+(metres) by spec, and every engine's glTF importer converts from them. With `--engine godot`,
+`<stem>.glb.import` goes beside each .glb, as `imubake convert --engine godot` writes it: Godot 3's
+import settings baking the animation at the take's rate (the next whole rate above a fractional
+one) with its lossy optimizer off, read by Godot on its first import (docs/src/godot.md).
 
 Prints on stdout one line per take, `[3/12] walk_24: exported out/walk_24.fbx (285 frames at 24
 fps) in 0.84 s` or `[4/12] bad: FAILED: <reason>`, then a summary, and nothing else: Blender's own
@@ -308,6 +311,31 @@ def export_glb(pkg, imported, path, engine):
         raise RuntimeError("Blender's glTF exporter returned %s" % sorted(result))
 
 
+def godot_import_text(fps):
+    """Godot 3's `<file>.import` for a take at `fps` (a Fraction), the text imubake's own
+    `--engine godot` writes (src/write/godot.rs): the scene importer, materials kept in the scene,
+    the animation baked at the next whole rate at or above the take's, the optimizer off."""
+    bake = -(-fps.numerator // fps.denominator)
+    return (
+        '[remap]\n\nimporter="scene"\n\n[params]\n\n'
+        "materials/storage=0\nanimation/import=true\nanimation/fps=%d\n"
+        "animation/optimizer/enabled=false\n" % bake
+    )
+
+
+def write_atomic_text(path, text):
+    """`path` written under a hidden name in its folder and renamed into place."""
+    folder, base = os.path.split(path)
+    tmp = os.path.join(folder, ".%s.tmp" % base)
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
 def export_take(pkg, sidecar_path, out_path, fmt, engine):
     """Imports one take into a fresh empty scene and exports it to `out_path` atomically."""
     import bpy
@@ -338,6 +366,8 @@ def export_take(pkg, sidecar_path, out_path, fmt, engine):
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+    if fmt == "glb" and engine == "godot":
+        write_atomic_text(out_path + ".import", godot_import_text(Fraction(imported.take.fps)))
     return imported
 
 
@@ -372,6 +402,8 @@ def run(argv):
         say("note: glb is Godot's recommended format; FBX needs Godot 4.3+ (ufbx)")
     if args.engine and args.format == "glb":
         say("note: glb is the same for every engine (glTF is Y up, metres, +Z front by spec)")
+    if args.engine == "godot" and args.format == "glb":
+        say("note: <stem>.glb.import beside each: Godot 3 bakes at the take's rate, no optimizer")
     say("exporting %d take(s) from %s as %s" % (len(sidecars), args.takes, label))
 
     ext = "." + args.format

@@ -47,11 +47,13 @@ if [ ! -f "$CACHE/node/node_modules/gltf-validator/package.json" ] \
 fi
 
 # Debian's packages, installed once with apt: Chromium (the viewer's page runs in it, headless,
-# WebGL through SwiftShader; playwright's own browser download does not work here) and libhdf5
-# (the `hdf5` feature: APDM Opal files).
+# WebGL through SwiftShader; playwright's own browser download does not work here), libhdf5
+# (the `hdf5` feature: APDM Opal files) and Godot 3's headless editor (`--engine godot` takes
+# imported by Godot itself).
 APT_PACKAGES=""
 [ -x /usr/bin/chromium ] || APT_PACKAGES="$APT_PACKAGES chromium"
 [ -f /usr/include/hdf5/serial/hdf5.h ] || APT_PACKAGES="$APT_PACKAGES libhdf5-dev"
+[ -x /usr/bin/godot3-server ] || APT_PACKAGES="$APT_PACKAGES godot3-server"
 if [ -n "$APT_PACKAGES" ]; then
   step "installing Debian's$APT_PACKAGES (apt)"
   SUDO=""
@@ -61,6 +63,7 @@ if [ -n "$APT_PACKAGES" ]; then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $APT_PACKAGES >/dev/null
 fi
 /usr/bin/chromium --version
+echo "Godot $(/usr/bin/godot3-server --version)"
 
 # mdBook, to build the reference in docs/ (a broken book fails the run).
 MDBOOK_VERSION="0.5.4"

@@ -21,6 +21,7 @@
 //! causal: false          # run the take as a live stream would (causal smoothing, no look-ahead)
 //! bind_frame: false      # the rest pose as frame 0, the take from frame 1
 //! in_place: false        # a root joint at floor level carries the hips' horizontal motion
+//! engine: godot          # also write what the engine's importer reads beside each glb/gltf
 //! unsensed: interpolate  # joints between two sensors share the bend; or rest
 //! heading: estimate      # from the take, refused when unsure; or sensors (keep their north)
 //! sensor_rate_hz: 100    # the sensors' rate, for causal smoothing (else from their first samples)
@@ -88,6 +89,9 @@ pub struct Config {
     /// A `root` joint at floor level carries the hips' horizontal motion (a flag).
     #[serde(default)]
     pub in_place: bool,
+    /// A game engine whose import settings are written beside the glTF outputs.
+    #[serde(default, deserialize_with = "engine")]
+    pub engine: Option<crate::write::Engine>,
     /// What joints without a sensor do: interpolate (default) or rest.
     pub unsensed: Option<crate::pipeline::relative::Unsensed>,
     /// Where the heading comes from: estimate (the mapping's default) or sensors.
@@ -116,6 +120,10 @@ fn bvh_reference<'de, D: Deserializer<'de>>(
     d: D,
 ) -> Result<Option<crate::retarget::Reference>, D::Error> {
     parsed(d, "bvh_reference")
+}
+
+fn engine<'de, D: Deserializer<'de>>(d: D) -> Result<Option<crate::write::Engine>, D::Error> {
+    parsed(d, "engine")
 }
 
 fn fusion<'de, D: Deserializer<'de>>(d: D) -> Result<Option<crate::fusion::Fusion>, D::Error> {
@@ -291,6 +299,7 @@ impl Config {
             causal: self.causal || below.causal,
             bind_frame: self.bind_frame || below.bind_frame,
             in_place: self.in_place || below.in_place,
+            engine: self.engine.or(below.engine),
             unsensed: self.unsensed.or(below.unsensed),
             heading: self.heading.or(below.heading),
             sensor_rate_hz: self.sensor_rate_hz.or(below.sensor_rate_hz),
@@ -342,6 +351,7 @@ impl Config {
         s.pipeline.causal = self.causal;
         s.bind_frame = self.bind_frame;
         s.in_place = self.in_place;
+        s.engine = self.engine;
         if let Some(u) = self.unsensed {
             s.pipeline.unsensed = u;
         }
@@ -508,6 +518,24 @@ mod tests {
         assert_eq!(
             s.sensor_calibration,
             Some(std::path::PathBuf::from("other.yaml"))
+        );
+    }
+
+    #[test]
+    fn the_engine_is_a_setting() {
+        let c = Config::parse("engine: Godot\n").unwrap();
+        assert_eq!(
+            c.to_settings(WorldFrom::Config).engine,
+            Some(crate::write::Engine::Godot)
+        );
+        let e = Config::parse("engine: unity\n").unwrap_err();
+        assert!(
+            e.contains("`engine`") && e.contains("unknown engine `unity`"),
+            "{e}"
+        );
+        assert_eq!(
+            Config::default().to_settings(WorldFrom::Config).engine,
+            None
         );
     }
 

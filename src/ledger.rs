@@ -189,6 +189,8 @@ struct FingerprintInput<'a> {
     bind_frame: bool,
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     in_place: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    engine: Option<&'static str>,
     unsensed: &'static str,
     /// `--heading` / the config's, when set (the mapping's is in its hash).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -249,6 +251,7 @@ pub fn settings_fingerprint(plan: &Plan) -> String {
         causal: p.causal,
         bind_frame: settings.bind_frame,
         in_place: settings.in_place,
+        engine: settings.engine.map(|e| e.name()),
         unsensed: p.unsensed.label(),
         heading: p.heading.map(|h| h.label()),
         sensor_rate_hz: p.sensor_rate_hz,
@@ -654,6 +657,10 @@ mod tests {
         let mut other = settings.clone();
         other.pipeline.fps = "60".parse().unwrap();
         assert_ne!(fingerprint(&other), fingerprint(&settings));
+        // An engine's import files are outputs too: asking for them converts again.
+        let mut godot = settings.clone();
+        godot.engine = Some(crate::write::Engine::Godot);
+        assert_ne!(fingerprint(&godot), fingerprint(&settings));
         // Fusion asked for, and each of its parameters, change the outputs.
         let mut fused = settings.clone();
         fused.pipeline.fusion = Some("vqf".parse().unwrap());

@@ -105,6 +105,11 @@ pub struct SettingsArgs {
     /// their horizontal motion (the convention Unreal and Unity import)
     #[arg(long)]
     in_place: bool,
+    /// Also write what this game engine's importer reads beside each .glb and .gltf: godot
+    /// (Godot 3's `<file>.import`: the animation baked at the take's rate, no lossy optimizer;
+    /// the bone names Godot will show go into the sidecar)
+    #[arg(long, value_name = "ENGINE")]
+    engine: Option<imubake::write::Engine>,
     /// Correct raw readings before fusion with this sensor calibration file (written by
     /// `imubake calibrate-sensors`): gyro bias and gain, accelerometer, magnetometer, per sensor.
     #[arg(long, value_name = "FILE.yaml")]
@@ -193,6 +198,7 @@ impl SettingsArgs {
             root: self.root,
             bind_frame: self.bind_frame,
             in_place: self.in_place,
+            engine: self.engine,
             unsensed: self.unsensed,
             heading: self.heading,
             subject: self.subject.clone(),

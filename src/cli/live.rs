@@ -144,6 +144,9 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
     if convert.bind_frame {
         ignored.push("--bind-frame");
     }
+    if convert.engine.is_some() {
+        ignored.push("--engine");
+    }
     if convert.report {
         ignored.push("--report");
     }

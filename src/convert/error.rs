@@ -77,6 +77,12 @@ pub enum ConvertError {
     /// The bone map file is not a bone map.
     #[error(transparent)]
     BoneMapFile(crate::retarget::RetargetError),
+    /// An engine's import settings were asked for without an output that engine imports.
+    #[error(
+        "--engine {}: its import settings go beside a .glb or .gltf, and none is asked for (Godot 3 imports no BVH): add --format glb",
+        .0.name()
+    )]
+    EngineWithoutGltf(crate::write::Engine),
 }
 
 impl crate::diagnostic::Diagnostic for ConvertError {
@@ -107,7 +113,7 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             ConvertError::BoneMapFile(crate::retarget::RetargetError::BoneMap { path, .. }) => {
                 Some(path)
             }
-            ConvertError::BoneMapFile(_) => None,
+            ConvertError::BoneMapFile(_) | ConvertError::EngineWithoutGltf(_) => None,
         }
     }
 
@@ -141,6 +147,7 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             ConvertError::Source { .. }
             | ConvertError::Bvh { .. }
             | ConvertError::FrameTime { .. } => None,
+            ConvertError::EngineWithoutGltf(_) => Some("add --format glb (or gltf)"),
         }
     }
 }

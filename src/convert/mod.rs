@@ -122,6 +122,7 @@ fn convert_unclean(
         source,
         facts,
         transforms,
+        engine: plan.settings().engine,
     };
     write_take(job, conversion).map_err(|e| match e {
         TakeError::Output(e) => ConvertError::Output(e),

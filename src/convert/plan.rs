@@ -9,7 +9,7 @@
 
 use super::error::ConvertError;
 use super::hash::hex;
-use super::settings::{ConvertSettings, Layer};
+use super::settings::{ConvertSettings, Layer, OutputFormat};
 use crate::intrinsics::{IntrinsicsError, SensorCalibration};
 use crate::mapping::{LegacyMapping, Mapping, MappingError, MappingFile, parse_mapping};
 use crate::pipeline::PipelineOptions;
@@ -91,6 +91,14 @@ fn read_text<E>(path: &Path, fail: impl Fn(String) -> E) -> Result<(String, Stri
 impl Plan {
     /// Reads every file `settings` names and resolves the rig. Errors name the file at fault.
     pub fn resolve(settings: ConvertSettings) -> Result<Plan, ConvertError> {
+        if let Some(engine) = settings.engine
+            && !settings
+                .formats
+                .iter()
+                .any(|f| matches!(f, OutputFormat::Glb | OutputFormat::Gltf))
+        {
+            return Err(ConvertError::EngineWithoutGltf(engine));
+        }
         let mapping = match &settings.mapping {
             None => PlanMapping::ByName,
             Some(path) => {

@@ -5,7 +5,7 @@ use crate::pipeline::PipelineOptions;
 use crate::read::ReadOptions;
 use crate::rig::LengthUnit;
 use crate::world::WorldFrom;
-pub use crate::write::{Output, OutputFormat};
+pub use crate::write::{Engine, Output, OutputFormat};
 use std::path::PathBuf;
 
 /// Which settings layer gave a value.
@@ -74,6 +74,8 @@ pub struct ConvertSettings {
     pub bind_frame: bool,
     /// A `root` joint at floor level carries the hips' horizontal motion (`--in-place`).
     pub in_place: bool,
+    /// A game engine whose import settings are written beside the glTF outputs (`--engine`).
+    pub engine: Option<Engine>,
     /// Where `read.world` came from (`--world` or the config file), when it is set.
     pub world_from: Option<WorldFrom>,
     /// A BVH take: which of its joints drive which bones (the Blender add-on's bone-map JSON);
@@ -117,6 +119,7 @@ impl Default for ConvertSettings {
             report: false,
             bind_frame: false,
             in_place: false,
+            engine: None,
             world_from: None,
             bone_map: None,
             bvh_reference: crate::retarget::Reference::default(),

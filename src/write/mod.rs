@@ -6,6 +6,7 @@ pub mod bvh;
 pub mod decimal;
 pub mod error_report;
 pub mod gltf;
+pub mod godot;
 pub mod orientation_csv;
 pub mod report;
 pub mod sidecar;
@@ -108,6 +109,33 @@ impl std::str::FromStr for OutputFormat {
             _ => Err(format!(
                 "unknown output format `{s}`; expected bvh, glb or gltf"
             )),
+        }
+    }
+}
+
+/// A game engine whose import settings are written beside each take's glTF outputs
+/// (`--engine`, config `engine`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Engine {
+    /// Godot 3: `<file>.import` beside each `.glb`/`.gltf` ([`godot`]).
+    Godot,
+}
+
+impl Engine {
+    pub fn name(self) -> &'static str {
+        match self {
+            Engine::Godot => "godot",
+        }
+    }
+}
+
+impl std::str::FromStr for Engine {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "godot" => Ok(Engine::Godot),
+            _ => Err(format!("unknown engine `{s}`; expected godot")),
         }
     }
 }
@@ -226,13 +254,15 @@ impl Output {
 
 /// The extensions a take's outputs may have, the sidecar first (removed first: without it a take
 /// is not complete).
-pub const OUTPUT_SUFFIXES: [&str; 6] = [
+pub const OUTPUT_SUFFIXES: [&str; 8] = [
     ".imubake.json",
     ".bvh",
     ".glb",
     ".gltf",
     ".bin",
     ".report.html",
+    ".glb.import",
+    ".gltf.import",
 ];
 
 /// Removes every output of take `stem` in `dir`, the sidecar first; missing files are fine.

@@ -29,6 +29,9 @@ pub struct Sidecar {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub vendor_contacts: Option<VendorContactsRecord>,
     pub outputs: Vec<OutputRecord>,
+    /// What `--engine` wrote beside the outputs for the engine's importer; absent without it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub engine: Option<EngineRecord>,
     pub sensors: SensorSummaries,
     /// The first [`DroppedLines::KEEP`] dropped lines, whole ([`Sidecar::bound_dropped`]).
     pub dropped_lines: Vec<LineReport>,
@@ -115,6 +118,13 @@ pub struct SubjectRecord {
     #[serde(flatten)]
     pub subject: crate::rig::subject::Subject,
     pub standing_height_m: f64,
+}
+
+/// An engine's import files and what its importer will make of the take, tagged by `name`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "name", rename_all = "lowercase")]
+pub enum EngineRecord {
+    Godot(super::godot::GodotRecord),
 }
 
 #[derive(Debug, Clone, Serialize)]

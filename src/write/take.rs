@@ -3,10 +3,11 @@
 
 use super::report::{ReportInput, bone_series};
 use super::sidecar::{
-    PipelineRecord, RigRecord, Sidecar, SourceRecord, SubjectRecord, VendorContactsRecord,
+    EngineRecord, PipelineRecord, RigRecord, Sidecar, SourceRecord, SubjectRecord,
+    VendorContactsRecord,
 };
 use super::transforms::{OutputTransform, apply_all};
-use super::{Output, OutputError, OutputFormat, TakeOutputs, write_atomic};
+use super::{Engine, Output, OutputError, OutputFormat, TakeOutputs, write_atomic};
 use crate::anim::{Animation, AnimationError};
 use crate::inspect::SensorSummaries;
 use crate::mapping::MappingRecord;
@@ -115,6 +116,8 @@ pub struct TakeJob<'a> {
     pub facts: TakeFacts,
     /// Applied to the conversion, in order, before anything is written.
     pub transforms: Vec<OutputTransform>,
+    /// Whose import settings go beside the glTF outputs (`--engine`).
+    pub engine: Option<Engine>,
 }
 
 /// Why a take was not written.
@@ -147,6 +150,7 @@ pub fn write_take(job: TakeJob<'_>, conversion: Conversion) -> Result<WrittenTak
         source,
         facts,
         transforms,
+        engine,
     } = job;
     let conversion = apply_all(conversion, &transforms)?;
     let vendor_contacts = conversion
@@ -221,6 +225,12 @@ pub fn write_take(job: TakeJob<'_>, conversion: Conversion) -> Result<WrittenTak
         .collect();
     let outputs = written.into_iter().collect::<Result<Vec<_>, _>>()?;
     drop(take_outputs);
+    let engine = match engine {
+        None => None,
+        Some(Engine::Godot) => Some(EngineRecord::Godot(super::godot::write_imports(
+            out_dir, &outputs, animation,
+        )?)),
+    };
     let (dropped_lines, dropped_lines_total, dropped_lines_omitted) =
         Sidecar::bound_dropped(dropped_lines);
     let out_rig = animation.rig();
@@ -246,6 +256,7 @@ pub fn write_take(job: TakeJob<'_>, conversion: Conversion) -> Result<WrittenTak
         contacts: conversion.contacts,
         vendor_contacts,
         outputs,
+        engine,
         sensors: sensor_summaries,
         dropped_lines,
         dropped_lines_total,

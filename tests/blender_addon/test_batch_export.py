@@ -235,6 +235,9 @@ class BatchExportTest(unittest.TestCase):
             cls.runs[("fbx", engine)] = (out, run_batch(*args))
         out = os.path.join(cls.tmp, "glb")
         cls.runs[("glb", None)] = (out, run_batch(cls.takes, out, "--format", "glb"))
+        out = os.path.join(cls.tmp, "glb-godot")
+        cls.runs[("glb", "godot")] = (
+            out, run_batch(cls.takes, out, "--format", "glb", "--engine", "godot"))
         # The direct import's world-space heads: the reference for every export.
         ti = harness.submodule("take_import")
         cls.reference = {}
@@ -275,8 +278,11 @@ class BatchExportTest(unittest.TestCase):
                 self.assertNotIn("FAILED", run.stdout)
                 self.assertRegex(run.stdout, summary(4, 4, 0))
                 self.assert_only_script_lines(run)
-                # Exactly one file per take; no hidden temporary file left behind.
-                self.assertEqual(sorted(os.listdir(out)), sorted("%s.%s" % (n, fmt) for n in TAKES))
+                # Exactly one file per take (and Godot's import settings beside a glb for it); no
+                # hidden temporary file left behind.
+                suffixes = (fmt, fmt + ".import") if (fmt, engine) == ("glb", "godot") else (fmt,)
+                self.assertEqual(sorted(os.listdir(out)),
+                                 sorted("%s.%s" % (n, s) for n in TAKES for s in suffixes))
 
     def test_every_sample_take_exports(self):
         # Whatever the shared takes folder holds (other rigs too), exported for Unreal.
@@ -487,6 +493,22 @@ class BatchExportTest(unittest.TestCase):
                     self.assertEqual(len(times), frames)
                     # n / fps seconds, not n / (fps * fps_base) as Blender's exporter alone writes.
                     np.testing.assert_allclose(times, np.arange(frames) / float(fps), atol=2e-6, rtol=0)
+
+    def test_glb_for_godot_has_godots_import_settings_beside_it(self):
+        """Godot 3 bakes at the take's rate (the next whole one above 29.97: 30), optimizer off;
+        Godot itself imports such a file in tests/outputs/godot_import.rs."""
+        out, run = self.runs[("glb", "godot")]
+        self.assertEqual(run.returncode, 0, run.stdout)
+        for name in TAKES:
+            with self.subTest(take=name):
+                fps, _ = self.info[name]
+                text = open(os.path.join(out, name + ".glb.import")).read()
+                bake = -(-fps.numerator // fps.denominator)
+                self.assertEqual(bake, {"walk_2997": 30}.get(name, fps))
+                self.assertIn("\nanimation/fps=%d\n" % bake, text)
+                self.assertIn("\nanimation/optimizer/enabled=false\n", text)
+                self.assertTrue(text.startswith('[remap]\n\nimporter="scene"\n'), text)
+                self.assertFalse(os.path.exists(self.output("glb", None, name) + ".import"))
 
     def import_glb_as_take(self, glb, sidecar):
         """The exported glb with a copy of the take's sidecar pointing at it, imported by the

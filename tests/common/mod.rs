@@ -91,6 +91,19 @@ pub fn python_blender42() -> Option<PathBuf> {
     )
 }
 
+/// Godot 3's headless editor, `godot3-server` (Debian's package, installed by scripts/test.sh;
+/// `IMUBAKE_GODOT` overrides).
+pub fn godot() -> Option<PathBuf> {
+    let path = std::env::var_os("IMUBAKE_GODOT")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("/usr/bin/godot3-server"));
+    if path.is_file() {
+        Some(path)
+    } else {
+        missing(&format!("Godot 3 {} (run scripts/test.sh)", path.display()))
+    }
+}
+
 /// The compiled `imubake` binary.
 pub fn imubake_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_imubake"))

@@ -14,5 +14,6 @@ mod convert_outputs;
 mod decimal_format;
 mod euler_mathutils;
 mod gltf_writer;
+mod godot_import;
 mod legacy_mode;
 mod report_html;
