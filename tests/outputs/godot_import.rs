@@ -1,6 +1,6 @@
 //! Godot imports what `--engine godot` writes (issue 52): the bundled walk converted plain,
-//! `--in-place`, `--bind-frame`, at 60 fps and at 29.97 fps, each with the `.glb.import` imubake
-//! wrote, imported headless by Godot 3 (`godot3-server --export-pack`, which imports a project's
+//! `--in-place`, `--bind-frame`, at 60 fps, at 29.97 fps and as `.gltf`, each with the `.import`
+//! imubake wrote, imported headless by Godot 3 (`godot3-server --export-pack`, which imports a project's
 //! files and exits) and read back by tests/godot/inspect_takes.gd: the animation's length, each
 //! track's keys, the skeleton's bone names and every bone's world position at the take's frame
 //! times. Positions are checked against an independent forward kinematics of the GLB
@@ -25,39 +25,53 @@ exclude_filter=\"\"\nexport_path=\"\"\nscript_export_mode=1\nscript_encryption_k
 /// One conversion of the walk into its own folder of the project.
 struct Variant {
     dir: &'static str,
+    /// `glb` or `gltf`.
+    format: &'static str,
     args: &'static [&'static str],
     /// `--engine godot`; without it Godot imports with its own defaults.
     engine: bool,
 }
 
-const VARIANTS: [Variant; 6] = [
+const VARIANTS: [Variant; 7] = [
     Variant {
         dir: "plain",
+        format: "glb",
         args: &[],
         engine: true,
     },
     Variant {
         dir: "in_place",
+        format: "glb",
         args: &["--in-place"],
         engine: true,
     },
     Variant {
         dir: "bind_frame",
+        format: "glb",
         args: &["--bind-frame"],
         engine: true,
     },
     Variant {
         dir: "fps60",
+        format: "glb",
         args: &["--fps", "60"],
         engine: true,
     },
     Variant {
         dir: "ntsc",
+        format: "glb",
         args: &["--fps", "29.97"],
         engine: true,
     },
     Variant {
+        dir: "gltf",
+        format: "gltf",
+        args: &[],
+        engine: true,
+    },
+    Variant {
         dir: "godot_defaults",
+        format: "glb",
         args: &[],
         engine: false,
     },
@@ -177,7 +191,7 @@ fn godot_imports_each_take_at_its_rate_with_the_sidecars_bone_names() {
             .arg(common::repo_file("samples/walk.csv"))
             .arg("--mapping")
             .arg(common::repo_file("mappings/paper000_16imu_mixamo.json"))
-            .args(["--format", "glb", "--out"])
+            .args(["--format", v.format, "--out"])
             .arg(project.join(v.dir))
             .args(v.args);
         if v.engine {
@@ -185,7 +199,9 @@ fn godot_imports_each_take_at_its_rate_with_the_sidecars_bone_names() {
         }
         run(&mut cmd, &format!("imubake convert ({})", v.dir));
         let sidecar = read_json(&project.join(v.dir).join("walk.imubake.json"));
-        let import = project.join(v.dir).join("walk.glb.import");
+        let import = project
+            .join(v.dir)
+            .join(format!("walk.{}.import", v.format));
         assert_eq!(import.is_file(), v.engine, "{}", import.display());
         sidecars.push(sidecar);
     }
@@ -229,11 +245,11 @@ fn godot_imports_each_take_at_its_rate_with_the_sidecars_bone_names() {
 
     let request: Vec<Value> = VARIANTS
         .iter()
-        .map(|v| v.dir)
-        .chain(["names", "blender"])
+        .map(|v| format!("{}/walk.{}", v.dir, v.format))
+        .chain(["names/walk.glb".into(), "blender/walk.glb".into()])
         .zip(sidecars.iter().chain([&sidecars[0], &sidecars[0]]))
-        .map(|(dir, sidecar)| {
-            serde_json::json!({"file": format!("res://{dir}/walk.glb"), "times": frame_times(sidecar)})
+        .map(|(file, sidecar)| {
+            serde_json::json!({"file": format!("res://{file}"), "times": frame_times(sidecar)})
         })
         .collect();
     std::fs::write(
@@ -278,7 +294,7 @@ fn godot_imports_each_take_at_its_rate_with_the_sidecars_bone_names() {
             Command::new(&py)
                 .arg(common::repo_file("tests/python/glb_positions.py"))
                 .arg("positions")
-                .arg(project.join(v.dir).join("walk.glb"))
+                .arg(project.join(v.dir).join(format!("walk.{}", v.format)))
                 .arg(&times),
             "glb_positions.py positions",
         ))
@@ -321,7 +337,7 @@ fn godot_imports_each_take_at_its_rate_with_the_sidecars_bone_names() {
         assert_eq!(godot_names, sidecar_names, "{label}: bone names");
         assert_eq!(
             sidecar["engine"]["import_files"],
-            serde_json::json!(["walk.glb.import"])
+            serde_json::json!([format!("walk.{}.import", v.format)])
         );
         let back = |godot: &str| -> String {
             recorded

@@ -6,12 +6,13 @@ says (LINEAR: lerp, slerp for rotations; STEP; held before the first and after t
 world transforms composed down the scene's hierarchy.
 
 usage:
-  glb_positions.py positions FILE.glb TIMES.json   (TIMES.json: a JSON list of seconds)
+  glb_positions.py positions FILE.glb|FILE.gltf TIMES.json   (TIMES.json: a JSON list of seconds)
       prints JSON {"nodes": {name: [[x, y, z] per time]}, "duration_s": last key time}
   glb_positions.py rename FILE.glb OUT.glb NAMES.json   (NAMES.json: {old name: new name})
       writes a copy whose nodes are renamed (the JSON chunk rewritten, padded to 4 bytes)
 """
 import json
+import os
 import struct
 import sys
 
@@ -20,6 +21,10 @@ from scipy.spatial.transform import Rotation, Slerp
 
 
 def read_glb(path):
+    if path.endswith(".gltf"):  # JSON, one buffer in a file beside it
+        doc = json.load(open(path, encoding="utf-8"))
+        uri = doc["buffers"][0]["uri"]
+        return doc, open(os.path.join(os.path.dirname(path), uri), "rb").read()
     data = open(path, "rb").read()
     magic, version, length = struct.unpack_from("<III", data, 0)
     assert magic == 0x46546C67 and version == 2 and length == len(data), "not a GLB 2.0"
