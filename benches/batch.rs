@@ -57,7 +57,7 @@ fn main() {
     println!("before: {}", HostProbe::measure());
     let never_stop = AtomicBool::new(false);
     let batch = |out: &Path, jobs: usize| {
-        run(&library, out, &plan, jobs, &never_stop, &|_| {}).expect("batch")
+        run(&library, out, None, &plan, jobs, &never_stop, &|_| {}).expect("batch")
     };
     let mut throughput = Vec::new();
     // 0 is the default: one job per core.

@@ -48,12 +48,15 @@ fi
 
 # Debian's packages, installed once with apt: Chromium (the viewer's page runs in it, headless,
 # WebGL through SwiftShader; playwright's own browser download does not work here), libhdf5
-# (the `hdf5` feature: APDM Opal files) and Godot 3's headless editor (`--engine godot` takes
-# imported by Godot itself).
+# (the `hdf5` feature: APDM Opal files), Godot 3's headless editor (`--engine godot` takes
+# imported by Godot itself), and Slurm with MUNGE (the documented array job run on a one-node
+# cluster that the test starts under a temporary folder; no service is started here).
 APT_PACKAGES=""
 [ -x /usr/bin/chromium ] || APT_PACKAGES="$APT_PACKAGES chromium"
 [ -f /usr/include/hdf5/serial/hdf5.h ] || APT_PACKAGES="$APT_PACKAGES libhdf5-dev"
 [ -x /usr/bin/godot3-server ] || APT_PACKAGES="$APT_PACKAGES godot3-server"
+[ -x /usr/sbin/slurmctld ] || APT_PACKAGES="$APT_PACKAGES slurm-wlm"
+[ -x /usr/sbin/munged ] || APT_PACKAGES="$APT_PACKAGES munge"
 if [ -n "$APT_PACKAGES" ]; then
   step "installing Debian's$APT_PACKAGES (apt)"
   SUDO=""
@@ -64,6 +67,7 @@ if [ -n "$APT_PACKAGES" ]; then
 fi
 /usr/bin/chromium --version
 echo "Godot $(/usr/bin/godot3-server --version)"
+/usr/sbin/slurmctld -V
 
 # mdBook, to build the reference in docs/ (a broken book fails the run).
 MDBOOK_VERSION="0.5.4"

@@ -9,8 +9,15 @@
 //! capture are byte-identical.
 //!
 //! Appends are atomic per line: the file is opened for appending, each line is written with one
-//! `write_all` and synced. Several processes may append to the same ledger on a local file system
+//! `write_all` and synced. Several processes may append to the same file on a local file system
 //! (O_APPEND); reading ignores a torn last line (a crash mid-write) and counts it.
+//!
+//! Shared storage (NFS) makes no append atomic across machines, so a shard of a batch appends to
+//! a file of its own, `ledger.shard-I-of-N.jsonl` beside `ledger.jsonl` (the file of unsharded
+//! runs and `watch`), and every reader reads them all: within a file the later line wins, across
+//! files the later recorded one (`recorded_at_ns`, else `converted_at_ns`; a tie goes to the file
+//! whose name sorts last). Ledgers of one file, written before shards had their own, read as
+//! before.
 
 use crate::convert::Plan;
 use crate::convert::plan::PlanMapping;
@@ -23,9 +30,26 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::{SystemTime, UNIX_EPOCH};
 
-/// The ledger's path under an output root.
+/// The ledger's folder under an output root.
+pub fn ledger_dir(out_root: &Path) -> PathBuf {
+    out_root.join(".imubake")
+}
+
+/// The ledger file of unsharded runs and `watch` under an output root.
 pub fn ledger_path(out_root: &Path) -> PathBuf {
-    out_root.join(".imubake").join("ledger.jsonl")
+    ledger_dir(out_root).join("ledger.jsonl")
+}
+
+/// The ledger file shard `index` of `count` appends to: its own, so that shards on several
+/// machines never append to one file.
+pub fn shard_ledger_name(index: usize, count: usize) -> String {
+    format!("ledger.shard-{index}-of-{count}.jsonl")
+}
+
+/// Whether a file name in the ledger's folder is a ledger file (`ledger.jsonl`,
+/// `ledger.shard-I-of-N.jsonl`).
+fn is_ledger_file(name: &str) -> bool {
+    name == "ledger.jsonl" || (name.starts_with("ledger.shard-") && name.ends_with(".jsonl"))
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -58,6 +82,10 @@ pub struct LedgerEntry {
     pub ctime_ns: Option<u64>,
     /// When the conversion started, ns since the Unix epoch.
     pub converted_at_ns: u64,
+    /// When the line was appended, ns since the Unix epoch (set by [`Ledger::append_shared`]):
+    /// what orders entries of one source across ledger files. Absent in lines written before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recorded_at_ns: Option<u64>,
     #[serde(default)]
     pub imubake_version: String,
 }
@@ -287,7 +315,7 @@ pub enum Freshness {
     Current,
     /// As `Current`, but the size or mtime changed with the content the same (a touched file):
     /// the entry to append so the next check is cheap again.
-    CurrentTouched(LedgerEntry),
+    CurrentTouched(Box<LedgerEntry>),
     /// Never converted, failed last time, settings or content changed, or an output is missing.
     Stale,
 }
@@ -298,7 +326,8 @@ impl Freshness {
     }
 }
 
-/// The ledger of one output root: the latest entry per source, and the file to append to.
+/// The ledger of one output root: the latest entry per source over all its files, and the file
+/// this process appends to.
 #[derive(Debug)]
 pub struct Ledger {
     out_root: PathBuf,
@@ -309,32 +338,63 @@ pub struct Ledger {
 }
 
 impl Ledger {
-    /// Loads `<out_root>/.imubake/ledger.jsonl` (an empty ledger when it does not exist yet).
-    /// Lines that do not parse (a torn last line after a crash) are ignored and counted.
+    /// Loads every ledger file of `out_root` (an empty ledger when there is none yet), to append
+    /// to `ledger.jsonl`. Lines that do not parse (a torn last line after a crash) are ignored
+    /// and counted.
     pub fn load(out_root: &Path) -> io::Result<Ledger> {
-        let path = ledger_path(out_root);
-        let mut latest = HashMap::new();
+        Ledger::load_appending_to(out_root, "ledger.jsonl")
+    }
+
+    /// [`Ledger::load`], to append to the file `own` of the ledger's folder (a shard's:
+    /// [`shard_ledger_name`]).
+    pub fn load_appending_to(out_root: &Path, own: &str) -> io::Result<Ledger> {
+        let dir = ledger_dir(out_root);
+        let mut names: Vec<String> = match fs::read_dir(&dir) {
+            Ok(entries) => entries
+                .filter_map(|e| e.ok())
+                .filter_map(|e| e.file_name().into_string().ok())
+                .filter(|n| is_ledger_file(n))
+                .collect(),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => Vec::new(),
+            Err(e) => return Err(e),
+        };
+        names.sort();
+        let mut latest: HashMap<String, LedgerEntry> = HashMap::new();
         let mut skipped_lines = 0;
-        match fs::read(&path) {
-            Ok(bytes) => {
-                for line in bytes.split(|&b| b == b'\n') {
-                    if line.iter().all(u8::is_ascii_whitespace) {
-                        continue;
+        for name in &names {
+            let bytes = match fs::read(dir.join(name)) {
+                Ok(bytes) => bytes,
+                // Removed between the listing and the read: nothing of it to know.
+                Err(e) if e.kind() == io::ErrorKind::NotFound => continue,
+                Err(e) => return Err(e),
+            };
+            // Within a file, the later line wins.
+            let mut of_file: HashMap<String, LedgerEntry> = HashMap::new();
+            for line in bytes.split(|&b| b == b'\n') {
+                if line.iter().all(u8::is_ascii_whitespace) {
+                    continue;
+                }
+                match serde_json::from_slice::<LedgerEntry>(line) {
+                    Ok(entry) => {
+                        of_file.insert(entry.source.clone(), entry);
                     }
-                    match serde_json::from_slice::<LedgerEntry>(line) {
-                        Ok(entry) => {
-                            latest.insert(entry.source.clone(), entry);
-                        }
-                        Err(_) => skipped_lines += 1,
+                    Err(_) => skipped_lines += 1,
+                }
+            }
+            // Across files, the later recorded; a tie to the file read last.
+            let recorded = |e: &LedgerEntry| e.recorded_at_ns.unwrap_or(e.converted_at_ns);
+            for (source, entry) in of_file {
+                match latest.get(&source) {
+                    Some(held) if recorded(held) > recorded(&entry) => {}
+                    _ => {
+                        latest.insert(source, entry);
                     }
                 }
             }
-            Err(e) if e.kind() == io::ErrorKind::NotFound => {}
-            Err(e) => return Err(e),
         }
         Ok(Ledger {
             out_root: out_root.to_path_buf(),
-            path,
+            path: dir.join(own),
             latest,
             skipped_lines,
             file: Mutex::new(None),
@@ -432,7 +492,7 @@ impl Ledger {
             let mut touched = entry.clone();
             touched.mtime_ns = stat.mtime_ns;
             touched.ctime_ns = stat.ctime_ns;
-            Ok(Freshness::CurrentTouched(touched))
+            Ok(Freshness::CurrentTouched(Box::new(touched)))
         }
     }
 
@@ -447,7 +507,11 @@ impl Ledger {
     /// [`Ledger::append`] through a shared reference (parallel conversions): the line is written
     /// but the in-memory view is not updated.
     pub fn append_shared(&self, entry: &LedgerEntry) -> io::Result<()> {
-        let mut line = serde_json::to_vec(entry).map_err(io::Error::other)?;
+        let recorded = LedgerEntry {
+            recorded_at_ns: Some(now_ns()),
+            ..entry.clone()
+        };
+        let mut line = serde_json::to_vec(&recorded).map_err(io::Error::other)?;
         line.push(b'\n');
         let mut guard = self.file.lock().unwrap_or_else(|e| e.into_inner());
         if guard.is_none() {
@@ -514,6 +578,7 @@ mod tests {
             settings: "fp".into(),
             error: None,
             converted_at_ns: 10_000_000_000,
+            recorded_at_ns: None,
             imubake_version: "x".into(),
         }
     }
@@ -543,6 +608,80 @@ mod tests {
         let ledger = Ledger::load(dir.path()).unwrap();
         assert_eq!(ledger.skipped_lines(), 1);
         assert_eq!(ledger.len(), 3);
+    }
+
+    /// Lines written straight into a ledger file (as other processes or older versions left them).
+    fn write_lines(dir: &Path, name: &str, entries: &[LedgerEntry]) {
+        fs::create_dir_all(ledger_dir(dir)).unwrap();
+        let text: String = entries
+            .iter()
+            .map(|e| serde_json::to_string(e).unwrap() + "\n")
+            .collect();
+        fs::write(ledger_dir(dir).join(name), text).unwrap();
+    }
+
+    #[test]
+    fn every_shards_file_is_read_and_the_later_recorded_entry_wins() {
+        let dir = tempfile::tempdir().unwrap();
+        let at = |mut e: LedgerEntry, converted: u64, recorded: Option<u64>| {
+            e.converted_at_ns = converted;
+            e.recorded_at_ns = recorded;
+            e
+        };
+        // A single-file ledger of before shards had files: within it the later line wins, even
+        // with an earlier time (a clock put back).
+        write_lines(
+            dir.path(),
+            "ledger.jsonl",
+            &[
+                at(entry("a", Status::Failed, "a1"), 50, None),
+                at(entry("a", Status::Converted, "a2"), 40, None),
+                at(entry("b", Status::Converted, "b1"), 50, None),
+                at(entry("c", Status::Converted, "c1"), 50, None),
+            ],
+        );
+        write_lines(
+            dir.path(),
+            &shard_ledger_name(1, 4),
+            &[
+                // Recorded after ledger.jsonl's b: wins.
+                at(entry("b", Status::Converted, "b2"), 45, Some(60)),
+                // Recorded before ledger.jsonl's c: loses.
+                at(entry("c", Status::Converted, "c0"), 30, Some(35)),
+                at(entry("d", Status::Converted, "d1"), 30, Some(35)),
+            ],
+        );
+        write_lines(
+            dir.path(),
+            "other.jsonl",
+            &[entry("e", Status::Converted, "x")],
+        );
+        let ledger = Ledger::load(dir.path()).unwrap();
+        let sha = |s: &str| ledger.latest(s).map(|e| e.sha256.as_str());
+        assert_eq!(
+            [sha("a"), sha("b"), sha("c"), sha("d"), sha("e")],
+            [Some("a2"), Some("b2"), Some("c1"), Some("d1"), None]
+        );
+        // A shard appends to its own file only, each line with the time it was recorded.
+        let mut shard = Ledger::load_appending_to(dir.path(), &shard_ledger_name(2, 4)).unwrap();
+        let before = now_ns();
+        shard.append(entry("c", Status::Failed, "c2")).unwrap();
+        let own = fs::read_to_string(ledger_dir(dir.path()).join(shard_ledger_name(2, 4))).unwrap();
+        let line: LedgerEntry = serde_json::from_str(own.trim()).unwrap();
+        assert!(line.recorded_at_ns.unwrap() >= before);
+        assert_eq!(
+            Ledger::load(dir.path())
+                .unwrap()
+                .latest("c")
+                .unwrap()
+                .sha256,
+            "c2"
+        );
+        assert_eq!(
+            fs::read_dir(ledger_dir(dir.path())).unwrap().count(),
+            4,
+            "ledger.jsonl, two shards' files, other.jsonl"
+        );
     }
 
     #[test]

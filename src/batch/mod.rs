@@ -162,17 +162,26 @@ fn is_zero(n: &usize) -> bool {
 
 /// Converts `takes` into `out_root` on `jobs` threads (0: one per core), calling `on_result` as
 /// each take finishes (logging is the caller's: [`TakeResult::log`]). Results are in the order of
-/// `takes`; once `stop` is set no take starts (those are left out of the results).
+/// `takes`; once `stop` is set no take starts (those are left out of the results). A shard
+/// records its takes in a ledger file of its own (shards on other machines may share the
+/// output root over NFS, where appends to one file are not atomic).
 pub fn run(
     takes: &[BatchTake],
     out_root: &Path,
+    shard: Option<Shard>,
     plan: &Plan,
     jobs: usize,
     stop: &AtomicBool,
     on_result: &(dyn Fn(&TakeResult) + Sync),
 ) -> io::Result<Vec<TakeResult>> {
     fs::create_dir_all(out_root)?;
-    let ledger = Ledger::load(out_root)?;
+    let ledger = match shard {
+        Some(s) if s.count > 1 => Ledger::load_appending_to(
+            out_root,
+            &crate::ledger::shard_ledger_name(s.index, s.count),
+        )?,
+        _ => Ledger::load(out_root)?,
+    };
     ledger.report_older_schema();
     let fingerprint = crate::ledger::settings_fingerprint(plan);
     let pool = rayon::ThreadPoolBuilder::new()

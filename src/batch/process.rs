@@ -235,6 +235,7 @@ fn process_take_untimed(take: &BatchTake, job: &TakeJob<'_>, retry: bool) -> Att
                 settings: fingerprint.to_string(),
                 error: None,
                 converted_at_ns: started,
+                recorded_at_ns: None,
                 imubake_version: env!("CARGO_PKG_VERSION").to_string(),
             };
             // The error report of an earlier failure goes first, then the ledger line.
@@ -341,6 +342,7 @@ fn fail(take: &BatchTake, job: &TakeJob<'_>, out_dir: &Path, failure: Failure) -
         settings: fingerprint.to_string(),
         error: Some(reason.clone()),
         converted_at_ns: started,
+        recorded_at_ns: None,
         imubake_version: env!("CARGO_PKG_VERSION").to_string(),
     };
     let recorded_already = retry

@@ -24,7 +24,7 @@ pub struct BatchArgs {
     #[arg(required = true)]
     inputs: Vec<PathBuf>,
     /// Output root: each take's outputs go to <out>/<its relative folder>/<stem>.*; the ledger to
-    /// <out>/.imubake/ledger.jsonl.
+    /// <out>/.imubake/ledger.jsonl (a shard's to ledger.shard-I-of-N.jsonl beside it).
     #[arg(long, short)]
     out: PathBuf,
     /// Conversions at once [default: one per core].
@@ -155,7 +155,7 @@ pub fn run(args: BatchArgs) -> anyhow::Result<ExitCode> {
             std::process::exit(INTERRUPTED);
         });
     }
-    let results = batch::run(&takes, &args.out, &plan, jobs, &stop, &on_result)
+    let results = batch::run(&takes, &args.out, shard, &plan, jobs, &stop, &on_result)
         .with_context(|| format!("{}: cannot run the batch", args.out.display()))?;
     bar.finish_and_clear();
 

@@ -570,3 +570,78 @@ fn a_symlink_cycle_and_settings_files_are_not_takes() {
         .count();
     assert_eq!(cycle_warnings, 1, "{}", run.stderr);
 }
+
+/// Shards run as separate processes at once, all into one output folder (as array tasks on a
+/// cluster do): each appends to its own ledger file, and every line of every file is whole — one
+/// `converted` line per take, none lost or torn — and an unsharded rerun reads them all and
+/// converts nothing.
+#[test]
+fn concurrent_shards_into_one_output_lose_no_ledger_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("in");
+    fs::create_dir_all(&input).unwrap();
+    let takes: Vec<String> = (0..24).map(|n| format!("take{n:02}.log")).collect();
+    for t in &takes {
+        fs::write(input.join(t), sample()).unwrap();
+    }
+    let out = tmp.path().join("out");
+    let mapping = repo("samples/sou_wave.mapping.json");
+    let count = 6;
+    let children: Vec<_> = (0..count)
+        .map(|i| {
+            let mut cmd = Command::new(env!("CARGO_BIN_EXE_imubake"));
+            cmd.arg("batch")
+                .arg(&input)
+                .arg("--out")
+                .arg(&out)
+                .arg("--mapping")
+                .arg(&mapping)
+                .args(["--smooth", "none", "--format", "bvh", "--jobs", "1"])
+                .args(["--shard", &format!("{i}/{count}")])
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped());
+            for v in SHARD_VARS {
+                cmd.env_remove(v);
+            }
+            cmd.spawn().expect("run imubake")
+        })
+        .collect();
+    for child in children {
+        let out = child.wait_with_output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let dir = imubake::ledger::ledger_dir(&out);
+    let mut names: Vec<String> = fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    names.sort();
+    let expected: Vec<String> = (0..count)
+        .map(|i| imubake::ledger::shard_ledger_name(i, count))
+        .collect();
+    assert_eq!(names, expected, "a file per shard, no shared one");
+    let mut converted = Vec::new();
+    for (i, name) in names.iter().enumerate() {
+        let text = fs::read_to_string(dir.join(name)).unwrap();
+        assert!(text.ends_with('\n'), "{name}: a torn last line");
+        for line in text.lines() {
+            let entry: imubake::ledger::LedgerEntry =
+                serde_json::from_str(line).unwrap_or_else(|e| panic!("{name}: {e}: {line}"));
+            assert_eq!(entry.status, imubake::ledger::Status::Converted, "{line}");
+            // Shard i's takes are those at i, i + count, … in path order.
+            let index = takes.iter().position(|t| *t == entry.source).unwrap();
+            assert_eq!(index % count, i, "{name} holds {}", entry.source);
+            converted.push(entry.source);
+        }
+    }
+    converted.sort();
+    assert_eq!(converted, takes, "one line per take, none lost");
+    let ledger = Ledger::load(&out).unwrap();
+    assert_eq!((ledger.len(), ledger.skipped_lines()), (takes.len(), 0));
+    let run = batch(&input, &out, &[]);
+    assert_eq!((run.code, run.counts()), (0, (0, 0, 24)), "{}", run.stderr);
+}

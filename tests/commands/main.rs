@@ -10,6 +10,7 @@ mod inspect_cli;
 mod live;
 mod live_hostile;
 mod mapping_errors;
+mod slurm;
 mod tools;
 mod viewer;
 mod viewer_properties;
