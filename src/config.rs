@@ -17,6 +17,7 @@
 //! skip_lines: 0
 //! skip_seconds: 0
 //! rate_hz: 200           # recordings without timestamps (WitMotion without time packets)
+//! layout: device.yaml    # a home-made device's packet layout; relative to this file
 //! world: ned             # override the format's world
 //! causal: false          # run the take as a live stream would (causal smoothing, no look-ahead)
 //! bind_frame: false      # the rest pose as frame 0, the take from frame 1
@@ -72,6 +73,8 @@ pub struct Config {
     #[serde(default, deserialize_with = "rate_hz")]
     pub rate_hz: Option<f64>,
     pub world: Option<World>,
+    /// A packet layout file, relative to the config file.
+    pub layout: Option<PathBuf>,
     #[serde(default, deserialize_with = "smoothing")]
     pub smoothing: Option<Smoothing>,
     /// Also write the report (a flag: `true` in any layer asks for it).
@@ -255,6 +258,9 @@ impl Config {
         if let Some(b) = config.bone_map.as_ref().filter(|b| b.is_relative()) {
             config.bone_map = Some(base.join(b));
         }
+        if let Some(l) = config.layout.as_ref().filter(|l| l.is_relative()) {
+            config.layout = Some(base.join(l));
+        }
         if let Some(r) = &config.rig {
             let p = Path::new(r);
             let is_file = r.ends_with(".yaml")
@@ -293,6 +299,7 @@ impl Config {
             skip_seconds: self.skip_seconds.or(below.skip_seconds),
             rate_hz: self.rate_hz.or(below.rate_hz),
             world: self.world.or(below.world),
+            layout: self.layout.or(below.layout),
             smoothing: self.smoothing.or(below.smoothing),
             report: self.report || below.report,
             force: self.force || below.force,
@@ -363,6 +370,7 @@ impl Config {
         s.read.skip_seconds = self.skip_seconds.unwrap_or(0.0);
         s.read.world = self.world;
         s.read.rate_hz = self.rate_hz;
+        s.read.layout = self.layout.clone();
         s.world_from = self.world.map(|_| world_from);
         s.report = self.report;
         s
@@ -519,6 +527,9 @@ mod tests {
             s.sensor_calibration,
             Some(std::path::PathBuf::from("other.yaml"))
         );
+        std::fs::write(&path, "layout: layouts/suit.yaml\n").unwrap();
+        let s = settings(Config::default(), Some(&path)).unwrap();
+        assert_eq!(s.read.layout, Some(dir.path().join("layouts/suit.yaml")));
     }
 
     #[test]

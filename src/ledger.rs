@@ -245,6 +245,9 @@ struct FingerprintInput<'a> {
     /// `--rate` of recordings without timestamps.
     #[serde(skip_serializing_if = "Option::is_none")]
     rate_hz: Option<f64>,
+    /// SHA-256 of the packet layout file's content.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    layout: Option<String>,
 }
 
 /// `<schema>:<SHA-256 of the settings' stable serialisation>`: the plan's settings, each file
@@ -291,6 +294,7 @@ pub fn settings_fingerprint(plan: &Plan) -> String {
             .then(|| settings.bvh_reference.to_string()),
         mvnx_segments: settings.mvnx_segments,
         rate_hz: settings.read.rate_hz,
+        layout: plan.layout().map(|(_, sha)| sha.to_string()),
     };
     let json = serde_json::to_vec(&input).expect("the fingerprint input serialises");
     format!("{FINGERPRINT_SCHEMA}:{}", hex(&Sha256::digest(&json)))

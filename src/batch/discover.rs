@@ -170,7 +170,7 @@ pub fn is_session_folder(path: &Path) -> bool {
 }
 
 /// What kind of settings file `path` is, if it is one: `imubake.yaml` always; another
-/// `.json`/`.yaml`/`.yml` when it parses as a config, a mapping or a rig.
+/// `.json`/`.yaml`/`.yml` when it parses as a config, a mapping, a rig or a packet layout.
 pub fn settings_file_kind(path: &Path) -> Option<&'static str> {
     let name = path.file_name()?.to_string_lossy();
     if name == FOLDER_CONFIG {
@@ -190,6 +190,8 @@ pub fn settings_file_kind(path: &Path) -> Option<&'static str> {
         Some("mapping")
     } else if crate::rig::file::parse_rig(&text, path).is_ok() {
         Some("rig")
+    } else if crate::read::layout::Layout::parse(&text).is_ok() {
+        Some("layout")
     } else {
         None
     }
@@ -607,12 +609,14 @@ mod tests {
         )
         .unwrap();
         fs::copy(root.join("rigs/sou12.yaml"), p("r.yaml")).unwrap();
+        fs::copy(root.join("layouts/esp32_struct.yaml"), p("suit.yaml")).unwrap();
         fs::write(p("c.yml"), "fps: 60\nsmoothing: none\n").unwrap();
         fs::write(p("notes.json"), "{\"hello\": 1}").unwrap();
         fs::write(p("walk.csv"), "time_s,sensor\n").unwrap();
         assert_eq!(settings_file_kind(&p("m.json")), Some("mapping"));
         assert_eq!(settings_file_kind(&p("r.yaml")), Some("rig"));
         assert_eq!(settings_file_kind(&p("c.yml")), Some("config"));
+        assert_eq!(settings_file_kind(&p("suit.yaml")), Some("layout"));
         assert_eq!(settings_file_kind(&p("notes.json")), None);
         assert_eq!(settings_file_kind(&p("walk.csv")), None);
     }

@@ -134,6 +134,13 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
         // A live view runs smoother than a file's default 30 fps.
         convert.pipeline.fps = "60".parse().expect("a frame rate");
     }
+    if convert.read.layout.is_some() {
+        eprintln!(
+            "error: --layout: live sources do not read packet layouts yet; record the device's \
+             stream to a file (`cat /dev/ttyUSB0 > take.bin`) and `imubake convert take.bin --layout …`"
+        );
+        return Ok(ExitCode::from(2));
+    }
     let mut ignored = Vec::new();
     if convert.pipeline.trim.is_some() {
         ignored.push("--trim");

@@ -79,6 +79,10 @@ pub struct ReadArgs {
     /// Xsens MTw export with neither `// Update Rate:` nor SampleTimeFine)
     #[arg(long, value_name = "HZ", value_parser = parse_rate_hz)]
     rate: Option<f64>,
+    /// Read captures through this packet layout (a YAML file: how a home-made device's frames
+    /// are delimited and what each field is; docs, "Packet layouts")
+    #[arg(long, value_name = "FILE.yaml")]
+    layout: Option<std::path::PathBuf>,
 }
 
 impl ReadArgs {
@@ -95,6 +99,7 @@ impl ReadArgs {
             skip_seconds: self.skip_seconds,
             world: self.world,
             rate_hz: self.rate,
+            layout: self.layout.clone(),
             ..Config::default()
         }
     }

@@ -57,6 +57,7 @@ pub(super) fn convert(
         world: World::Rig,
         world_from: WorldFrom::Format,
         start_timestamp: "0 s".to_string(),
+        layout: None,
     };
     let motion = Motion {
         animation,

@@ -83,6 +83,9 @@ pub enum ConvertError {
         .0.name()
     )]
     EngineWithoutGltf(crate::write::Engine),
+    /// The packet layout file (`--layout`) cannot be used.
+    #[error(transparent)]
+    Layout(#[from] crate::read::layout::LayoutError),
 }
 
 impl crate::diagnostic::Diagnostic for ConvertError {
@@ -114,6 +117,7 @@ impl crate::diagnostic::Diagnostic for ConvertError {
                 Some(path)
             }
             ConvertError::BoneMapFile(_) | ConvertError::EngineWithoutGltf(_) => None,
+            ConvertError::Layout(e) => Some(&e.path),
         }
     }
 
@@ -148,6 +152,9 @@ impl crate::diagnostic::Diagnostic for ConvertError {
             | ConvertError::Bvh { .. }
             | ConvertError::FrameTime { .. } => None,
             ConvertError::EngineWithoutGltf(_) => Some("add --format glb (or gltf)"),
+            ConvertError::Layout(_) => {
+                Some("see docs/src/formats/layouts.md for the layout's keys")
+            }
         }
     }
 }

@@ -78,10 +78,10 @@ pub(super) fn read_and_hash(
     }
     if input.is_file() {
         let head = sniff(input)?;
-        if !crate::read::is_binary_format(&head, options.format) {
+        if !crate::read::is_binary_format(&head, options.forced_format()) {
             check_text(input, &head)?;
         }
-        let format = match options.format {
+        let format = match options.forced_format() {
             Some(f) => f,
             None => crate::read::detect_format(input)?,
         };

@@ -28,7 +28,7 @@ use crate::anim::Animation;
 pub use crate::read::take_stem;
 use crate::take::Take;
 use crate::write::remove_take_outputs;
-use crate::write::sidecar::SourceRecord;
+use crate::write::sidecar::{FileRecord, SourceRecord};
 use crate::write::take::{
     Conversion, SubjectFile, TakeError, TakeFacts, TakeJob, WrittenTake, write_take,
 };
@@ -108,6 +108,10 @@ fn convert_unclean(
                 world: conversion.world.0,
                 world_from: conversion.world.1,
                 start_timestamp: source_info.start_timestamp,
+                layout: plan.layout().map(|(path, sha256)| FileRecord {
+                    path: path.display().to_string(),
+                    sha256: sha256.to_string(),
+                }),
             };
             (conversion, source, facts)
         }

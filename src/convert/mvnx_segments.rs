@@ -82,6 +82,7 @@ pub(super) fn convert(input: &Path, plan: &Plan) -> Result<Mvnx, ConvertError> {
         world: World::Nwu,
         world_from: WorldFrom::Format,
         start_timestamp: "0 s".to_string(),
+        layout: None,
     };
     Ok(Mvnx {
         conversion: motion.conversion(plan),

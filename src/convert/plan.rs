@@ -71,6 +71,8 @@ pub struct Plan {
     /// The settings' pipeline options with the sensor calibration in place and the unsmoothed
     /// rotations kept when the report is asked for.
     pipeline: PipelineOptions,
+    /// The packet layout file (`--layout`), checked: its path and SHA-256.
+    layout: Option<(PathBuf, String)>,
 }
 
 /// A file's bytes and their SHA-256.
@@ -99,6 +101,18 @@ impl Plan {
         {
             return Err(ConvertError::EngineWithoutGltf(engine));
         }
+        let layout = match &settings.read.layout {
+            None => None,
+            Some(path) => {
+                let error = |message: String| crate::read::layout::LayoutError {
+                    path: path.clone(),
+                    message,
+                };
+                let (text, sha256) = read_text(path, error)?;
+                crate::read::layout::Layout::parse(&text).map_err(error)?;
+                Some((path.clone(), sha256))
+            }
+        };
         let mapping = match &settings.mapping {
             None => PlanMapping::ByName,
             Some(path) => {
@@ -200,6 +214,7 @@ impl Plan {
             sensor_calibration,
             bone_map,
             pipeline,
+            layout,
         })
     }
 
@@ -220,6 +235,11 @@ impl Plan {
 
     pub fn settings(&self) -> &ConvertSettings {
         &self.settings
+    }
+
+    /// The packet layout file read through (`--layout`): its path and SHA-256.
+    pub fn layout(&self) -> Option<(&Path, &str)> {
+        self.layout.as_ref().map(|(p, s)| (p.as_path(), s.as_str()))
     }
 
     /// The local rotations of the pose the subject calibrates in (the mapping's

@@ -12,6 +12,7 @@ pub mod apdm;
 pub mod blocks;
 pub mod clock;
 pub mod imubake_csv;
+pub mod layout;
 pub mod lines;
 pub mod opensense_sto;
 pub mod sou;
@@ -44,6 +45,19 @@ pub struct ReadOptions {
     pub world: Option<World>,
     /// Samples per second of a recording without timestamps (WitMotion without time packets).
     pub rate_hz: Option<f64>,
+    /// A declared packet layout (`--layout`): every capture is read through it.
+    pub layout: Option<PathBuf>,
+}
+
+impl ReadOptions {
+    /// The format the options impose: the layout's, else `--input-format`'s.
+    pub fn forced_format(&self) -> Option<InputFormat> {
+        if self.layout.is_some() {
+            Some(InputFormat::Layout)
+        } else {
+            self.format
+        }
+    }
 }
 
 /// Why a take could not be read. Every message names the file, the line when there is one, what
@@ -188,7 +202,10 @@ pub fn take_stem(input: &Path) -> String {
 /// which the text check must let through.
 pub(crate) fn is_binary_format(head: &[u8], format: Option<InputFormat>) -> bool {
     match format {
-        Some(f) => matches!(f, InputFormat::WitMotion | InputFormat::ApdmH5),
+        Some(f) => matches!(
+            f,
+            InputFormat::WitMotion | InputFormat::ApdmH5 | InputFormat::Layout
+        ),
         None => witmotion::looks_like(head) || apdm::looks_like(head),
     }
 }
@@ -667,7 +684,10 @@ fn format_of_head(
             detect_bytes(head).ok_or_else(|| unknown_format(path))?
         }
     };
-    if !matches!(format, InputFormat::WitMotion | InputFormat::ApdmH5) {
+    if !matches!(
+        format,
+        InputFormat::WitMotion | InputFormat::ApdmH5 | InputFormat::Layout
+    ) {
         check_text(path, head)?;
     }
     Ok(format)
@@ -680,7 +700,7 @@ pub fn read_take_from_bytes(
     options: &ReadOptions,
 ) -> Result<Take, ReadError> {
     let head = &bytes[..bytes.len().min(SNIFF_BYTES)];
-    match format_of_head(head, path, options.format)? {
+    match format_of_head(head, path, options.forced_format())? {
         InputFormat::WitMotion => witmotion::take_of(
             &[witmotion::Recording {
                 id: take_stem(path),
@@ -709,7 +729,7 @@ fn read_take_from_source(
     options: &ReadOptions,
 ) -> Result<Take, ReadError> {
     let head = read_head(&mut source, path)?;
-    let format = format_of_head(&head, path, options.format)?;
+    let format = format_of_head(&head, path, options.forced_format())?;
     read_format_from(
         format,
         std::io::Cursor::new(head).chain(source),
@@ -768,6 +788,7 @@ fn read_format_from(
             path,
             "an HDF5 file is read from a file, not a stream (libhdf5 opens files). Hint: save it first",
         )),
+        InputFormat::Layout => layout::read_from(source, path, options),
     }
 }
 
@@ -776,7 +797,7 @@ pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> 
     if is_stream(path) {
         return read_take_from_stream(path, options);
     }
-    let format = match options.format {
+    let format = match options.forced_format() {
         Some(f) => f,
         None => detect_format(path)?,
     };
@@ -792,6 +813,16 @@ pub fn read_take(path: &Path, options: &ReadOptions) -> Result<Take, ReadError> 
         InputFormat::Bvh => Err(bvh_is_motion(path)),
         InputFormat::WitMotion => witmotion::read(path, options),
         InputFormat::ApdmH5 => apdm::read(path, options),
+        InputFormat::Layout => {
+            if path.is_dir() {
+                return Err(ReadError::format(
+                    path,
+                    "--layout reads one capture file, not a folder",
+                ));
+            }
+            let file = fs::File::open(path).map_err(|e| ReadError::io(path, e))?;
+            layout::read_from(file, path, options)
+        }
     }
 }
 

@@ -32,10 +32,12 @@ pub enum InputFormat {
     WitMotion,
     /// APDM Opal `.h5` (HDF5; the cargo feature `hdf5`).
     ApdmH5,
+    /// A home-made device's frames, read through a declared layout (`--layout FILE`).
+    Layout,
 }
 
 impl InputFormat {
-    pub const ALL: [InputFormat; 11] = [
+    pub const ALL: [InputFormat; 12] = [
         InputFormat::Sou,
         InputFormat::ImubakeCsv,
         InputFormat::OpensenseSto,
@@ -47,6 +49,7 @@ impl InputFormat {
         InputFormat::Bvh,
         InputFormat::WitMotion,
         InputFormat::ApdmH5,
+        InputFormat::Layout,
     ];
 
     pub fn name(self) -> &'static str {
@@ -62,6 +65,7 @@ impl InputFormat {
             InputFormat::Bvh => "bvh",
             InputFormat::WitMotion => "witmotion",
             InputFormat::ApdmH5 => "apdm-h5",
+            InputFormat::Layout => "layout",
         }
     }
 
@@ -79,6 +83,7 @@ impl InputFormat {
             InputFormat::Bvh => "BVH motion",
             InputFormat::WitMotion => "WitMotion binary stream",
             InputFormat::ApdmH5 => "APDM Opal .h5",
+            InputFormat::Layout => "frames of a declared layout (--layout FILE)",
         }
     }
 }

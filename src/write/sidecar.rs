@@ -97,6 +97,9 @@ pub struct SourceRecord {
     /// Where the world came from: `flag`, `config`, `mapping` or `format`.
     pub world_from: crate::world::WorldFrom,
     pub start_timestamp: String,
+    /// The packet layout the capture was read through (`--layout`): its path and SHA-256.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub layout: Option<FileRecord>,
 }
 
 #[derive(Debug, Clone, Serialize)]

@@ -10,6 +10,7 @@ mod bvh_prop;
 mod bvh_read;
 mod damaged_logs;
 mod imubake_csv;
+mod layouts;
 mod property_readers;
 mod sou_reader;
 mod vendor_readers;

@@ -1,0 +1,212 @@
+//! Declared packet layouts (issue 54): captures in the two shipped layouts written by
+//! `tests/python/make_layout_streams.py` from known values with Python's `struct` (the data
+//! matrix's hexadecimal float32 rows; the ESP32 struct with its CRC from `binascii.crc_hqx`), read
+//! through `--layout`: every value as written (float32), the damaged rows and frames reported with
+//! their lines and byte offsets and the rest read, and the binary capture converting like the same
+//! readings given as imubake CSV.
+
+use crate::common;
+
+use common::{imubake_bin, python, repo_file, run};
+use imubake::read::{ReadOptions, read_take};
+use imubake::take::OrientationTrack;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn fixtures(py: &Path) -> (tempfile::TempDir, Value) {
+    let dir = tempfile::tempdir().unwrap();
+    run(Command::new(py)
+        .arg(repo_file("tests/python/make_layout_streams.py"))
+        .arg(dir.path()));
+    let expected =
+        serde_json::from_slice(&std::fs::read(dir.path().join("expected.json")).unwrap()).unwrap();
+    (dir, expected)
+}
+
+fn layout(name: &str) -> PathBuf {
+    repo_file(&format!("layouts/{name}"))
+}
+
+fn numbers(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+fn quaternion(v: &Value) -> UnitQuaternion<f64> {
+    let q = numbers(v);
+    UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+}
+
+#[test]
+fn the_data_matrix_reads_every_row_as_written() {
+    let Some(py) = python() else { return };
+    let (dir, expected) = fixtures(&py);
+    let options = ReadOptions {
+        layout: Some(layout("paper004_data_matrix.yaml")),
+        rate_hz: Some(100.0),
+        ..ReadOptions::default()
+    };
+    let take = read_take(&dir.path().join("matrix.txt"), &options).unwrap();
+    assert_eq!(take.source().format.name(), "layout");
+    let m = &expected["matrix"];
+    for id in ["1", "2", "3"] {
+        let Some(OrientationTrack::Quaternion(track)) = take.sensor(id).unwrap().orientation()
+        else {
+            panic!("{id}: no orientation");
+        };
+        let rows = m["quaternions"][id].as_array().unwrap();
+        assert_eq!(track.len(), rows.len(), "{id}");
+        for (k, ((t, q), e)) in track.iter().zip(rows).enumerate() {
+            assert!((t - k as f64 / 100.0).abs() < 1e-12, "{id}: t {t}");
+            // Quaternions: the float32 values normalised in f64 on both sides; Euler angles:
+            // scipy's intrinsic ZYX of the same float32 angles.
+            let angle = q.angle_to(&quaternion(e));
+            assert!(angle < 1e-12, "{id} row {k}: {angle} rad");
+        }
+    }
+    let reasons = |line: u64| -> Vec<&str> {
+        take.dropped_lines()
+            .iter()
+            .filter(|r| r.line == line)
+            .map(|r| r.reason.as_str())
+            .collect()
+    };
+    for line in numbers(&m["repeats"]) {
+        let r = reasons(line as u64);
+        assert!(
+            r.len() == 1 && r[0].contains("new-data flag is 0"),
+            "line {line}: {r:?}"
+        );
+    }
+    let bad = numbers(&m["bad_lines"]);
+    assert_eq!(bad.len(), 3);
+    assert!(reasons(bad[0] as u64)[0].contains("`3F80000`"));
+    assert_eq!(reasons(bad[1] as u64), ["unknown type 9"]);
+    assert!(reasons(bad[2] as u64)[0].contains("2 values for type 1, expected 3"));
+    assert_eq!(
+        take.dropped_lines().len(),
+        m["repeats"].as_array().unwrap().len() + 3
+    );
+}
+
+#[test]
+fn the_esp32_struct_reads_every_value_and_names_each_bad_frame() {
+    let Some(py) = python() else { return };
+    let (dir, expected) = fixtures(&py);
+    let options = ReadOptions {
+        layout: Some(layout("esp32_struct.yaml")),
+        ..ReadOptions::default()
+    };
+    let take = read_take(&dir.path().join("esp32.bin"), &options).unwrap();
+    let e = &expected["esp32"];
+    let frames = e["frames"].as_array().unwrap();
+    for id in ["1", "2", "3"] {
+        let sensor = take.sensor(id).unwrap();
+        let mine: Vec<&Value> = frames
+            .iter()
+            .filter(|f| f["sensor"].as_u64().unwrap().to_string() == id)
+            .collect();
+        let Some(OrientationTrack::Quaternion(track)) = sensor.orientation() else {
+            panic!("{id}: no orientation");
+        };
+        let inertial = sensor.inertial().unwrap();
+        assert_eq!(
+            (track.len(), inertial.len()),
+            (mine.len(), mine.len()),
+            "{id}"
+        );
+        for (((t, q), (_, s)), f) in track.iter().zip(inertial.iter()).zip(&mine) {
+            assert!((t - f["t_us"].as_f64().unwrap() * 1e-6).abs() < 1e-12);
+            assert!(q.angle_to(&quaternion(&f["q"])) < 1e-12, "{id} at {t}");
+            let gyro = Vector3::from_vec(numbers(&f["gyro_dps"])) * (std::f64::consts::PI / 180.0);
+            let accel = Vector3::from_vec(numbers(&f["accel_g"])) * 9.80665;
+            assert!((s.gyro_rad_s - gyro).norm() < 1e-12, "{id} at {t}");
+            assert!((s.accel_m_s2 - accel).norm() < 1e-12, "{id} at {t}");
+        }
+    }
+    // Each damaged frame: dropped, named by its byte offset; nothing else is.
+    let offsets: Vec<String> = take
+        .dropped_lines()
+        .iter()
+        .map(|r| r.reason.clone())
+        .collect();
+    let bad = numbers(&e["bad_offsets"]);
+    assert_eq!(offsets.len(), bad.len(), "{offsets:?}");
+    for (reason, offset) in offsets.iter().zip(&bad) {
+        assert!(
+            reason.starts_with("bad checksum")
+                && reason.ends_with(&format!("(byte offset {offset})")),
+            "{reason}"
+        );
+    }
+    // The junk before the first frame, and each damaged frame's 36 bytes after its first.
+    let skipped = e["junk"].as_u64().unwrap() + 36 * bad.len() as u64;
+    assert!(
+        take.warnings().iter().any(|w| w
+            == &format!("{skipped} bytes outside frames skipped (the first at byte offset 0)")),
+        "{:?}",
+        take.warnings()
+    );
+}
+
+/// A take recorded through a layout converts as the same readings given as imubake CSV: the
+/// BVHs are identical.
+#[test]
+fn a_layout_take_converts_like_the_same_values_as_csv() {
+    let Some(py) = python() else { return };
+    let (dir, _) = fixtures(&py);
+    let mapping = dir.path().join("mapping.json");
+    std::fs::write(
+        &mapping,
+        r#"{"rig": "mixamo", "heading": "sensors", "calibration": {"pose": "rest", "start_s": 0, "duration_s": 0.5},
+            "sensors": {"1": {"bone": "Hips", "mount": "calibrate"},
+                        "2": {"bone": "Spine1", "mount": "calibrate"},
+                        "3": {"bone": "Head", "mount": "calibrate"}}}"#,
+    )
+    .unwrap();
+    let convert = |input: &str, extra: &[&Path]| {
+        let out = dir.path().join(format!("out-{input}"));
+        let mut cmd = Command::new(imubake_bin());
+        cmd.arg("convert")
+            .arg(dir.path().join(input))
+            .arg("--mapping")
+            .arg(&mapping)
+            .args(["--format", "bvh", "--out"])
+            .arg(&out);
+        for layout in extra {
+            cmd.arg("--layout").arg(layout);
+        }
+        run(&mut cmd);
+        let stem = input.split('.').next().unwrap();
+        let sidecar: Value = serde_json::from_slice(
+            &std::fs::read(out.join(format!("{stem}.imubake.json"))).unwrap(),
+        )
+        .unwrap();
+        (
+            std::fs::read_to_string(out.join(format!("{stem}.bvh"))).unwrap(),
+            sidecar,
+        )
+    };
+    let (binary, sidecar) = convert("esp32.bin", &[&layout("esp32_struct.yaml")]);
+    let (csv, _) = convert("esp32.csv", &[]);
+    assert_eq!(sidecar["source"]["format"], "layout");
+    assert!(
+        sidecar["source"]["layout"]["path"]
+            .as_str()
+            .unwrap()
+            .ends_with("esp32_struct.yaml")
+    );
+    assert_eq!(
+        sidecar["source"]["layout"]["sha256"]
+            .as_str()
+            .unwrap()
+            .len(),
+        64
+    );
+    assert!(binary == csv, "the BVHs differ");
+}
