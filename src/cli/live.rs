@@ -13,7 +13,8 @@ use std::process::ExitCode;
 #[derive(Debug, Args)]
 pub struct LiveArgs {
     /// Where lines come from (repeatable): serial:PORT[@BAUD], udp:[ADDR:]PORT, tcp:HOST:PORT,
-    /// stdin, file:CAPTURE[@SPEED]
+    /// stdin, file:CAPTURE[@SPEED]; serial and udp sources may end in :witmotion (WitMotion's
+    /// packets) or :layout (the frames of --layout FILE)
     #[arg(long = "source", value_name = "SOURCE", required = true)]
     sources: Vec<SourceSpec>,
     /// Send VMC (OSC over UDP) here, or `off` [default: 127.0.0.1:39539]
@@ -133,13 +134,6 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
     if convert.given.fps == imubake::convert::Layer::Default {
         // A live view runs smoother than a file's default 30 fps.
         convert.pipeline.fps = "60".parse().expect("a frame rate");
-    }
-    if convert.read.layout.is_some() {
-        eprintln!(
-            "error: --layout: live sources do not read packet layouts yet; record the device's \
-             stream to a file (`cat /dev/ttyUSB0 > take.bin`) and `imubake convert take.bin --layout …`"
-        );
-        return Ok(ExitCode::from(2));
     }
     let mut ignored = Vec::new();
     if convert.pipeline.trim.is_some() {

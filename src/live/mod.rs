@@ -39,6 +39,9 @@ pub const DEFAULT_LISTEN: &str = "127.0.0.1:39540";
 pub enum LiveError {
     #[error("{0}")]
     Setup(#[from] ConvertError),
+    /// The packet layout (`--layout`) cannot be read.
+    #[error("{0}")]
+    Layout(String),
     #[error("source `{source_name}`: {source}")]
     Source {
         source_name: String,
@@ -303,6 +306,14 @@ pub fn run(
         }
     }
 
+    // The packet layout of `:layout` sources, read once (the plan checked it).
+    let layout = match &settings.plan.settings().read.layout {
+        Some(path) => Some(Arc::new(
+            crate::read::layout::Layout::load(path)
+                .map_err(|e| LiveError::Layout(e.to_string()))?,
+        )),
+        None => None,
+    };
     let (tx, rx) = sync_channel::<Event>(1024);
     let mut counters = Vec::new();
     let mut threads = Vec::new();
@@ -315,7 +326,7 @@ pub fn run(
             stop: Arc::clone(&stop),
             counters: c,
         };
-        let thread = source::start(spec, link, settings.allow.clone())?;
+        let thread = source::start(spec, link, settings.allow.clone(), layout.clone())?;
         // Not joined: a read of stdin cannot be interrupted (a pipe that stays open and silent
         // would hold the session's end forever); the thread ends with the process.
         if *spec != SourceSpec::Stdin {

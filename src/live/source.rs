@@ -3,6 +3,7 @@
 //! session over one bounded channel.
 
 use super::LiveError;
+use crate::read::layout::Layout;
 use std::io::Read;
 use std::net::{IpAddr, SocketAddr, TcpStream, UdpSocket};
 use std::path::PathBuf;
@@ -14,19 +15,39 @@ use std::time::{Duration, Instant};
 /// The longest line kept (bytes); a longer one is dropped and counted.
 pub const MAX_LINE: usize = 64 * 1024;
 
+/// What a serial or UDP source's bytes are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Packets {
+    /// Lines of text (imubake CSV, SOU, …).
+    Lines,
+    /// WitMotion's binary packets (`:witmotion`).
+    WitMotion,
+    /// Frames of the session's `--layout` (`:layout`).
+    Layout,
+}
+
+impl Packets {
+    fn suffix(self) -> &'static str {
+        match self {
+            Packets::Lines => "",
+            Packets::WitMotion => ":witmotion",
+            Packets::Layout => ":layout",
+        }
+    }
+}
+
 /// A source as given on the command line.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SourceSpec {
-    /// `serial:/dev/ttyUSB0[@115200][:witmotion]`.
+    /// `serial:/dev/ttyUSB0[@115200][:witmotion|:layout]`.
     Serial {
         path: PathBuf,
         baud: u32,
-        /// WitMotion's binary packets instead of lines.
-        witmotion: bool,
+        packets: Packets,
     },
-    /// `udp:[BIND_ADDR:]PORT[:witmotion]` (the address defaults to 127.0.0.1): lines in
-    /// datagrams, or WitMotion packets.
-    Udp { bind: SocketAddr, witmotion: bool },
+    /// `udp:[BIND_ADDR:]PORT[:witmotion|:layout]` (the address defaults to 127.0.0.1): lines in
+    /// datagrams, WitMotion packets, or a layout's frames.
+    Udp { bind: SocketAddr, packets: Packets },
     /// `tcp:HOST:PORT`: a client that connects, and reconnects.
     Tcp { addr: String },
     /// `stdin`.
@@ -41,18 +62,9 @@ impl std::fmt::Display for SourceSpec {
             SourceSpec::Serial {
                 path,
                 baud,
-                witmotion,
-            } => write!(
-                f,
-                "serial:{}@{baud}{}",
-                path.display(),
-                if *witmotion { ":witmotion" } else { "" }
-            ),
-            SourceSpec::Udp { bind, witmotion } => write!(
-                f,
-                "udp:{bind}{}",
-                if *witmotion { ":witmotion" } else { "" }
-            ),
+                packets,
+            } => write!(f, "serial:{}@{baud}{}", path.display(), packets.suffix()),
+            SourceSpec::Udp { bind, packets } => write!(f, "udp:{bind}{}", packets.suffix()),
             SourceSpec::Tcp { addr } => write!(f, "tcp:{addr}"),
             SourceSpec::Stdin => write!(f, "stdin"),
             SourceSpec::File { path, speed } => write!(f, "file:{}@{speed}", path.display()),
@@ -73,19 +85,23 @@ fn at_suffix(s: &str) -> (&str, Option<&str>) {
 impl std::str::FromStr for SourceSpec {
     type Err = String;
     fn from_str(s: &str) -> Result<SourceSpec, String> {
-        let usage = "expected serial:PATH[@BAUD][:witmotion], udp:[ADDR:]PORT[:witmotion], tcp:HOST:PORT, stdin or file:PATH[@SPEED]";
+        let usage = "expected serial:PATH[@BAUD][:witmotion|:layout], udp:[ADDR:]PORT[:witmotion|:layout], tcp:HOST:PORT, stdin or file:PATH[@SPEED]";
         if s == "stdin" || s == "-" {
             return Ok(SourceSpec::Stdin);
         }
         let (kind, rest) = s.split_once(':').ok_or_else(|| format!("`{s}`: {usage}"))?;
-        let (rest, witmotion) = match rest.strip_suffix(":witmotion") {
-            Some(r) if matches!(kind, "serial" | "udp") => (r, true),
-            Some(_) => {
+        let (rest, packets) = match [Packets::WitMotion, Packets::Layout]
+            .into_iter()
+            .find_map(|p| rest.strip_suffix(p.suffix()).map(|r| (r, p)))
+        {
+            Some((r, p)) if matches!(kind, "serial" | "udp") => (r, p),
+            Some((_, p)) => {
                 return Err(format!(
-                    "`{s}`: `:witmotion` applies to serial and udp sources"
+                    "`{s}`: `{}` applies to serial and udp sources",
+                    p.suffix()
                 ));
             }
-            None => (rest, false),
+            None => (rest, Packets::Lines),
         };
         match kind {
             "serial" => {
@@ -104,7 +120,7 @@ impl std::str::FromStr for SourceSpec {
                 Ok(SourceSpec::Serial {
                     path: path.into(),
                     baud,
-                    witmotion,
+                    packets,
                 })
             }
             "udp" => {
@@ -114,7 +130,7 @@ impl std::str::FromStr for SourceSpec {
                         .parse()
                         .map_err(|_| format!("`{s}`: `{rest}` is not ADDR:PORT or PORT"))?,
                 };
-                Ok(SourceSpec::Udp { bind, witmotion })
+                Ok(SourceSpec::Udp { bind, packets })
             }
             "tcp" => {
                 if !rest.contains(':') {
@@ -371,6 +387,7 @@ pub fn start(
     spec: &SourceSpec,
     link: Link,
     allow: Allow,
+    layout: Option<Arc<Layout>>,
 ) -> Result<std::thread::JoinHandle<()>, LiveError> {
     let name = spec.to_string();
     let io = |source: std::io::Error| LiveError::Source {
@@ -386,17 +403,27 @@ pub fn start(
             let stdin = std::io::stdin();
             read_stream(stdin.lock(), &link);
         }),
-        SourceSpec::Udp { bind, witmotion } => {
+        SourceSpec::Udp { bind, packets } => {
             let socket = udp_socket(bind).map_err(io)?;
-            let framing = Framing::new(witmotion, &format!("udp{}", bind.port()));
+            let framing = Framing::new(packets, &format!("udp{}", bind.port()), layout)
+                .map_err(|e| io(std::io::Error::other(e)))?;
             std::thread::spawn(move || udp(socket, &link, &allow, framing))
         }
         SourceSpec::Tcp { addr } => std::thread::spawn(move || tcp(&addr, &link, &allow)),
         SourceSpec::Serial {
             path,
             baud,
-            witmotion,
-        } => std::thread::spawn(move || serial(&path, baud, witmotion, &link)),
+            packets,
+        } => {
+            // A device's lines carry the port's name (`ttyUSB0`) as their sensor when its
+            // packets name none.
+            let sensor = path
+                .file_name()
+                .map_or_else(|| "serial".into(), |n| n.to_string_lossy().into_owned());
+            let framing =
+                Framing::new(packets, &sensor, layout).map_err(|e| io(std::io::Error::other(e)))?;
+            std::thread::spawn(move || serial(&path, baud, framing, &link))
+        }
     };
     Ok(handle)
 }
@@ -421,8 +448,9 @@ fn transient(e: &std::io::Error) -> bool {
     )
 }
 
-/// How a source's bytes become lines: split at line ends, or WitMotion packets decoded into
-/// imubake CSV lines ([`crate::read::witmotion::CsvLines`]).
+/// How a source's bytes become lines: split at line ends, or WitMotion packets or a layout's
+/// frames decoded into imubake CSV lines ([`crate::read::witmotion::CsvLines`],
+/// [`crate::read::layout::CsvLines`]).
 enum Framing {
     Lines(LineSplitter),
     WitMotion {
@@ -431,20 +459,34 @@ enum Framing {
         /// Bad checksums already said.
         said: u64,
     },
+    Layout {
+        lines: Box<crate::read::layout::CsvLines>,
+        started: Instant,
+        /// Dropped frames already said.
+        said: u64,
+    },
 }
 
 impl Framing {
-    /// `sensor`: the id a WitMotion device's lines carry.
-    fn new(witmotion: bool, sensor: &str) -> Framing {
-        if witmotion {
-            Framing::WitMotion {
+    /// `sensor`: the id a device's lines carry when its packets name none; `layout`: the
+    /// session's `--layout`, which a `:layout` source needs.
+    fn new(packets: Packets, sensor: &str, layout: Option<Arc<Layout>>) -> Result<Framing, String> {
+        Ok(match packets {
+            Packets::Lines => Framing::Lines(LineSplitter::default()),
+            Packets::WitMotion => Framing::WitMotion {
                 lines: Box::new(crate::read::witmotion::CsvLines::new(sensor)),
                 started: Instant::now(),
                 said: 0,
-            }
-        } else {
-            Framing::Lines(LineSplitter::default())
-        }
+            },
+            Packets::Layout => Framing::Layout {
+                lines: Box::new(crate::read::layout::CsvLines::new(
+                    layout.ok_or("a `:layout` source needs --layout FILE")?,
+                    sensor,
+                )),
+                started: Instant::now(),
+                said: 0,
+            },
+        })
     }
 
     fn push(&mut self, bytes: &[u8], out: &mut Vec<Vec<u8>>, link: &Link) {
@@ -468,6 +510,20 @@ impl Framing {
                     *said = bad;
                 }
             }
+            Framing::Layout {
+                lines,
+                started,
+                said,
+            } => {
+                lines.push(bytes, started.elapsed().as_secs_f64(), out);
+                let dropped = lines.dropped();
+                if dropped > *said && (*said == 0 || dropped >= *said + 100) {
+                    link.notice(format!(
+                        "{dropped} frames of the layout dropped (bad, repeated or without an orientation)"
+                    ));
+                    *said = dropped;
+                }
+            }
         }
     }
 
@@ -477,6 +533,7 @@ impl Framing {
         match self {
             Framing::Lines(split) => *split = LineSplitter::default(),
             Framing::WitMotion { lines, .. } => lines.restart(),
+            Framing::Layout { lines, .. } => lines.restart(),
         }
     }
 
@@ -487,6 +544,9 @@ impl Framing {
                 link.count_too_long(split);
             }
             Framing::WitMotion { lines, started, .. } => {
+                lines.finish(started.elapsed().as_secs_f64(), out)
+            }
+            Framing::Layout { lines, started, .. } => {
                 lines.finish(started.elapsed().as_secs_f64(), out)
             }
         }
@@ -522,7 +582,11 @@ fn pump(reader: &mut impl Read, link: &Link, framing: &mut Framing) -> Pumped {
 
 /// A byte stream until its end (or the session's stop).
 fn read_stream(mut reader: impl Read, link: &Link) {
-    match pump(&mut reader, link, &mut Framing::new(false, "")) {
+    match pump(
+        &mut reader,
+        link,
+        &mut Framing::Lines(LineSplitter::default()),
+    ) {
         Pumped::Stopped => {}
         Pumped::Ended => link.closed(None),
         Pumped::Lost(e) => link.closed(Some(e.to_string())),
@@ -572,7 +636,7 @@ fn reopening<R: Read>(
 /// (at most [`MAX_LINE`] bytes, longer ones counted in `too_long`), never held whole.
 fn replay(mut reader: impl Read, speed: f64, link: &Link) {
     let mut clock = super::clock::SourceClock::new(super::clock::DEFAULT_HORIZON_S);
-    let mut framing = Framing::new(false, "");
+    let mut framing = Framing::Lines(LineSplitter::default());
     let mut buf = vec![0u8; 64 * 1024];
     let mut lines = Vec::new();
     let mut judged = Vec::new();
@@ -763,11 +827,11 @@ fn tcp(addr: &str, link: &Link, allow: &Allow) {
         open,
         "reconnecting",
         "connected",
-        Framing::new(false, ""),
+        Framing::Lines(LineSplitter::default()),
     );
 }
 
-fn serial(path: &std::path::Path, baud: u32, witmotion: bool, link: &Link) {
+fn serial(path: &std::path::Path, baud: u32, framing: Framing, link: &Link) {
     // A port with a timeout says "no data yet" as TimedOut; 0 bytes is its end (the device
     // gone, a pty whose other side closed).
     let open = || {
@@ -776,17 +840,7 @@ fn serial(path: &std::path::Path, baud: u32, witmotion: bool, link: &Link) {
             .open()
             .map_err(std::io::Error::from)
     };
-    // A WitMotion device's lines carry the port's name (`ttyUSB0`) as their sensor.
-    let sensor = path
-        .file_name()
-        .map_or_else(|| "witmotion".into(), |n| n.to_string_lossy().into_owned());
-    reopening(
-        link,
-        open,
-        "reopening",
-        "opened",
-        Framing::new(witmotion, &sensor),
-    );
+    reopening(link, open, "reopening", "opened", framing);
 }
 
 #[cfg(test)]
@@ -850,7 +904,7 @@ mod tests {
             SourceSpec::Serial {
                 path: "/dev/ttyUSB0".into(),
                 baud: 115_200,
-                witmotion: false
+                packets: Packets::Lines
             }
         );
         assert_eq!(
@@ -858,7 +912,7 @@ mod tests {
             SourceSpec::Serial {
                 path: "/dev/ttyACM1".into(),
                 baud: 9600,
-                witmotion: false
+                packets: Packets::Lines
             }
         );
         assert_eq!(
@@ -868,28 +922,28 @@ mod tests {
             SourceSpec::Serial {
                 path: "/dev/ttyUSB0".into(),
                 baud: 115_200,
-                witmotion: true
+                packets: Packets::WitMotion
             }
         );
         assert_eq!(
             "udp:9001:witmotion".parse::<SourceSpec>().unwrap(),
             SourceSpec::Udp {
                 bind: "127.0.0.1:9001".parse().unwrap(),
-                witmotion: true
+                packets: Packets::WitMotion
             }
         );
         assert_eq!(
             "udp:9000".parse::<SourceSpec>().unwrap(),
             SourceSpec::Udp {
                 bind: "127.0.0.1:9000".parse().unwrap(),
-                witmotion: false
+                packets: Packets::Lines
             }
         );
         assert_eq!(
             "udp:0.0.0.0:9000".parse::<SourceSpec>().unwrap(),
             SourceSpec::Udp {
                 bind: "0.0.0.0:9000".parse().unwrap(),
-                witmotion: false
+                packets: Packets::Lines
             }
         );
         assert_eq!(
@@ -911,6 +965,26 @@ mod tests {
         ] {
             assert!(bad.parse::<SourceSpec>().is_err(), "{bad}");
         }
+        assert_eq!(
+            "udp:9000:layout".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Udp {
+                bind: "127.0.0.1:9000".parse().unwrap(),
+                packets: Packets::Layout
+            }
+        );
+        assert_eq!(
+            "serial:/dev/ttyACM0@921600:layout"
+                .parse::<SourceSpec>()
+                .unwrap()
+                .to_string(),
+            "serial:/dev/ttyACM0@921600:layout"
+        );
+        assert!(
+            "tcp:host:9:layout"
+                .parse::<SourceSpec>()
+                .unwrap_err()
+                .contains("`:layout` applies to serial and udp")
+        );
     }
 
     #[test]

@@ -210,3 +210,179 @@ fn a_layout_take_converts_like_the_same_values_as_csv() {
     );
     assert!(binary == csv, "the BVHs differ");
 }
+
+/// A pseudo-terminal standing in for a serial port: the master the test writes, and the slave's
+/// path (kept open here, raw, so the port stays up between writes).
+fn openpty() -> (std::fs::File, (i32, String)) {
+    let (mut m, mut s) = (0, 0);
+    let mut name = [0 as libc::c_char; 128];
+    let rc = unsafe {
+        libc::openpty(
+            &mut m,
+            &mut s,
+            name.as_mut_ptr(),
+            std::ptr::null(),
+            std::ptr::null(),
+        )
+    };
+    assert_eq!(rc, 0);
+    unsafe {
+        libc::fcntl(m, libc::F_SETFD, libc::FD_CLOEXEC);
+        libc::fcntl(s, libc::F_SETFD, libc::FD_CLOEXEC);
+        let mut t: libc::termios = std::mem::zeroed();
+        libc::tcgetattr(s, &mut t);
+        libc::cfmakeraw(&mut t);
+        libc::tcsetattr(s, libc::TCSANOW, &t);
+    }
+    let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
+        .to_string_lossy()
+        .into_owned();
+    use std::os::fd::FromRawFd;
+    (unsafe { std::fs::File::from_raw_fd(m) }, (s, path))
+}
+
+/// `imubake live` on `source` with `layout`, recording; `feed` sends the capture; the recorded
+/// CSV's header and rows.
+fn live_recording(
+    dir: &Path,
+    source: &str,
+    layout: &Path,
+    feed: impl FnOnce(),
+) -> (String, Vec<Vec<String>>) {
+    let mapping = dir.join("live_mapping.json");
+    std::fs::write(
+        &mapping,
+        r#"{"rig": "mixamo", "world": "enu", "heading": "sensors", "sensors": {
+            "1": {"bone": "Hips", "mount": "calibrate"},
+            "2": {"bone": "Spine1", "mount": "calibrate"},
+            "3": {"bone": "Head", "mount": "calibrate"}}}"#,
+    )
+    .unwrap();
+    let record = dir.join(format!("takes-{}", source.replace([':', '/'], "_")));
+    let child = Command::new(imubake_bin())
+        .args(["live", "--source", source, "--mapping"])
+        .arg(&mapping)
+        .arg("--layout")
+        .arg(layout)
+        .args(["--vmc", "off", "--listen", "off", "--record"])
+        .arg(&record)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    feed();
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let recording = std::fs::read_dir(&record)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "csv"))
+        .expect("a recording");
+    let text = std::fs::read_to_string(&recording).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header = lines.next().unwrap().to_string();
+    let rows = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    (header, rows)
+}
+
+fn row_quaternion(row: &[String]) -> UnitQuaternion<f64> {
+    let q: Vec<f64> = row[2..6].iter().map(|v| v.parse().unwrap()).collect();
+    UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+}
+
+/// `live --source udp:PORT:layout`: the ESP32 capture sent three frames to a datagram is
+/// recorded with every frame's values as written — the rates and accelerations exactly, the
+/// quaternion to 10⁻¹² rad (normalised) — the damaged frames dropped, the time from the frames'
+/// own clock.
+#[test]
+fn a_live_udp_stream_decodes_through_the_layout() {
+    let Some(py) = python() else { return };
+    let (dir, expected) = fixtures(&py);
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let bytes = std::fs::read(dir.path().join("esp32.bin")).unwrap();
+    let (header, rows) = live_recording(
+        dir.path(),
+        &format!("udp:{port}:layout"),
+        &layout("esp32_struct.yaml"),
+        || {
+            let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+            for chunk in bytes.chunks(3 * 37) {
+                socket.send_to(chunk, ("127.0.0.1", port)).unwrap();
+                std::thread::sleep(std::time::Duration::from_micros(300));
+            }
+        },
+    );
+    assert_eq!(
+        header,
+        "time_s,sensor,qw,qx,qy,qz,gx_dps,gy_dps,gz_dps,ax_g,ay_g,az_g"
+    );
+    let frames = expected["esp32"]["frames"].as_array().unwrap();
+    assert_eq!(rows.len(), frames.len());
+    let t0 = frames[0]["t_us"].as_f64().unwrap() * 1e-6;
+    for (row, f) in rows.iter().zip(frames) {
+        assert_eq!(row[1], f["sensor"].as_u64().unwrap().to_string());
+        let t: f64 = row[0].parse().unwrap();
+        assert!(
+            (t - (f["t_us"].as_f64().unwrap() * 1e-6 - t0)).abs() < 1e-12,
+            "{row:?}"
+        );
+        // The recording holds the quaternion as the session normalised it.
+        let angle = row_quaternion(row).angle_to(&quaternion(&f["q"]));
+        assert!(angle < 1e-12, "{row:?}: {angle} rad");
+        let v: Vec<f64> = row[6..12].iter().map(|v| v.parse().unwrap()).collect();
+        let mut e = numbers(&f["gyro_dps"]);
+        e.extend(numbers(&f["accel_g"]));
+        assert_eq!(v, e);
+    }
+}
+
+/// `live --source serial:PTY:layout`: paper 004's data matrix written row by row through a
+/// pseudo-terminal, as a receiver on USB serial would: every row's orientation as written, the
+/// repeats and damaged rows dropped.
+#[test]
+fn a_live_serial_port_decodes_the_data_matrix() {
+    let Some(py) = python() else { return };
+    let (dir, expected) = fixtures(&py);
+    let text = std::fs::read_to_string(dir.path().join("matrix.txt")).unwrap();
+    let (mut master, slave) = openpty();
+    let (header, rows) = live_recording(
+        dir.path(),
+        &format!("serial:{}:layout", slave.1),
+        &layout("paper004_data_matrix.yaml"),
+        || {
+            use std::io::Write;
+            for (i, line) in text.lines().enumerate() {
+                master.write_all(line.as_bytes()).unwrap();
+                master.write_all(b"\n").unwrap();
+                if i % 30 == 0 {
+                    std::thread::sleep(std::time::Duration::from_millis(2));
+                }
+            }
+            master.flush().unwrap();
+        },
+    );
+    unsafe { libc::close(slave.0) };
+    assert_eq!(header, "time_s,sensor,qw,qx,qy,qz");
+    for id in ["1", "2", "3"] {
+        let mine: Vec<&Vec<String>> = rows.iter().filter(|r| r[1] == id).collect();
+        let e = expected["matrix"]["quaternions"][id].as_array().unwrap();
+        assert_eq!(mine.len(), e.len(), "sensor {id}");
+        for (row, q) in mine.iter().zip(e) {
+            let angle = row_quaternion(row).angle_to(&quaternion(q));
+            assert!(angle < 1e-12, "sensor {id}: {angle} rad");
+        }
+    }
+}

@@ -49,10 +49,9 @@ pub struct Decoded {
     pub first_skipped_offset: Option<u64>,
 }
 
-/// An incremental decoder of a layout's stream.
-#[derive(Debug)]
-pub struct Decoder<'a> {
-    layout: &'a Layout,
+/// An incremental decoder of a layout's stream (the layout is given to each call).
+#[derive(Debug, Default)]
+pub struct Decoder {
     buf: Vec<u8>,
     /// The stream offset of `buf[0]`.
     buf_offset: u64,
@@ -62,15 +61,9 @@ pub struct Decoder<'a> {
     discarding: bool,
 }
 
-impl<'a> Decoder<'a> {
-    pub fn new(layout: &'a Layout) -> Decoder<'a> {
-        Decoder {
-            layout,
-            buf: Vec::new(),
-            buf_offset: 0,
-            line: 0,
-            discarding: false,
-        }
+impl Decoder {
+    pub fn new() -> Decoder {
+        Decoder::default()
     }
 
     /// Bytes held for a frame or line not complete yet.
@@ -79,24 +72,24 @@ impl<'a> Decoder<'a> {
     }
 
     /// Feeds bytes; complete frames (and bad ones) go to `out`.
-    pub fn push(&mut self, bytes: &[u8], out: &mut Decoded) {
+    pub fn push(&mut self, layout: &Layout, bytes: &[u8], out: &mut Decoded) {
         self.buf.extend_from_slice(bytes);
-        match self.layout.frame {
-            FrameKind::Text => self.text(out, false),
-            FrameKind::Binary => self.binary(out, false),
+        match layout.frame {
+            FrameKind::Text => self.text(layout, out, false),
+            FrameKind::Binary => self.binary(layout, out, false),
         }
     }
 
     /// The stream's end: a last line without its newline is a frame; an incomplete binary frame
     /// is a bad one.
-    pub fn finish(&mut self, out: &mut Decoded) {
-        match self.layout.frame {
-            FrameKind::Text => self.text(out, true),
-            FrameKind::Binary => self.binary(out, true),
+    pub fn finish(&mut self, layout: &Layout, out: &mut Decoded) {
+        match layout.frame {
+            FrameKind::Text => self.text(layout, out, true),
+            FrameKind::Binary => self.binary(layout, out, true),
         }
     }
 
-    fn text(&mut self, out: &mut Decoded, end: bool) {
+    fn text(&mut self, layout: &Layout, out: &mut Decoded, end: bool) {
         let mut pos = 0;
         // `pos` passes the end only after a last line without its newline.
         while pos <= self.buf.len() {
@@ -116,7 +109,7 @@ impl<'a> Decoder<'a> {
                 line = &line[..line.len() - 1];
             }
             if !line.iter().all(u8::is_ascii_whitespace) {
-                match decode_text(self.layout, line) {
+                match decode_text(layout, line) {
                     Ok((kind, values)) => out.frames.push(Frame {
                         line: self.line,
                         offset,
@@ -151,8 +144,8 @@ impl<'a> Decoder<'a> {
         }
     }
 
-    fn binary(&mut self, out: &mut Decoded, end: bool) {
-        let start = &self.layout.start;
+    fn binary(&mut self, layout: &Layout, out: &mut Decoded, end: bool) {
+        let start = &layout.start;
         let mut pos = 0;
         loop {
             let found = memchr::memmem::find(&self.buf[pos..], start).map(|i| pos + i);
@@ -165,7 +158,7 @@ impl<'a> Decoder<'a> {
                 break;
             };
             self.skip(out, pos, at);
-            match decode_binary(self.layout, &self.buf[at..]) {
+            match decode_binary(layout, &self.buf[at..]) {
                 Binary::Frame(size, kind, values) => {
                     out.frames.push(Frame {
                         line: 0,

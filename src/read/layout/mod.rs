@@ -22,8 +22,10 @@
 //! byte offset; the binary decoder then looks for the next start from the byte after the bad
 //! frame's start.
 
+mod csv_lines;
 mod frames;
 
+pub use csv_lines::CsvLines;
 pub use frames::{Decoded, Decoder, Frame};
 
 use super::{InputFormat, ReadError, ReadOptions};
@@ -319,6 +321,9 @@ pub struct Layout {
     euler: Option<([usize; 3], f64)>,
     gyro_rad_s: f64,
     accel_m_s2: f64,
+    /// The units the layout declares (the live stream's CSV columns keep them).
+    pub gyro_unit: Option<GyroUnit>,
+    pub accel_unit: Option<AccelUnit>,
     pub world: World,
     /// The longest binary frame, bytes (start and checksum included).
     pub max_frame: usize,
@@ -551,6 +556,8 @@ impl Layout {
             euler,
             gyro_rad_s,
             accel_m_s2,
+            gyro_unit: file.gyro.map(|g| g.unit),
+            accel_unit: file.accel.map(|a| a.unit),
             world: file.world.unwrap_or(World::Enu),
             max_frame,
         })
@@ -593,10 +600,10 @@ pub fn take_of(
 ) -> Result<Take, ReadError> {
     let world = options.world.unwrap_or(layout.world);
     let mut take = TakeBuilder::new(path, InputFormat::Layout, world, ClockUnit::Seconds);
-    let mut decoder = Decoder::new(layout);
+    let mut decoder = Decoder::new();
     let mut decoded = Decoded::default();
-    decoder.push(bytes, &mut decoded);
-    decoder.finish(&mut decoded);
+    decoder.push(layout, bytes, &mut decoded);
+    decoder.finish(layout, &mut decoded);
     let stem = super::take_stem(path);
     let rate = match (layout.time_unit, options.rate_hz) {
         (Some(_), _) => None,

@@ -10,12 +10,12 @@ fn shipped(name: &str) -> Layout {
 }
 
 fn decode_all(layout: &Layout, chunks: &[&[u8]]) -> Decoded {
-    let mut decoder = Decoder::new(layout);
+    let mut decoder = Decoder::new();
     let mut out = Decoded::default();
     for c in chunks {
-        decoder.push(c, &mut out);
+        decoder.push(layout, c, &mut out);
     }
-    decoder.finish(&mut out);
+    decoder.finish(layout, &mut out);
     out
 }
 
@@ -196,17 +196,30 @@ proptest! {
                 .windows(2)
                 .map(|w| &stream[w[0].min(stream.len())..w[1].min(stream.len())])
                 .collect();
-            let mut decoder = Decoder::new(layout);
+            let mut decoder = Decoder::new();
             let mut out = Decoded::default();
             for c in &chunks {
-                decoder.push(c, &mut out);
+                decoder.push(layout, c, &mut out);
                 prop_assert!(decoder.buffered() <= layout.max_frame.max(MAX_LINE_BYTES) + c.len());
             }
-            decoder.finish(&mut out);
+            decoder.finish(layout, &mut out);
             prop_assert_eq!(&out, &whole);
         }
         // Every inserted frame that no other bytes overlap is found.
         let whole = decode_all(&e, &[&stream]);
         prop_assert!(whole.frames.len() <= frames.len() + stream.len() / 37);
+        // Live: the same bytes as CSV lines, whatever the chunks: no panic, one line a frame
+        // with an orientation, after one header.
+        for layout in [e, m] {
+            let mut lines = CsvLines::new(std::sync::Arc::new(layout), "port");
+            let mut out = Vec::new();
+            for c in stream.chunks(cuts.first().copied().unwrap_or(7).max(1)) {
+                lines.push(c, 0.5, &mut out);
+            }
+            lines.finish(1.0, &mut out);
+            for line in out.iter().skip(1) {
+                prop_assert!(std::str::from_utf8(line).is_ok());
+            }
+        }
     }
 }
