@@ -13,8 +13,8 @@ use std::process::ExitCode;
 #[derive(Debug, Args)]
 pub struct LiveArgs {
     /// Where lines come from (repeatable): serial:PORT[@BAUD], udp:[ADDR:]PORT, tcp:HOST:PORT,
-    /// stdin, file:CAPTURE[@SPEED]; serial and udp sources may end in :witmotion (WitMotion's
-    /// packets) or :layout (the frames of --layout FILE)
+    /// stdin, file:CAPTURE[@SPEED]; serial, udp and tcp sources may end in :witmotion
+    /// (WitMotion's packets) or :layout (the frames of --layout FILE)
     #[arg(long = "source", value_name = "SOURCE", required = true)]
     sources: Vec<SourceSpec>,
     /// Send VMC (OSC over UDP) here, or `off` [default: 127.0.0.1:39539]

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 /// The longest line kept (bytes); a longer one is dropped and counted.
 pub const MAX_LINE: usize = 64 * 1024;
 
-/// What a serial or UDP source's bytes are.
+/// What a serial, UDP or TCP source's bytes are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Packets {
     /// Lines of text (imubake CSV, SOU, …).
@@ -48,8 +48,8 @@ pub enum SourceSpec {
     /// `udp:[BIND_ADDR:]PORT[:witmotion|:layout]` (the address defaults to 127.0.0.1): lines in
     /// datagrams, WitMotion packets, or a layout's frames.
     Udp { bind: SocketAddr, packets: Packets },
-    /// `tcp:HOST:PORT`: a client that connects, and reconnects.
-    Tcp { addr: String },
+    /// `tcp:HOST:PORT[:witmotion|:layout]`: a client that connects, and reconnects.
+    Tcp { addr: String, packets: Packets },
     /// `stdin`.
     Stdin,
     /// `file:PATH[@SPEED]`: a capture replayed at its own pace × SPEED (default 1).
@@ -65,7 +65,7 @@ impl std::fmt::Display for SourceSpec {
                 packets,
             } => write!(f, "serial:{}@{baud}{}", path.display(), packets.suffix()),
             SourceSpec::Udp { bind, packets } => write!(f, "udp:{bind}{}", packets.suffix()),
-            SourceSpec::Tcp { addr } => write!(f, "tcp:{addr}"),
+            SourceSpec::Tcp { addr, packets } => write!(f, "tcp:{addr}{}", packets.suffix()),
             SourceSpec::Stdin => write!(f, "stdin"),
             SourceSpec::File { path, speed } => write!(f, "file:{}@{speed}", path.display()),
         }
@@ -85,7 +85,7 @@ fn at_suffix(s: &str) -> (&str, Option<&str>) {
 impl std::str::FromStr for SourceSpec {
     type Err = String;
     fn from_str(s: &str) -> Result<SourceSpec, String> {
-        let usage = "expected serial:PATH[@BAUD][:witmotion|:layout], udp:[ADDR:]PORT[:witmotion|:layout], tcp:HOST:PORT, stdin or file:PATH[@SPEED]";
+        let usage = "expected serial:PATH[@BAUD][:witmotion|:layout], udp:[ADDR:]PORT[:witmotion|:layout], tcp:HOST:PORT[:witmotion|:layout], stdin or file:PATH[@SPEED]";
         if s == "stdin" || s == "-" {
             return Ok(SourceSpec::Stdin);
         }
@@ -94,10 +94,10 @@ impl std::str::FromStr for SourceSpec {
             .into_iter()
             .find_map(|p| rest.strip_suffix(p.suffix()).map(|r| (r, p)))
         {
-            Some((r, p)) if matches!(kind, "serial" | "udp") => (r, p),
+            Some((r, p)) if matches!(kind, "serial" | "udp" | "tcp") => (r, p),
             Some((_, p)) => {
                 return Err(format!(
-                    "`{s}`: `{}` applies to serial and udp sources",
+                    "`{s}`: `{}` applies to serial, udp and tcp sources",
                     p.suffix()
                 ));
             }
@@ -136,7 +136,10 @@ impl std::str::FromStr for SourceSpec {
                 if !rest.contains(':') {
                     return Err(format!("`{s}`: expected tcp:HOST:PORT"));
                 }
-                Ok(SourceSpec::Tcp { addr: rest.into() })
+                Ok(SourceSpec::Tcp {
+                    addr: rest.into(),
+                    packets,
+                })
             }
             "file" => {
                 let (path, speed) = at_suffix(rest);
@@ -409,7 +412,11 @@ pub fn start(
                 .map_err(|e| io(std::io::Error::other(e)))?;
             std::thread::spawn(move || udp(socket, &link, &allow, framing))
         }
-        SourceSpec::Tcp { addr } => std::thread::spawn(move || tcp(&addr, &link, &allow)),
+        SourceSpec::Tcp { addr, packets } => {
+            let framing =
+                Framing::new(packets, "tcp", layout).map_err(|e| io(std::io::Error::other(e)))?;
+            std::thread::spawn(move || tcp(&addr, &link, &allow, framing))
+        }
         SourceSpec::Serial {
             path,
             baud,
@@ -810,7 +817,7 @@ fn back_off(delay: Duration, link: &Link) -> Duration {
     (delay * 2).min(Duration::from_secs(5))
 }
 
-fn tcp(addr: &str, link: &Link, allow: &Allow) {
+fn tcp(addr: &str, link: &Link, allow: &Allow, framing: Framing) {
     let open = || {
         let a = std::net::ToSocketAddrs::to_socket_addrs(addr)?
             .next()
@@ -822,13 +829,7 @@ fn tcp(addr: &str, link: &Link, allow: &Allow) {
         stream.set_read_timeout(Some(Duration::from_millis(100)))?;
         Ok(stream)
     };
-    reopening(
-        link,
-        open,
-        "reconnecting",
-        "connected",
-        Framing::Lines(LineSplitter::default()),
-    );
+    reopening(link, open, "reconnecting", "connected", framing);
 }
 
 fn serial(path: &std::path::Path, baud: u32, framing: Framing, link: &Link) {
@@ -960,7 +961,7 @@ mod tests {
             "file:a@0",
             "nope:1",
             "x",
-            "tcp:h:1:witmotion",
+            "file:a:witmotion",
             "serial::witmotion",
         ] {
             assert!(bad.parse::<SourceSpec>().is_err(), "{bad}");
@@ -979,11 +980,18 @@ mod tests {
                 .to_string(),
             "serial:/dev/ttyACM0@921600:layout"
         );
+        assert_eq!(
+            "tcp:host:9:layout".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Tcp {
+                addr: "host:9".into(),
+                packets: Packets::Layout
+            }
+        );
         assert!(
-            "tcp:host:9:layout"
+            "file:take.bin:layout"
                 .parse::<SourceSpec>()
                 .unwrap_err()
-                .contains("`:layout` applies to serial and udp")
+                .contains("`:layout` applies to serial, udp and tcp")
         );
     }
 

@@ -5,7 +5,7 @@
 
 use crate::common;
 
-use common::{imubake_bin, python, repo_file, run};
+use common::{imubake_bin, openpty, python, repo_file, run};
 use imubake::anim::Animation;
 use imubake::convert::ConvertSettings;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -388,40 +388,6 @@ fn udp_datagrams_stream_the_same_frames() {
     let vmc = receiver.finish();
     let anim = whole_take(&capture, &mapping);
     assert_streamed("UDP", &vmc["bundles"], &anim, &MIXAMO);
-}
-
-/// A pseudo-terminal: its master (what the test writes) and its slave's fd and path (the
-/// "serial port").
-fn openpty() -> (std::fs::File, (i32, String)) {
-    let (mut m, mut s) = (0, 0);
-    let mut name = [0 as libc::c_char; 128];
-    let rc = unsafe {
-        libc::openpty(
-            &mut m,
-            &mut s,
-            name.as_mut_ptr(),
-            std::ptr::null(),
-            std::ptr::null(),
-        )
-    };
-    assert_eq!(rc, 0);
-    // Not inherited by the imubake child (it would keep the device alive after an "unplug").
-    unsafe {
-        libc::fcntl(m, libc::F_SETFD, libc::FD_CLOEXEC);
-        libc::fcntl(s, libc::F_SETFD, libc::FD_CLOEXEC);
-    }
-    // Raw, as a USB-serial adapter is (no echo, no line editing) before anyone opens it.
-    unsafe {
-        let mut t: libc::termios = std::mem::zeroed();
-        libc::tcgetattr(s, &mut t);
-        libc::cfmakeraw(&mut t);
-        libc::tcsetattr(s, libc::TCSANOW, &t);
-    }
-    let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
-        .to_string_lossy()
-        .into_owned();
-    use std::os::fd::FromRawFd;
-    (unsafe { std::fs::File::from_raw_fd(m) }, (s, path))
 }
 
 /// Paper 002's SOU log (debug text, corrupted lines) written through a pseudo-terminal at its

@@ -104,6 +104,59 @@ pub fn godot() -> Option<PathBuf> {
     }
 }
 
+/// A pseudo-terminal: its master (what the test writes) and its slave's fd and path (the
+/// "serial port").
+pub fn openpty() -> (std::fs::File, (i32, String)) {
+    let (mut m, mut s) = (0, 0);
+    let mut name = [0 as libc::c_char; 128];
+    let rc = unsafe {
+        libc::openpty(
+            &mut m,
+            &mut s,
+            name.as_mut_ptr(),
+            std::ptr::null(),
+            std::ptr::null(),
+        )
+    };
+    assert_eq!(rc, 0);
+    // Not inherited by the imubake child (it would keep the device alive after an "unplug").
+    unsafe {
+        libc::fcntl(m, libc::F_SETFD, libc::FD_CLOEXEC);
+        libc::fcntl(s, libc::F_SETFD, libc::FD_CLOEXEC);
+    }
+    // Raw, as a USB-serial adapter is (no echo, no line editing) before anyone opens it.
+    unsafe {
+        let mut t: libc::termios = std::mem::zeroed();
+        libc::tcgetattr(s, &mut t);
+        libc::cfmakeraw(&mut t);
+        libc::tcsetattr(s, libc::TCSANOW, &t);
+    }
+    let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
+        .to_string_lossy()
+        .into_owned();
+    use std::os::fd::FromRawFd;
+    (unsafe { std::fs::File::from_raw_fd(m) }, (s, path))
+}
+
+/// A UDP port on 127.0.0.1 free a moment ago (for a live source to bind).
+pub fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// The text of the CSV recording `imubake live --record DIR` left in `record`.
+pub fn recorded_csv(record: &Path) -> String {
+    let recording = std::fs::read_dir(record)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "csv"))
+        .expect("a recording");
+    std::fs::read_to_string(&recording).unwrap()
+}
+
 /// The compiled `imubake` binary.
 pub fn imubake_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_imubake"))

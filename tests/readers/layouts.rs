@@ -211,36 +211,6 @@ fn a_layout_take_converts_like_the_same_values_as_csv() {
     assert!(binary == csv, "the BVHs differ");
 }
 
-/// A pseudo-terminal standing in for a serial port: the master the test writes, and the slave's
-/// path (kept open here, raw, so the port stays up between writes).
-fn openpty() -> (std::fs::File, (i32, String)) {
-    let (mut m, mut s) = (0, 0);
-    let mut name = [0 as libc::c_char; 128];
-    let rc = unsafe {
-        libc::openpty(
-            &mut m,
-            &mut s,
-            name.as_mut_ptr(),
-            std::ptr::null(),
-            std::ptr::null(),
-        )
-    };
-    assert_eq!(rc, 0);
-    unsafe {
-        libc::fcntl(m, libc::F_SETFD, libc::FD_CLOEXEC);
-        libc::fcntl(s, libc::F_SETFD, libc::FD_CLOEXEC);
-        let mut t: libc::termios = std::mem::zeroed();
-        libc::tcgetattr(s, &mut t);
-        libc::cfmakeraw(&mut t);
-        libc::tcsetattr(s, libc::TCSANOW, &t);
-    }
-    let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
-        .to_string_lossy()
-        .into_owned();
-    use std::os::fd::FromRawFd;
-    (unsafe { std::fs::File::from_raw_fd(m) }, (s, path))
-}
-
 /// `imubake live` on `source` with `layout`, recording; `feed` sends the capture; the recorded
 /// CSV's header and rows.
 fn live_recording(
@@ -280,12 +250,7 @@ fn live_recording(
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let recording = std::fs::read_dir(&record)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.extension().is_some_and(|e| e == "csv"))
-        .expect("a recording");
-    let text = std::fs::read_to_string(&recording).unwrap();
+    let text = common::recorded_csv(&record);
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
     let header = lines.next().unwrap().to_string();
     let rows = lines
@@ -307,11 +272,7 @@ fn row_quaternion(row: &[String]) -> UnitQuaternion<f64> {
 fn a_live_udp_stream_decodes_through_the_layout() {
     let Some(py) = python() else { return };
     let (dir, expected) = fixtures(&py);
-    let port = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    let port = common::free_udp_port();
     let bytes = std::fs::read(dir.path().join("esp32.bin")).unwrap();
     let (header, rows) = live_recording(
         dir.path(),
@@ -357,7 +318,7 @@ fn a_live_serial_port_decodes_the_data_matrix() {
     let Some(py) = python() else { return };
     let (dir, expected) = fixtures(&py);
     let text = std::fs::read_to_string(dir.path().join("matrix.txt")).unwrap();
-    let (mut master, slave) = openpty();
+    let (mut master, slave) = common::openpty();
     let (header, rows) = live_recording(
         dir.path(),
         &format!("serial:{}:layout", slave.1),
@@ -384,5 +345,46 @@ fn a_live_serial_port_decodes_the_data_matrix() {
             let angle = row_quaternion(row).angle_to(&quaternion(q));
             assert!(angle < 1e-12, "sensor {id}: {angle} rad");
         }
+    }
+}
+
+/// `live --source tcp:HOST:PORT:layout`: the ESP32 capture from a TCP server (a Wi-Fi board's
+/// socket) in arbitrary 1000-byte writes: every frame recorded with its values.
+#[test]
+fn a_live_tcp_stream_decodes_through_the_layout() {
+    let Some(py) = python() else { return };
+    let (dir, expected) = fixtures(&py);
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    let bytes = std::fs::read(dir.path().join("esp32.bin")).unwrap();
+    let (header, rows) = live_recording(
+        dir.path(),
+        &format!("tcp:127.0.0.1:{port}:layout"),
+        &layout("esp32_struct.yaml"),
+        || {
+            use std::io::Write;
+            let (mut stream, _) = listener.accept().unwrap();
+            for chunk in bytes.chunks(1000) {
+                stream.write_all(chunk).unwrap();
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            stream.flush().unwrap();
+            // Kept open until the session stops, as a device's socket is.
+            std::mem::forget(stream);
+        },
+    );
+    assert_eq!(
+        header,
+        "time_s,sensor,qw,qx,qy,qz,gx_dps,gy_dps,gz_dps,ax_g,ay_g,az_g"
+    );
+    let frames = expected["esp32"]["frames"].as_array().unwrap();
+    assert_eq!(rows.len(), frames.len());
+    for (row, f) in rows.iter().zip(frames) {
+        assert_eq!(row[1], f["sensor"].as_u64().unwrap().to_string());
+        assert!(row_quaternion(row).angle_to(&quaternion(&f["q"])) < 1e-12);
+        let v: Vec<f64> = row[6..12].iter().map(|v| v.parse().unwrap()).collect();
+        let mut e = numbers(&f["gyro_dps"]);
+        e.extend(numbers(&f["accel_g"]));
+        assert_eq!(v, e);
     }
 }

@@ -141,11 +141,7 @@ fn untimed_recordings_need_a_rate() {
 fn a_live_witmotion_stream_is_recorded_as_decoded() {
     let Some(py) = python() else { return };
     let (dir, expected) = fixtures(&py);
-    let port = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    let port = common::free_udp_port();
     let sensor = format!("udp{port}");
     let mapping = dir.path().join("mapping.json");
     std::fs::write(
@@ -183,12 +179,7 @@ fn a_live_witmotion_stream_is_recorded_as_decoded() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let recording = std::fs::read_dir(&record)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.extension().is_some_and(|e| e == "csv"))
-        .expect("a recording");
-    let text = std::fs::read_to_string(&recording).unwrap();
+    let text = common::recorded_csv(&record);
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
     assert_eq!(
         lines.next(),

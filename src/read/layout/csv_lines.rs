@@ -85,15 +85,7 @@ impl CsvLines {
                 [Some(w), Some(x), Some(y), Some(z)] => [w, x, y, z],
                 _ => [q.w, q.i, q.j, q.k],
             };
-            let inertial_values = [
-                Meaning::Gx,
-                Meaning::Gy,
-                Meaning::Gz,
-                Meaning::Ax,
-                Meaning::Ay,
-                Meaning::Az,
-            ]
-            .map(|m| f.get(m));
+            let inertial_values = super::INERTIAL.map(|m| f.get(m));
             let has_inertial = inertial_values.iter().all(Option::is_some);
             let inertial = *self.inertial.get_or_insert_with(|| {
                 let mut header = b"time_s,sensor,qw,qx,qy,qz".to_vec();

@@ -337,6 +337,16 @@ pub struct LayoutError {
     pub message: String,
 }
 
+/// The gyroscope's and accelerometer's values: one reading, as imubake's inertial sample is.
+const INERTIAL: [Meaning; 6] = [
+    Meaning::Gx,
+    Meaning::Gy,
+    Meaning::Gz,
+    Meaning::Ax,
+    Meaning::Ay,
+    Meaning::Az,
+];
+
 /// Each group of values that is one reading: all or none of them in a list of meanings.
 const GROUPS: [(&str, &[Meaning]); 4] = [
     (
@@ -344,17 +354,7 @@ const GROUPS: [(&str, &[Meaning]); 4] = [
         &[Meaning::Qw, Meaning::Qx, Meaning::Qy, Meaning::Qz],
     ),
     ("euler", &[Meaning::Yaw, Meaning::Pitch, Meaning::Roll]),
-    (
-        "gyroscope and accelerometer",
-        &[
-            Meaning::Gx,
-            Meaning::Gy,
-            Meaning::Gz,
-            Meaning::Ax,
-            Meaning::Ay,
-            Meaning::Az,
-        ],
-    ),
+    ("gyroscope and accelerometer", &INERTIAL),
     ("magnetometer", &[Meaning::Mx, Meaning::My, Meaning::Mz]),
 ];
 
