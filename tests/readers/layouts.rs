@@ -388,3 +388,70 @@ fn a_live_tcp_stream_decodes_through_the_layout() {
         assert_eq!(v, e);
     }
 }
+
+/// `inspect --layout` shows what the layout makes of a capture (its sensors, the damaged frames
+/// by offset); `batch --layout` converts a folder holding the capture and the layout file itself
+/// (recognised and skipped, not a take).
+#[test]
+fn inspect_and_batch_read_through_the_layout() {
+    let Some(py) = python() else { return };
+    let (dir, expected) = fixtures(&py);
+    let layout_file = layout("esp32_struct.yaml");
+    let out = Command::new(imubake_bin())
+        .arg("inspect")
+        .arg(dir.path().join("esp32.bin"))
+        .arg("--layout")
+        .arg(&layout_file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("Node count: 3"), "{text}");
+    for offset in numbers(&expected["esp32"]["bad_offsets"]) {
+        assert!(text.contains(&format!("(byte offset {offset})")), "{text}");
+    }
+
+    let library = dir.path().join("library");
+    std::fs::create_dir_all(&library).unwrap();
+    std::fs::copy(dir.path().join("esp32.bin"), library.join("suit.bin")).unwrap();
+    std::fs::copy(&layout_file, library.join("suit_layout.yaml")).unwrap();
+    std::fs::write(
+        library.join("imubake.yaml"),
+        "layout: suit_layout.yaml\nmapping: mapping.json\nformats: [bvh]\n",
+    )
+    .unwrap();
+    std::fs::write(
+        library.join("mapping.json"),
+        r#"{"rig": "mixamo", "heading": "sensors", "sensors": {"1": {"bone": "Hips", "mount": "calibrate"}}}"#,
+    )
+    .unwrap();
+    let out = Command::new(imubake_bin())
+        .arg("batch")
+        .arg(&library)
+        .arg("--config")
+        .arg(library.join("imubake.yaml"))
+        .arg("--out")
+        .arg(dir.path().join("converted"))
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (report["converted"].as_u64(), report["failed"].as_u64()),
+        (Some(1), Some(0))
+    );
+    let sidecar: Value = serde_json::from_slice(
+        &std::fs::read(dir.path().join("converted/suit.imubake.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(sidecar["source"]["format"], "layout");
+}
