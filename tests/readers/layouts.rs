@@ -264,6 +264,33 @@ fn row_quaternion(row: &[String]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
 }
 
+/// A live recording of the ESP32 capture: one row per good frame, in order, each with the
+/// frame's sensor, its time from the first frame's, its quaternion (to 10⁻¹² rad: the session
+/// normalises it) and its rates and accelerations exactly.
+fn assert_esp32_recorded(header: &str, rows: &[Vec<String>], expected: &Value) {
+    assert_eq!(
+        header,
+        "time_s,sensor,qw,qx,qy,qz,gx_dps,gy_dps,gz_dps,ax_g,ay_g,az_g"
+    );
+    let frames = expected["esp32"]["frames"].as_array().unwrap();
+    assert_eq!(rows.len(), frames.len());
+    let t0 = frames[0]["t_us"].as_f64().unwrap() * 1e-6;
+    for (row, f) in rows.iter().zip(frames) {
+        assert_eq!(row[1], f["sensor"].as_u64().unwrap().to_string());
+        let t: f64 = row[0].parse().unwrap();
+        assert!(
+            (t - (f["t_us"].as_f64().unwrap() * 1e-6 - t0)).abs() < 1e-12,
+            "{row:?}"
+        );
+        let angle = row_quaternion(row).angle_to(&quaternion(&f["q"]));
+        assert!(angle < 1e-12, "{row:?}: {angle} rad");
+        let v: Vec<f64> = row[6..12].iter().map(|v| v.parse().unwrap()).collect();
+        let mut e = numbers(&f["gyro_dps"]);
+        e.extend(numbers(&f["accel_g"]));
+        assert_eq!(v, e);
+    }
+}
+
 /// `live --source udp:PORT:layout`: the ESP32 capture sent three frames to a datagram is
 /// recorded with every frame's values as written — the rates and accelerations exactly, the
 /// quaternion to 10⁻¹² rad (normalised) — the damaged frames dropped, the time from the frames'
@@ -286,28 +313,7 @@ fn a_live_udp_stream_decodes_through_the_layout() {
             }
         },
     );
-    assert_eq!(
-        header,
-        "time_s,sensor,qw,qx,qy,qz,gx_dps,gy_dps,gz_dps,ax_g,ay_g,az_g"
-    );
-    let frames = expected["esp32"]["frames"].as_array().unwrap();
-    assert_eq!(rows.len(), frames.len());
-    let t0 = frames[0]["t_us"].as_f64().unwrap() * 1e-6;
-    for (row, f) in rows.iter().zip(frames) {
-        assert_eq!(row[1], f["sensor"].as_u64().unwrap().to_string());
-        let t: f64 = row[0].parse().unwrap();
-        assert!(
-            (t - (f["t_us"].as_f64().unwrap() * 1e-6 - t0)).abs() < 1e-12,
-            "{row:?}"
-        );
-        // The recording holds the quaternion as the session normalised it.
-        let angle = row_quaternion(row).angle_to(&quaternion(&f["q"]));
-        assert!(angle < 1e-12, "{row:?}: {angle} rad");
-        let v: Vec<f64> = row[6..12].iter().map(|v| v.parse().unwrap()).collect();
-        let mut e = numbers(&f["gyro_dps"]);
-        e.extend(numbers(&f["accel_g"]));
-        assert_eq!(v, e);
-    }
+    assert_esp32_recorded(&header, &rows, &expected);
 }
 
 /// `live --source serial:PTY:layout`: paper 004's data matrix written row by row through a
@@ -373,20 +379,7 @@ fn a_live_tcp_stream_decodes_through_the_layout() {
             std::mem::forget(stream);
         },
     );
-    assert_eq!(
-        header,
-        "time_s,sensor,qw,qx,qy,qz,gx_dps,gy_dps,gz_dps,ax_g,ay_g,az_g"
-    );
-    let frames = expected["esp32"]["frames"].as_array().unwrap();
-    assert_eq!(rows.len(), frames.len());
-    for (row, f) in rows.iter().zip(frames) {
-        assert_eq!(row[1], f["sensor"].as_u64().unwrap().to_string());
-        assert!(row_quaternion(row).angle_to(&quaternion(&f["q"])) < 1e-12);
-        let v: Vec<f64> = row[6..12].iter().map(|v| v.parse().unwrap()).collect();
-        let mut e = numbers(&f["gyro_dps"]);
-        e.extend(numbers(&f["accel_g"]));
-        assert_eq!(v, e);
-    }
+    assert_esp32_recorded(&header, &rows, &expected);
 }
 
 /// `inspect --layout` shows what the layout makes of a capture (its sensors, the damaged frames
