@@ -508,14 +508,9 @@ impl Framing {
                 said,
             } => {
                 lines.push(bytes, started.elapsed().as_secs_f64(), out);
-                // Said when they start, and then once per 100 more.
-                let bad = lines.bad_checksums();
-                if bad > *said && (*said == 0 || bad >= *said + 100) {
-                    link.notice(format!(
-                        "{bad} WitMotion packets with a bad checksum dropped"
-                    ));
-                    *said = bad;
-                }
+                say_growing(link, lines.bad_checksums(), said, |n| {
+                    format!("{n} WitMotion packets with a bad checksum dropped")
+                });
             }
             Framing::Layout {
                 lines,
@@ -523,13 +518,11 @@ impl Framing {
                 said,
             } => {
                 lines.push(bytes, started.elapsed().as_secs_f64(), out);
-                let dropped = lines.dropped();
-                if dropped > *said && (*said == 0 || dropped >= *said + 100) {
-                    link.notice(format!(
-                        "{dropped} frames of the layout dropped (bad, repeated or without an orientation)"
-                    ));
-                    *said = dropped;
-                }
+                say_growing(link, lines.dropped(), said, |n| {
+                    format!(
+                        "{n} frames of the layout dropped (bad, repeated or without an orientation)"
+                    )
+                });
             }
         }
     }
@@ -557,6 +550,15 @@ impl Framing {
                 lines.finish(started.elapsed().as_secs_f64(), out)
             }
         }
+    }
+}
+
+/// A count of dropped packets said as a notice when it first grows, then once per 100 more
+/// (`said`: the count last said).
+fn say_growing(link: &Link, count: u64, said: &mut u64, text: impl FnOnce(u64) -> String) {
+    if count > *said && (*said == 0 || count >= *said + 100) {
+        link.notice(text(count));
+        *said = count;
     }
 }
 

@@ -390,18 +390,11 @@ fn inspect_and_batch_read_through_the_layout() {
     let Some(py) = python() else { return };
     let (dir, expected) = fixtures(&py);
     let layout_file = layout("esp32_struct.yaml");
-    let out = Command::new(imubake_bin())
+    let out = run(Command::new(imubake_bin())
         .arg("inspect")
         .arg(dir.path().join("esp32.bin"))
         .arg("--layout")
-        .arg(&layout_file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+        .arg(&layout_file));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("Node count: 3"), "{text}");
     for offset in numbers(&expected["esp32"]["bad_offsets"]) {
@@ -422,21 +415,14 @@ fn inspect_and_batch_read_through_the_layout() {
         r#"{"rig": "mixamo", "heading": "sensors", "sensors": {"1": {"bone": "Hips", "mount": "calibrate"}}}"#,
     )
     .unwrap();
-    let out = Command::new(imubake_bin())
+    let out = run(Command::new(imubake_bin())
         .arg("batch")
         .arg(&library)
         .arg("--config")
         .arg(library.join("imubake.yaml"))
         .arg("--out")
         .arg(dir.path().join("converted"))
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+        .arg("--json"));
     let report: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(
         (report["converted"].as_u64(), report["failed"].as_u64()),
