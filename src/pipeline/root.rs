@@ -128,10 +128,14 @@ pub const STANCE_S: f64 = 0.1;
 /// (the ankle stands about a quarter of the foot's length in front of the heel).
 pub const HEEL_BACK: f64 = 0.25;
 /// A foot whose lowest point is this close to its surface, × h …
-pub const PLANT_H: f64 = 0.01;
-/// … and slower than this over the ground, × h / s, is reported planted (released at twice
-/// either).
-pub const PLANT_SPEED_H_S: f64 = 0.15;
+pub const PLANT_H: f64 = 0.02;
+/// … slower than this over the ground, × h / s …
+pub const PLANT_SPEED_H_S: f64 = 0.3;
+/// … and whose toes' tip turns about its joint slower than this, × h / s, is reported planted: a
+/// foot rolling off its toes or onto its sole is not, though the point it pivots on holds still
+/// (the ground-truth rule of issue 49 sees the source's rolling foot move: a real sole rolls,
+/// ours pivots on a point). About 7 rad/s for a foot 0.15 h long.
+pub const PLANT_ROLL_H_S: f64 = 1.0;
 /// Contacts and airborne stretches shorter than this many frames are not reported.
 pub const MIN_FRAMES: usize = 3;
 
@@ -145,6 +149,9 @@ struct Foot {
     /// without it a foot rolling onto its heel (the end of a backwards step, a heel pivot) pivots
     /// on its ankle, which swings.
     heel: Vector3<f64>,
+    /// Which of the foot's points ([`foot_points`]) reaches farthest from its joint horizontally
+    /// in the standing pose (the toes' tip): how fast it turns about the joint is the foot's roll.
+    tip: usize,
 }
 
 /// The foot joints of a rig, its body parts' ([`crate::rig::anatomy`]: declared, named in any
@@ -250,7 +257,7 @@ struct FeetState {
     /// The hips' velocity over the last frames (smoothed), rig units per second.
     velocity: Vector3<f64>,
     airborne: bool,
-    /// Each foot planted, as reported (with hysteresis).
+    /// Each foot planted, as reported.
     planted: [bool; 2],
 }
 
@@ -330,6 +337,15 @@ fn lowest(points: &[Vector3<f64>]) -> (usize, f64) {
         .unwrap_or((0, 0.0))
 }
 
+/// How fast a foot rolls, × its units / s: its toes' tip (`before`, `after`: relative to the foot
+/// joint, a frame `dt` apart) turning about the joint in the foot's upright plane — a heel rising
+/// at push-off, a sole coming down after a heel strike change the tip's height and its horizontal
+/// reach; a foot swivelling on the spot changes neither.
+fn roll_speed(before: Vector3<f64>, after: Vector3<f64>, dt: f64) -> f64 {
+    let reach = |v: Vector3<f64>| v.x.hypot(v.z);
+    (after.y - before.y).hypot(reach(after) - reach(before)) / dt
+}
+
 /// Smooth step from 0 at `x = −1` to 1 at `x = 1`.
 fn smooth(x: f64) -> f64 {
     let u = ((x + 1.0) / 2.0).clamp(0.0, 1.0);
@@ -368,16 +384,19 @@ impl RootCore {
                 let mut foot = Foot {
                     joints,
                     heel: Vector3::zeros(),
+                    tip: 0,
                 };
                 let mut points = Vec::new();
                 foot_points(rig, &foot, &positions, &world, &mut points);
                 let sole = lowest(&points).1 - positions[f].y;
                 // The foot's reach: its farthest point from the joint horizontally (the toes).
-                let reach = points
+                let (tip, reach) = points
                     .iter()
                     .map(|p| Vector3::new(p.x - positions[f].x, 0.0, p.z - positions[f].z))
-                    .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))
+                    .enumerate()
+                    .max_by(|a, b| a.1.norm_squared().total_cmp(&b.1.norm_squared()))
                     .unwrap_or_default();
+                foot.tip = tip;
                 foot.heel = world[f].inverse()
                     * (Vector3::new(0.0, sole.min(0.0), 0.0) - HEEL_BACK * reach);
                 foot
@@ -467,6 +486,10 @@ impl RootCore {
     fn step_feet(&mut self, body_low: f64, now: [&[Vector3<f64>]; 2]) -> RootFrame {
         let h = self.height;
         let low = [lowest(now[0]), lowest(now[1])];
+        let tips = self
+            .feet
+            .as_ref()
+            .map_or([0; 2], |feet| [feet[0].tip, feet[1].tip]);
         let Some(state) = self.state.as_mut() else {
             // The first frame: the body stands on the floor where the rest pose stood.
             let hips = Vector3::new(self.rest_root.x, self.floor - body_low, self.rest_root.z);
@@ -602,20 +625,24 @@ impl RootCore {
                 state.stance.pop_front();
             }
         }
-        // Reported contacts: a foot near its surface and nearly still over the ground, engaged
-        // and released at different thresholds so that noise does not flicker them.
+        // Reported contacts: a foot near its surface, nearly still over the ground and not
+        // rolling. No hysteresis (it held contacts past the source's end, measured by
+        // `every_gait_walks_without_sliding`): contacts shorter than [`MIN_FRAMES`] are dropped
+        // instead, so that noise does not flicker them.
         for f in 0..2 {
             let height = state.hips.y + low[f].1 - state.level[f];
             // The pivot's ground speed: the hips' step plus its motion relative to them.
             let d = state.hips - before + moved[f];
             let speed = Vector3::new(d.x, 0.0, d.z).norm() / dt;
-            let (height_limit, speed_limit) = if state.planted[f] {
-                (2.0 * PLANT_H * h, 2.0 * PLANT_SPEED_H_S * h)
-            } else {
-                (PLANT_H * h, PLANT_SPEED_H_S * h)
+            // A planted foot lies still on its sole: it does not roll.
+            let tip = |points: &[Vector3<f64>]| {
+                points.get(tips[f]).copied().unwrap_or_default() - points[0]
             };
-            state.planted[f] =
-                (!state.airborne || pushing) && height <= height_limit && speed <= speed_limit;
+            let roll = roll_speed(tip(&state.previous[f]), tip(now[f]), dt);
+            state.planted[f] = (!state.airborne || pushing)
+                && height <= PLANT_H * h
+                && speed <= PLANT_SPEED_H_S * h
+                && roll <= PLANT_ROLL_H_S * h;
         }
         for (previous, now) in state.previous.iter_mut().zip(now) {
             previous.clear();
@@ -917,6 +944,60 @@ mod tests {
                 assert!(!f.airborne);
             }
         }
+    }
+
+    /// A foot rolling on the point it pivots on — its toes' tip turning about its joint in the
+    /// foot's upright plane at twice [`PLANT_ROLL_H_S`] — is not reported planted, though that
+    /// point holds still; rolling at half of it, it is.
+    #[test]
+    fn a_rolling_foot_is_not_planted() {
+        let rig = load_rig("mixamo").unwrap();
+        let foot = Anatomy::of(&rig).limb(Side::Left, Limb::Foot).unwrap();
+        let rest = vec![UnitQuaternion::identity(); rig.len()];
+        let dt = 1.0 / 60.0;
+        // The toes' tip about the foot joint in the standing pose, rig units.
+        let probe = RootCore::new(&rig, RootMode::Feet, dt, &rest);
+        let left = probe.feet.as_ref().unwrap()[0].clone();
+        let (mut world, mut positions, mut points) = (Vec::new(), Vec::new(), Vec::new());
+        pose_relative_to_hips(&rig, &rest, &mut world, &mut positions);
+        foot_points(&rig, &left, &positions, &world, &mut points);
+        let tip = points[left.tip] - points[0];
+        // Turning about x (the foot points along z), the tip moves at ω · its distance from x.
+        let limit = PLANT_ROLL_H_S * probe.standing_height();
+        let arm = tip.y.hypot(tip.z);
+        for (rate_rad_s, planted) in [(0.5 * limit / arm, true), (2.0 * limit / arm, false)] {
+            let mut core = RootCore::new(&rig, RootMode::Feet, dt, &rest);
+            for _ in 0..10 {
+                assert!(core.push(&rest).contact[0]);
+            }
+            let mut pose = rest.clone();
+            for k in 1..=6 {
+                // Toes up: the foot pivots on its heel.
+                pose[foot] = UnitQuaternion::from_axis_angle(
+                    &Vector3::x_axis(),
+                    -rate_rad_s * dt * k as f64,
+                );
+                let frame = core.push(&pose);
+                assert!(!frame.airborne, "{rate_rad_s} rad/s, frame {k}");
+                assert_eq!(
+                    frame.contact[0], planted,
+                    "{rate_rad_s} rad/s, frame {k}: {frame:?}"
+                );
+            }
+        }
+    }
+
+    /// The roll is the tip's turn in the foot's upright plane: ω · arm for a pitch (by hand:
+    /// a tip 0.2 ahead and 0.05 below the joint, turned 0.1 rad in 0.1 s, moves 0.1 · √0.0425
+    /// in 0.1 s), nil for a swivel about the vertical however fast.
+    #[test]
+    fn a_foot_swivelling_on_the_spot_does_not_roll() {
+        let tip = Vector3::new(0.0, -0.05, 0.2);
+        let pitched = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.1) * tip;
+        let expected = 2.0 * (0.05f64).sin() * 0.0425f64.sqrt() / 0.1; // chord over dt
+        assert!((roll_speed(tip, pitched, 0.1) - expected).abs() < 1e-12);
+        let swivelled = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 1.0) * tip;
+        assert!(roll_speed(tip, swivelled, 0.01).abs() < 1e-12);
     }
 
     /// Both knees, flexed 40°, straighten to 15° over 0.3 s (too slowly for a hop's take-off,

@@ -4,11 +4,13 @@ scipy: a minimal BVH parser (offsets, End Sites, channels), each joint's rotatio
 as intrinsic Euler angles in channel order, positions down the hierarchy
 (p_child = p_parent + R_parent · offset), a position channel replacing its OFFSET component (the root's channels are its world position).
 
-usage: bvh_positions.py FILE.bvh JOINT[,JOINT...] [FOOT,FOOT...]
+usage: bvh_positions.py FILE.bvh JOINT[,JOINT...] [FOOT,FOOT... [FIRST:LAST]]
 prints JSON {"joints": {joint: [[x, y, z] per frame]}, "lowest": [y per frame] (the lowest joint
 or End Site), "rest_lowest": y, "rest_highest": y (the rest pose, root at its OFFSET),
 "frame_time": s; with FOOT names "contacts": {foot: [bool per frame]} and "airborne": [bool per
-frame], no point of any foot near its lowest height (see `contacts`)}
+frame], no point of any foot near its lowest height (see `contacts`), judged on frames FIRST to
+LAST (inclusive; all by default) alone — the motion a simulation played, without a reference pose
+before or after it, which would otherwise stand in the ±0.5 s window — and false outside them}
 """
 import json
 import sys
@@ -139,6 +141,9 @@ def main():
     path, names = sys.argv[1], sys.argv[2].split(",")
     feet = sys.argv[3].split(",") if len(sys.argv) > 3 else []
     joints, values, frame_time = parse(path)
+    first, last = 0, len(values) - 1
+    if len(sys.argv) > 4:
+        first, last = (int(v) for v in sys.argv[4].split(":"))
     pos = positions(joints, values)
     rest = positions(joints, np.zeros((1, values.shape[1])), channels=False)
     out = {
@@ -153,14 +158,19 @@ def main():
         out["joints"][name] = pos[k].tolist()
     height = out["rest_highest"] - out["rest_lowest"]
     out["contacts"] = {}
+    played = [p[first:last + 1] for p in pos]
     grounded = np.zeros(len(values), dtype=bool)
+    airborne = np.zeros(len(values), dtype=bool)
     for name in feet:
         k = next(i for i, j in enumerate(joints) if j["name"] == name)
-        touching, low_enough = contacts(joints, pos, k, height, frame_time)
-        out["contacts"][name] = touching.tolist()
-        grounded |= low_enough
+        touching, low_enough = contacts(joints, played, k, height, frame_time)
+        whole = np.zeros(len(values), dtype=bool)
+        whole[first:last + 1] = touching
+        out["contacts"][name] = whole.tolist()
+        grounded[first:last + 1] |= low_enough
+    airborne[first:last + 1] = ~grounded[first:last + 1]
     if feet:
-        out["airborne"] = (~grounded).tolist()
+        out["airborne"] = airborne.tolist()
     print(json.dumps(out))
 
 
