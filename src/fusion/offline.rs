@@ -96,40 +96,116 @@ fn vqf(params: &OfflineParams, ts: f64) -> VQF {
 
 /// Rest as VQF detects it (its thresholds): the gyro and the accelerometer within 2 °/s and
 /// 0.5 m/s² of their own low-passed values (first order, τ = 0.5 s), the low-passed gyro under
-/// 2 °/s on every axis, for at least 1.5 s. The stretches of rest, as step ranges.
+/// 2 °/s on every axis, for at least 1.5 s — or [`OPENING_S`] for the take's first stretch: a
+/// pose held before the motion, however briefly, is the take's best look at the bias and at
+/// gravity (VQF's 1.5 s found none in a 0.5–1.5 s pose, and the bias then came from VQF's passes
+/// in motion: 3.8° of error since the pose on a 5 s take with a 2 °/s bias, 0.56° with it; see
+/// `scripts/fusion_matrix.py`). The stretches of rest, as step ranges.
+///
+/// VQF's last test also refuses a still sensor whose gyro is biased by more than 2 °/s (a
+/// cheap gyro's bias reaches that), and then no rest is found and no bias learned from it. So a
+/// stretch steady but turning at up to [`BIASED_REST_DPS`] is rest too when the turn is not
+/// real: the specific force and, with a magnetometer, the field keep their directions in the
+/// sensor's frame over it (within [`REST_TURN_DEG`] between its first and its last
+/// [`REST_ENDS_S`]) where the gyro says it turned at least twice as far. Without a magnetometer
+/// a turn about the vertical cannot be told from bias: the gyro's part about it must pass VQF's
+/// test.
 pub fn rest_segments(steps: &[Step]) -> Vec<std::ops::Range<usize>> {
     const TAU_S: f64 = 0.5;
     const MIN_S: f64 = 1.5;
     let (gyr_th, acc_th) = (2f64.to_radians(), 0.5);
+    let biased_th = BIASED_REST_DPS.to_radians();
     let Some(first) = steps.first() else {
         return Vec::new();
     };
     let (mut gyr_lp, mut acc_lp) = (first.gyr, first.acc);
     let mut segments = Vec::new();
-    let (mut start, mut still_s) = (0, 0.0);
+    // The current stretch: where it started, how long, whether every step passed VQF's test.
+    let (mut start, mut still_s, mut vqf_rest) = (0, 0.0, true);
+    let mut close = |range: std::ops::Range<usize>, still_s: f64, vqf_rest: bool| {
+        let long_enough = still_s >= MIN_S || (range.start == 0 && still_s >= OPENING_S);
+        if long_enough && (vqf_rest || turn_is_bias(&steps[range.clone()])) {
+            segments.push(range);
+        }
+    };
     for (i, s) in steps.iter().enumerate() {
         let alpha = s.dt / (TAU_S + s.dt);
         gyr_lp += (s.gyr - gyr_lp) * alpha;
         acc_lp += (s.acc - acc_lp) * alpha;
-        let still = (s.gyr - gyr_lp).norm() < gyr_th
-            && (s.acc - acc_lp).norm() < acc_th
-            && gyr_lp.amax() < gyr_th;
-        if still {
+        let steady = (s.gyr - gyr_lp).norm() < gyr_th && (s.acc - acc_lp).norm() < acc_th;
+        if steady && gyr_lp.amax() < biased_th {
             if still_s == 0.0 {
                 start = i;
+                vqf_rest = true;
             }
             still_s += s.dt;
+            vqf_rest &= gyr_lp.amax() < gyr_th;
         } else {
-            if still_s >= MIN_S {
-                segments.push(start..i);
-            }
+            close(start..i, still_s, vqf_rest);
             still_s = 0.0;
         }
     }
-    if still_s >= MIN_S {
-        segments.push(start..steps.len());
-    }
+    close(start..steps.len(), still_s, vqf_rest);
     segments
+}
+
+/// A take that opens still for this long opens at rest (the pose held before a take, which
+/// animators keep short), s: its mean gyro is the bias, its specific force gravity.
+pub const OPENING_S: f64 = 0.4;
+/// The fastest steady turn that may still be a biased gyro at rest, °/s.
+pub const BIASED_REST_DPS: f64 = 6.0;
+/// The most the specific force (and the field) may turn over such a stretch, degrees …
+pub const REST_TURN_DEG: f64 = 0.5;
+/// … between the means over its first and its last this long, s.
+pub const REST_ENDS_S: f64 = 0.3;
+
+/// Whether a steady stretch's turn, as its gyro tells it, is the gyro's bias: the readings that
+/// see the turn — the specific force, the field if there is one — keep their directions while
+/// the mean gyro integrates to at least twice [`REST_TURN_DEG`] over the stretch.
+fn turn_is_bias(stretch: &[Step]) -> bool {
+    let Some(last) = stretch.len().checked_sub(1) else {
+        return false;
+    };
+    let duration: f64 = stretch[1..].iter().map(|s| s.dt).sum();
+    let mean_gyr = stretch.iter().map(|s| s.gyr).sum::<Vector3<f64>>() / stretch.len() as f64;
+    let turn = REST_TURN_DEG.to_radians();
+    if mean_gyr.norm() * duration < 2.0 * turn {
+        return false;
+    }
+    let ends = stretch
+        .iter()
+        .scan(0.0, |t, s| {
+            *t += s.dt;
+            Some(*t)
+        })
+        .take_while(|&t| t <= REST_ENDS_S)
+        .count()
+        .clamp(1, stretch.len() / 2 + 1);
+    let mean = |range: std::ops::Range<usize>, f: &dyn Fn(&Step) -> Option<Vector3<f64>>| {
+        let values: Option<Vec<Vector3<f64>>> = stretch[range].iter().map(f).collect();
+        values.map(|v| v.iter().sum::<Vector3<f64>>() / v.len() as f64)
+    };
+    let kept = |f: &dyn Fn(&Step) -> Option<Vector3<f64>>| match (
+        mean(0..ends, f),
+        mean(last + 1 - ends..last + 1, f),
+    ) {
+        (Some(a), Some(b)) => a.angle(&b) < turn,
+        _ => false,
+    };
+    // Without a field, nothing sees a turn about the vertical: the gyro's part about it must pass
+    // VQF's own test.
+    let about_vertical = || {
+        let up = stretch.iter().map(|s| s.acc).sum::<Vector3<f64>>();
+        up.try_normalize(1e-9)
+            .is_some_and(|up| mean_gyr.dot(&up).abs() < 2f64.to_radians())
+    };
+    let field = stretch.iter().all(|s| s.mag.is_some());
+    kept(&|s| Some(s.acc))
+        && if field {
+            kept(&|s| s.mag)
+        } else {
+            about_vertical()
+        }
 }
 
 /// How fast the bias may wander away from what rest showed: its uncertainty grows to 0.05 °/s
@@ -693,6 +769,67 @@ mod tests {
         assert!(bias[480].x > 0.015 && bias[480].x < 0.02, "{}", bias[480].x);
         // After the last stretch, its bias is carried on.
         assert!((bias[960].x - 0.02).abs() < 1e-9, "{}", bias[960].x);
+    }
+
+    /// A take opening with a pose held 0.5 s (VQF's 1.5 s finds no rest in it) learns its bias
+    /// and gravity there; a stretch that still so briefly later in the take does not count.
+    #[test]
+    fn a_brief_opening_pose_is_rest() {
+        let step = |turning: bool| Step {
+            gyr: Vector3::new(0.01, 0.0, if turning { 1.0 } else { 0.0 }),
+            acc: Vector3::new(0.0, 0.0, 9.80665),
+            mag: None,
+            dt: 0.01,
+        };
+        let steps: Vec<Step> = [(50, false), (300, true), (50, false), (300, true)]
+            .iter()
+            .flat_map(|&(n, turning)| std::iter::repeat_n(step(turning), n))
+            .collect();
+        assert_eq!(rest_segments(&steps), vec![0..50]);
+        let segments = rest_segments(&steps);
+        assert!((bias_from_rest(&steps, &segments)[600].x - 0.01).abs() < 1e-12);
+        // Shorter than OPENING_S it is not rest.
+        assert!(rest_segments(&steps[20..]).is_empty());
+    }
+
+    /// A still sensor whose gyro is biased 3 °/s about x (more than VQF's 2 °/s test allows) is
+    /// at rest: its specific force and field keep their directions while the gyro says it turned
+    /// 6°. A sensor really turning at 3 °/s about x is not (its specific force turns), nor
+    /// about z without a magnetometer (nothing else sees a turn about the vertical).
+    #[test]
+    fn a_biased_gyro_at_rest_is_told_from_a_slow_turn() {
+        let rate = 3f64.to_radians();
+        let field = Vector3::new(0.0, 20.0, -40.0);
+        let take = |axis: Vector3<f64>, real: bool, mag: bool| -> Vec<Step> {
+            (0..200)
+                .map(|i| {
+                    let turned = UnitQuaternion::from_scaled_axis(
+                        axis * if real { rate * i as f64 * 0.01 } else { 0.0 },
+                    )
+                    .inverse();
+                    Step {
+                        gyr: axis * rate,
+                        acc: turned * Vector3::new(0.0, 0.0, 9.80665),
+                        mag: mag.then(|| turned * field),
+                        dt: 0.01,
+                    }
+                })
+                .collect()
+        };
+        // Biased, still: rest from the first sample (the whole take is its opening).
+        let biased = take(Vector3::x(), false, true);
+        assert_eq!(rest_segments(&biased), vec![0..200]);
+        let bias = bias_from_rest(&biased, &rest_segments(&biased));
+        assert!((bias[0].x - rate).abs() < 1e-12);
+        assert_eq!(
+            rest_segments(&take(Vector3::x(), false, false)),
+            vec![0..200]
+        );
+        // Turning about x: the specific force turns with it.
+        assert!(rest_segments(&take(Vector3::x(), true, true)).is_empty());
+        // Turning about z: the field turns (with a magnetometer); without one, not rest either.
+        assert!(rest_segments(&take(Vector3::z(), true, true)).is_empty());
+        assert!(rest_segments(&take(Vector3::z(), false, false)).is_empty());
     }
 
     #[test]

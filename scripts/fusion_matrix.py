@@ -1,0 +1,153 @@
+#!/usr/bin/env python3
+"""Issue 51's accuracy matrix: the offline fusion on the takes animators record (short, dynamic,
+a brief still pose first) against PyPI `vqf`'s offline mode on the same readings.
+
+Each cell simulates a raw capture (`imubake simulate --raw`: 16 body-worn sensors, gyro noise
+0.3 °/s, each sensor's constant gyro bias drawn up to the cell's, accelerometer 0.05 m/s²,
+magnetometer 0.3 µT) and, with the same seed, the orientations it was simulated from (the
+truth). The readings are fused by `imubake fuse --fusion offline` (the default for files), by
+`imubake fuse --fusion vqf` (online VQF) and by PyPI `vqf`'s `offlineVQF` (the authors' C++,
+on the mean sample interval: it takes uniform samples). Scores per sensor, over the motion (after
+the still pose and the blend into the first frame), mean over the 16 sensors, degrees:
+
+- `abs`: RMS of the angle between the fused orientation and the truth (ENU);
+- `since`: RMS of the error's change since the still pose — the error quaternion
+  `e(t) = q_fused(t) ⊗ q_true(t)⁻¹` against its mean over the pose — what a bone calibrated in
+  that pose sees (a constant error is absorbed by calibration, one that changes is not). It does
+  not depend on the fused world's heading.
+
+usage: fusion_matrix.py [--quick] [--out FILE.json] [--bin IMUBAKE] [--data SHARED_DATA]
+`--quick` runs a few cells (CI); the full matrix is issue 51's (lengths, rests, biases, rates,
+jitter, three seeds) and takes about an hour on two cores.
+"""
+import argparse
+import itertools
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from vqf import offlineVQF
+
+MAPPING = "tests/fixtures/mappings/cmu_16imu.json"
+PYMO_MAPPING = "tests/fixtures/mappings/pymo_16imu.json"
+
+
+def read_csv(path, columns):
+    """{sensor: (times (n,), values (n, columns))} from an imubake CSV (comments skipped)."""
+    rows = {}
+    with open(path) as f:
+        for line in f:
+            if line.startswith("#") or line.startswith("time_s"):
+                continue
+            parts = line.strip().split(",")
+            rows.setdefault(parts[1], []).append([float(parts[0])] + [float(v) for v in parts[2:2 + columns]])
+    return {s: (np.array(v)[:, 0], np.array(v)[:, 1:]) for s, v in rows.items()}
+
+
+def rotations(wxyz):
+    return Rotation.from_quat(np.column_stack([wxyz[:, 1:], wxyz[:, :1]]))
+
+
+def scores(fused, truth, times, rest_end, motion_start):
+    """(abs, since) RMS degrees of one sensor (Rotation stacks on the same samples)."""
+    error = fused * truth.inv()
+    rest = times <= rest_end
+    motion = times >= motion_start
+    absolute = np.degrees(error[motion].magnitude())
+    reference = error[rest].mean() if rest.any() else error[0]
+    since = np.degrees((error[motion] * reference.inv()).magnitude())
+    rms = lambda x: float(np.sqrt(np.mean(x ** 2)))
+    return rms(absolute), rms(since)
+
+
+def run(cmd):
+    subprocess.run(cmd, check=True, capture_output=True)
+
+
+def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_ms, seed, work):
+    common = [bvh, "--mapping", os.path.join(repo, mapping), "--rig", bvh, "--frames", frames,
+              "--hold-s", str(rest_s), "--rate", str(rate_hz), "--jitter-ms", str(jitter_ms),
+              "--seed", str(seed)]
+    raw, ori, info = (os.path.join(work, n) for n in ("raw.csv", "truth.csv", "truth.json"))
+    run([binary, "simulate", *common, "--raw", "--gyro-bias-dps", str(bias_dps), "--output", raw,
+         "--truth", info])
+    run([binary, "simulate", *common, "--output", ori])
+    motion_start = json.load(open(info))["motion_start_s"]
+    truth = read_csv(ori, 4)
+    readings = read_csv(raw, 9)
+    fused = {}
+    for fusion in ("offline", "vqf"):
+        out = os.path.join(work, fusion + ".csv")
+        run([binary, "fuse", raw, "--output", out, "--fusion", fusion])
+        fused[fusion] = read_csv(out, 4)
+    result = {name: [] for name in ("offline", "vqf", "pypi_offline")}
+    for sensor, (times, values) in readings.items():
+        t_truth, q_truth = truth[sensor]
+        true = rotations(q_truth)
+        for name in ("offline", "vqf"):
+            t, q = fused[name][sensor]
+            # `fuse` starts the take at its first sample (the simulation's sensors start up to a
+            # jitter later): the same samples, shifted by under a millisecond.
+            assert len(t) == len(t_truth) and np.allclose(t - t[0], t_truth - t_truth[0], atol=1e-6), sensor
+            result[name].append(scores(rotations(q), true, t_truth, rest_s, motion_start))
+        gyr, acc, mag = (np.ascontiguousarray(values[:, i:i + 3]) for i in (0, 3, 6))
+        ts = float(np.mean(np.diff(times)))
+        q = offlineVQF(gyr, acc, mag, ts)["quat9D"]
+        result["pypi_offline"].append(scores(rotations(q), true, times, rest_s, motion_start))
+    return {name: np.mean(np.array(v), axis=0).tolist() for name, v in result.items()}
+
+
+def matrix(quick):
+    """Cells: (label, bvh, mapping, frames at 120 fps, rest s, bias °/s, rate Hz, jitter ms)."""
+    sources = [("CMU 01_01 5 s", "cmu_01_01.bvh", MAPPING, 600),
+               ("CMU 01_01 10 s", "cmu_01_01.bvh", MAPPING, 1200),
+               ("CMU 01_01 20 s", "cmu_01_01.bvh", MAPPING, 2400),
+               ("pymo walk 5 s", "pymo_walk.bvh", PYMO_MAPPING, 600)]
+    if quick:
+        return [("CMU 01_01 10 s", "cmu_01_01.bvh", MAPPING, "1:1200", 1.5, 0.5, 100, 1.0),
+                ("pymo walk 5 s", "pymo_walk.bvh", PYMO_MAPPING, "0:599", 0.5, 2.0, 60, 0.0)]
+    cells = []
+    for (label, bvh, mapping, n), rest, bias, rate, jitter in itertools.product(
+            sources, (0.5, 1.5, 3.0), (0.0, 0.5, 2.0), (60, 100, 200), (0.0, 1.0)):
+        length = n / 120.0
+        if rest > length - 2.0:
+            continue
+        first = 1 if bvh.startswith("cmu") else 0
+        cells.append((label, bvh, mapping, f"{first}:{first + n - 1}", rest, bias, rate, jitter))
+    return cells
+
+
+def main():
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--out")
+    parser.add_argument("--bin", default=os.path.join(here, "target/release/imubake"))
+    parser.add_argument("--data", default=os.path.join(here, "../shared/data"))
+    parser.add_argument("--seeds", default="1,2,3")
+    args = parser.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",")]
+    results = []
+    for label, bvh, mapping, frames, rest, bias, rate, jitter in matrix(args.quick):
+        per_seed = []
+        for seed in seeds:
+            with tempfile.TemporaryDirectory() as work:
+                per_seed.append(cell(args.bin, here, os.path.join(args.data, "bvh", bvh), mapping,
+                                     frames, rest, bias, rate, jitter, seed, work))
+        mean = {k: np.mean([s[k] for s in per_seed], axis=0).tolist() for k in per_seed[0]}
+        row = {"take": label, "rest_s": rest, "bias_dps": bias, "rate_hz": rate,
+               "jitter_ms": jitter, "seeds": seeds, **mean}
+        results.append(row)
+        print(f"{label:15s} rest {rest:3.1f} s bias {bias:3.1f} °/s {rate:3d} Hz jitter {jitter:3.1f} ms  "
+              + "  ".join(f"{k} {v[0]:.2f}/{v[1]:.2f}" for k, v in mean.items()), flush=True)
+    if args.out:
+        with open(args.out, "w") as f:
+            json.dump(results, f, indent=1)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
