@@ -18,7 +18,7 @@ the still pose and the blend into the first frame), mean over the 16 sensors, de
 
 usage: fusion_matrix.py [--quick] [--out FILE.json] [--bin IMUBAKE] [--data SHARED_DATA]
 `--quick` runs a few cells (CI); the full matrix is issue 51's (lengths, rests, biases, rates,
-jitter, three seeds) and takes about an hour on two cores.
+jitter, three seeds) and takes about 8 minutes on two cores.
 """
 import argparse
 import itertools

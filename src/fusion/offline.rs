@@ -3,7 +3,9 @@
 //! 2023) and changed where the measurements said so:
 //!
 //! 1. **Gyro bias from rest.** Where the take holds rest (VQF's detector: gyro and accelerometer
-//!    steady for 1.5 s), each stretch's mean gyro is the bias there, and between stretches the
+//!    steady for 1.5 s; 0.4 s for the pose that opens a take; a gyro biased beyond VQF's 2 °/s
+//!    found still by the readings that see turns — [`rest_segments`]), each stretch's mean gyro is
+//!    the bias there, and between stretches the
 //!    two nearest are carried forward and backward with an uncertainty that grows with time and
 //!    merged by inverse variance ([`bias_from_rest`]). VQF's online estimate in motion leans on the
 //!    accelerometer, which a body that keeps accelerating misleads (the final estimates on a

@@ -15,6 +15,7 @@ mod filters_scipy;
 mod functional_calibration;
 mod fusion_real;
 mod fusion_reference;
+mod fusion_short_takes;
 mod joint_angles;
 mod property_fusion;
 mod real_exports;
