@@ -366,6 +366,10 @@ pub struct FusionStats {
     pub magnetic_rejected: f64,
     /// Share of samples in which the accelerometer was set aside.
     pub acceleration_rejected: f64,
+    /// The offline fusion: seconds of rest found (its gyro bias came from them; `0` when the
+    /// take has none and the bias came from VQF's passes in motion).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rest_s: Option<f64>,
     /// The corrections of the readings before fusion (the sensor calibration file's kinds, and
     /// where the gyro bias came from).
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -381,6 +385,8 @@ struct Run {
     orientation: Vec<UnitQuaternion<f64>>,
     bias: StepBias,
     rejected: Vec<Rejected>,
+    /// The offline fusion's rest, per step.
+    rest: Option<Vec<bool>>,
 }
 
 /// The gyro bias at each step, as the filter gave it (no copy of the offline fusion's).
@@ -629,6 +635,7 @@ pub fn fuse(
             Run {
                 orientation: r.orientation,
                 bias: StepBias::Offline(r.bias),
+                rest: Some(r.rest),
                 rejected: r
                     .magnetic_disturbance
                     .into_iter()
@@ -663,6 +670,7 @@ pub fn fuse(
                 orientation,
                 bias: StepBias::Online(bias),
                 rejected,
+                rest: None,
             }
         }
     };
@@ -683,6 +691,14 @@ pub fn fuse(
             next_series_t = t + 0.1;
         }
     }
+    let rest_s = run.rest.as_ref().map(|rest| {
+        steps
+            .iter()
+            .zip(rest)
+            .filter(|(_, r)| **r)
+            .map(|(s, _)| s.dt)
+            .sum::<f64>()
+    });
     // Without filled-in steps, every step is a sample: the run's orientations are the track's.
     let out = if filled == 0 {
         run.orientation
@@ -696,6 +712,7 @@ pub fn fuse(
         gyro_bias_dps: last_bias.map(|b| [b.x.to_degrees(), b.y.to_degrees(), b.z.to_degrees()]),
         magnetic_rejected: mag_rejected as f64 / n,
         acceleration_rejected: acc_rejected as f64 / n,
+        rest_s,
         corrections: Vec::new(),
         series,
     };
@@ -791,6 +808,33 @@ mod tests {
             let up = q[n - 1] * Vector3::z();
             assert!((up - Vector3::z()).norm() < 1e-3, "{spec}: {up:?}");
         }
+    }
+
+    /// The offline fusion says how much rest its bias came from: a sensor still for its first
+    /// second (a pose held before the motion) then turning, 1 s; one turning from the start, none.
+    #[test]
+    fn the_offline_fusion_reports_the_rest_it_found() {
+        let track = |still_s: f64| {
+            let times: Vec<f64> = (0..300).map(|i| i as f64 * 0.01).collect();
+            let samples = times
+                .iter()
+                .map(|&t| ImuSample {
+                    gyro_rad_s: Vector3::new(0.0, 0.0, if t < still_s { 0.0 } else { 1.0 }),
+                    accel_m_s2: Vector3::new(0.0, 0.0, G),
+                })
+                .collect();
+            Track::new(times, samples).unwrap()
+        };
+        let offline: Fusion = "offline".parse().unwrap();
+        let rest = |still_s: f64| {
+            fuse("shank", &track(still_s), None, &offline)
+                .unwrap()
+                .stats
+                .rest_s
+                .unwrap()
+        };
+        assert!((rest(1.0) - 1.0).abs() < 0.02, "{}", rest(1.0));
+        assert_eq!(rest(0.0), 0.0);
     }
 
     #[test]

@@ -195,6 +195,7 @@ pub fn fuse_as_stream(
             gyro_bias_dps: bias.map(|b| [b.x.to_degrees(), b.y.to_degrees(), b.z.to_degrees()]),
             magnetic_rejected: fuser.magnetic_rejected as f64 / n,
             acceleration_rejected: fuser.acceleration_rejected as f64 / n,
+            rest_s: None,
             corrections: Vec::new(),
             series: Vec::new(),
         },

@@ -818,6 +818,7 @@ mod tests {
             gyro_bias_dps: Some([0.1, -0.2, 0.2]),
             magnetic_rejected: 0.2,
             acceleration_rejected: 0.0,
+            rest_s: Some(1.5),
             corrections: Vec::new(),
             series,
         };
