@@ -113,20 +113,40 @@ fn vqf(params: &OfflineParams, ts: f64) -> VQF {
 /// a turn about the vertical cannot be told from bias: the gyro's part about it must pass VQF's
 /// test.
 pub fn rest_segments(steps: &[Step]) -> Vec<std::ops::Range<usize>> {
+    let vqf = steady_stretches(steps, 2.0);
+    let mut segments: Vec<std::ops::Range<usize>> = Vec::with_capacity(vqf.len());
+    // A stretch steady at a biased gyro's rate, whose turn nothing else sees, replaces the VQF
+    // rest inside it; one whose turn is real leaves that rest as VQF found it.
+    let biased: Vec<_> = steady_stretches(steps, BIASED_REST_DPS)
+        .into_iter()
+        .filter(|r| turn_is_bias(&steps[r.clone()]))
+        .collect();
+    for r in vqf {
+        if !biased.iter().any(|b| b.start <= r.start && r.end <= b.end) {
+            segments.push(r);
+        }
+    }
+    segments.extend(biased);
+    segments.sort_by_key(|r| r.start);
+    segments
+}
+
+/// The stretches in which the gyro and the accelerometer are within 2 °/s and 0.5 m/s² of their
+/// own low-passed values (first order, τ = 0.5 s) and the low-passed gyro under `gyro_dps` on
+/// every axis, at least 1.5 s long ([`OPENING_S`] for the take's first).
+fn steady_stretches(steps: &[Step], gyro_dps: f64) -> Vec<std::ops::Range<usize>> {
     const TAU_S: f64 = 0.5;
     const MIN_S: f64 = 1.5;
     let (gyr_th, acc_th) = (2f64.to_radians(), 0.5);
-    let biased_th = BIASED_REST_DPS.to_radians();
+    let lp_th = gyro_dps.to_radians();
     let Some(first) = steps.first() else {
         return Vec::new();
     };
     let (mut gyr_lp, mut acc_lp) = (first.gyr, first.acc);
     let mut segments = Vec::new();
-    // The current stretch: where it started, how long, whether every step passed VQF's test.
-    let (mut start, mut still_s, mut vqf_rest) = (0, 0.0, true);
-    let mut close = |range: std::ops::Range<usize>, still_s: f64, vqf_rest: bool| {
-        let long_enough = still_s >= MIN_S || (range.start == 0 && still_s >= OPENING_S);
-        if long_enough && (vqf_rest || turn_is_bias(&steps[range.clone()])) {
+    let (mut start, mut still_s) = (0, 0.0);
+    let mut close = |range: std::ops::Range<usize>, still_s: f64| {
+        if still_s >= MIN_S || (range.start == 0 && still_s >= OPENING_S) {
             segments.push(range);
         }
     };
@@ -134,20 +154,20 @@ pub fn rest_segments(steps: &[Step]) -> Vec<std::ops::Range<usize>> {
         let alpha = s.dt / (TAU_S + s.dt);
         gyr_lp += (s.gyr - gyr_lp) * alpha;
         acc_lp += (s.acc - acc_lp) * alpha;
-        let steady = (s.gyr - gyr_lp).norm() < gyr_th && (s.acc - acc_lp).norm() < acc_th;
-        if steady && gyr_lp.amax() < biased_th {
+        let still = (s.gyr - gyr_lp).norm() < gyr_th
+            && (s.acc - acc_lp).norm() < acc_th
+            && gyr_lp.amax() < lp_th;
+        if still {
             if still_s == 0.0 {
                 start = i;
-                vqf_rest = true;
             }
             still_s += s.dt;
-            vqf_rest &= gyr_lp.amax() < gyr_th;
         } else {
-            close(start..i, still_s, vqf_rest);
+            close(start..i, still_s);
             still_s = 0.0;
         }
     }
-    close(start..steps.len(), still_s, vqf_rest);
+    close(start..steps.len(), still_s);
     segments
 }
 
@@ -792,6 +812,38 @@ mod tests {
         assert!((bias_from_rest(&steps, &segments)[600].x - 0.01).abs() < 1e-12);
         // Shorter than OPENING_S it is not rest.
         assert!(rest_segments(&steps[20..]).is_empty());
+    }
+
+    /// Rest, then a real turn about x that speeds up smoothly to 3 °/s over 1 s and holds it for
+    /// 1 s (the specific force turns): steady throughout, under the biased gyro's rate, but the
+    /// turn is real — the rest before it stays as VQF finds it.
+    #[test]
+    fn a_slow_real_turn_after_rest_leaves_the_rest() {
+        let rate = |i: usize| 3f64.to_radians() * ((i as f64 - 200.0) / 100.0).clamp(0.0, 1.0);
+        let mut angle = 0.0;
+        let steps: Vec<Step> = (0..400)
+            .map(|i| {
+                angle += rate(i) * 0.01;
+                let turned = UnitQuaternion::from_scaled_axis(Vector3::x() * angle).inverse();
+                Step {
+                    gyr: Vector3::x() * rate(i),
+                    acc: turned * Vector3::new(0.0, 0.0, 9.80665),
+                    mag: None,
+                    dt: 0.01,
+                }
+            })
+            .collect();
+        // The biased test's stretch covers it all, and is refused.
+        let steady = steady_stretches(&steps, BIASED_REST_DPS);
+        assert_eq!(steady, vec![0..400]);
+        assert!(!turn_is_bias(&steps));
+        let segments = rest_segments(&steps);
+        assert_eq!(segments.len(), 1, "{segments:?}");
+        assert_eq!(segments[0].start, 0);
+        assert!(
+            segments[0].end > 200 && segments[0].end < 320,
+            "{segments:?}"
+        );
     }
 
     /// A still sensor whose gyro is biased 3 °/s about x (more than VQF's 2 °/s test allows) is
