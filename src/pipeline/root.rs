@@ -257,8 +257,6 @@ struct FeetState {
     /// The hips' velocity over the last frames (smoothed), rig units per second.
     velocity: Vector3<f64>,
     airborne: bool,
-    /// Each foot planted, as reported.
-    planted: [bool; 2],
 }
 
 /// Points of a foot's subtree (joint positions and end sites) for positions `pos` and world
@@ -508,7 +506,6 @@ impl RootCore {
                 dominant: usize::from(w_left < 0.5),
                 velocity: Vector3::zeros(),
                 airborne: false,
-                planted,
             });
             return RootFrame {
                 position: hips,
@@ -629,7 +626,7 @@ impl RootCore {
         // rolling. No hysteresis (it held contacts past the source's end, measured by
         // `every_gait_walks_without_sliding`): contacts shorter than [`MIN_FRAMES`] are dropped
         // instead, so that noise does not flicker them.
-        for f in 0..2 {
+        let contact = [0, 1].map(|f| {
             let height = state.hips.y + low[f].1 - state.level[f];
             // The pivot's ground speed: the hips' step plus its motion relative to them.
             let d = state.hips - before + moved[f];
@@ -639,18 +636,18 @@ impl RootCore {
                 points.get(tips[f]).copied().unwrap_or_default() - points[0]
             };
             let roll = roll_speed(tip(&state.previous[f]), tip(now[f]), dt);
-            state.planted[f] = (!state.airborne || pushing)
+            (!state.airborne || pushing)
                 && height <= PLANT_H * h
                 && speed <= PLANT_SPEED_H_S * h
-                && roll <= PLANT_ROLL_H_S * h;
-        }
+                && roll <= PLANT_ROLL_H_S * h
+        });
         for (previous, now) in state.previous.iter_mut().zip(now) {
             previous.clear();
             previous.extend_from_slice(now);
         }
         RootFrame {
             position: state.hips,
-            contact: state.planted,
+            contact,
             airborne: state.airborne && !pushing,
         }
     }
