@@ -147,8 +147,17 @@ pub fn free_udp_port() -> u16 {
         .port()
 }
 
-/// The text of the CSV recording `imubake live --record DIR` left in `record`.
-pub fn recorded_csv(record: &Path) -> String {
+/// Stops a `imubake live --record DIR` session (`child`, its stderr piped) as a user would
+/// (SIGINT), checks that it exited cleanly, and returns the text of the CSV recording it left in
+/// `record`.
+pub fn stop_and_read_recording(child: std::process::Child, record: &Path) -> String {
+    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let recording = std::fs::read_dir(record)
         .unwrap()
         .map(|e| e.unwrap().path())

@@ -243,14 +243,7 @@ fn live_recording(
     std::thread::sleep(std::time::Duration::from_millis(500));
     feed();
     std::thread::sleep(std::time::Duration::from_millis(800));
-    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
-    let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = common::recorded_csv(&record);
+    let text = common::stop_and_read_recording(child, &record);
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
     let header = lines.next().unwrap().to_string();
     let rows = lines

@@ -172,14 +172,7 @@ fn a_live_witmotion_stream_is_recorded_as_decoded() {
         std::thread::sleep(Duration::from_micros(300));
     }
     std::thread::sleep(Duration::from_millis(500));
-    unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
-    let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = common::recorded_csv(&record);
+    let text = common::stop_and_read_recording(child, &record);
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
     assert_eq!(
         lines.next(),
