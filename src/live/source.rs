@@ -902,60 +902,52 @@ mod tests {
 
     #[test]
     fn specs_parse_and_bad_ones_say_why() {
-        assert_eq!(
-            "serial:/dev/ttyUSB0".parse::<SourceSpec>().unwrap(),
-            SourceSpec::Serial {
-                path: "/dev/ttyUSB0".into(),
-                baud: 115_200,
-                packets: Packets::Lines
-            }
-        );
-        assert_eq!(
-            "serial:/dev/ttyACM1@9600".parse::<SourceSpec>().unwrap(),
-            SourceSpec::Serial {
-                path: "/dev/ttyACM1".into(),
-                baud: 9600,
-                packets: Packets::Lines
-            }
-        );
-        assert_eq!(
-            "serial:/dev/ttyUSB0@115200:witmotion"
-                .parse::<SourceSpec>()
-                .unwrap(),
-            SourceSpec::Serial {
-                path: "/dev/ttyUSB0".into(),
-                baud: 115_200,
-                packets: Packets::WitMotion
-            }
-        );
-        assert_eq!(
-            "udp:9001:witmotion".parse::<SourceSpec>().unwrap(),
-            SourceSpec::Udp {
-                bind: "127.0.0.1:9001".parse().unwrap(),
-                packets: Packets::WitMotion
-            }
-        );
-        assert_eq!(
-            "udp:9000".parse::<SourceSpec>().unwrap(),
-            SourceSpec::Udp {
-                bind: "127.0.0.1:9000".parse().unwrap(),
-                packets: Packets::Lines
-            }
-        );
-        assert_eq!(
-            "udp:0.0.0.0:9000".parse::<SourceSpec>().unwrap(),
-            SourceSpec::Udp {
-                bind: "0.0.0.0:9000".parse().unwrap(),
-                packets: Packets::Lines
-            }
-        );
-        assert_eq!(
-            "file:take@user.log@2.5".parse::<SourceSpec>().unwrap(),
-            SourceSpec::File {
-                path: "take@user.log".into(),
-                speed: 2.5
-            }
-        );
+        let udp = |bind: &str, packets| SourceSpec::Udp {
+            bind: bind.parse().unwrap(),
+            packets,
+        };
+        let serial = |path: &str, baud, packets| SourceSpec::Serial {
+            path: path.into(),
+            baud,
+            packets,
+        };
+        for (spec, expected) in [
+            (
+                "serial:/dev/ttyUSB0",
+                serial("/dev/ttyUSB0", 115_200, Packets::Lines),
+            ),
+            (
+                "serial:/dev/ttyACM1@9600",
+                serial("/dev/ttyACM1", 9600, Packets::Lines),
+            ),
+            (
+                "serial:/dev/ttyUSB0@115200:witmotion",
+                serial("/dev/ttyUSB0", 115_200, Packets::WitMotion),
+            ),
+            (
+                "udp:9001:witmotion",
+                udp("127.0.0.1:9001", Packets::WitMotion),
+            ),
+            ("udp:9000", udp("127.0.0.1:9000", Packets::Lines)),
+            ("udp:0.0.0.0:9000", udp("0.0.0.0:9000", Packets::Lines)),
+            ("udp:9000:layout", udp("127.0.0.1:9000", Packets::Layout)),
+            (
+                "file:take@user.log@2.5",
+                SourceSpec::File {
+                    path: "take@user.log".into(),
+                    speed: 2.5,
+                },
+            ),
+            (
+                "tcp:host:9:layout",
+                SourceSpec::Tcp {
+                    addr: "host:9".into(),
+                    packets: Packets::Layout,
+                },
+            ),
+        ] {
+            assert_eq!(spec.parse::<SourceSpec>().unwrap(), expected, "{spec}");
+        }
         for bad in [
             "serial:",
             "udp:x",
@@ -969,25 +961,11 @@ mod tests {
             assert!(bad.parse::<SourceSpec>().is_err(), "{bad}");
         }
         assert_eq!(
-            "udp:9000:layout".parse::<SourceSpec>().unwrap(),
-            SourceSpec::Udp {
-                bind: "127.0.0.1:9000".parse().unwrap(),
-                packets: Packets::Layout
-            }
-        );
-        assert_eq!(
             "serial:/dev/ttyACM0@921600:layout"
                 .parse::<SourceSpec>()
                 .unwrap()
                 .to_string(),
             "serial:/dev/ttyACM0@921600:layout"
-        );
-        assert_eq!(
-            "tcp:host:9:layout".parse::<SourceSpec>().unwrap(),
-            SourceSpec::Tcp {
-                addr: "host:9".into(),
-                packets: Packets::Layout
-            }
         );
         assert!(
             "file:take.bin:layout"
