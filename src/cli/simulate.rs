@@ -5,7 +5,7 @@ use clap::{Args, ValueEnum};
 use imubake::bvh;
 use imubake::mapping::{MappingFile, load_mapping};
 use imubake::rig::load_rig;
-use imubake::simulate::raw::RawOptions;
+use imubake::simulate::raw::{GyroBias, RawOptions};
 use imubake::simulate::{CaptureFormat, SimulateOptions, simulate};
 use imubake::write::write_atomic;
 use std::path::PathBuf;
@@ -73,9 +73,14 @@ pub struct SimulateArgs {
     /// With --raw: gyro white noise, °/s per axis.
     #[arg(long, default_value_t = 0.3, requires = "raw")]
     gyro_noise_dps: f64,
-    /// With --raw: the largest constant gyro bias, °/s (each sensor's drawn up to it).
+    /// With --raw: the largest constant gyro bias, °/s (each sensor's drawn up to it, in a random
+    /// direction).
     #[arg(long, default_value_t = 0.5, requires = "raw")]
     gyro_bias_dps: f64,
+    /// With --raw: each sensor's constant gyro bias drawn normal on every axis with this standard
+    /// deviation, °/s (instead of --gyro-bias-dps).
+    #[arg(long, value_name = "SD", requires = "raw", conflicts_with = "gyro_bias_dps", value_parser = parse_sd)]
+    gyro_bias_sd_dps: Option<f64>,
     /// With --raw: accelerometer white noise, m/s² per axis.
     #[arg(long, default_value_t = 0.05, requires = "raw")]
     accel_noise: f64,
@@ -190,7 +195,10 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
         bone_map,
         raw: args.raw.then(|| RawOptions {
             gyro_noise_dps: args.gyro_noise_dps,
-            gyro_bias_dps: args.gyro_bias_dps,
+            gyro_bias: match args.gyro_bias_sd_dps {
+                Some(sd) => GyroBias::SdPerAxis(sd),
+                None => GyroBias::UpTo(args.gyro_bias_dps),
+            },
             accel_noise: args.accel_noise,
             mag_noise_ut: args.mag_noise_ut,
             field_ut: args.field_ut,
@@ -219,4 +227,11 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
         simulated.truth.motion_start_s
     );
     Ok(ExitCode::SUCCESS)
+}
+
+fn parse_sd(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{s}`: expected a standard deviation ≥ 0 °/s")),
+    }
 }

@@ -440,10 +440,8 @@ impl RawInputs<'_> {
             })
             .collect();
         for (i, s) in self.sims.iter().enumerate() {
-            let direction = Vector3::new(rng.normal(), rng.normal(), rng.normal())
-                .try_normalize(1e-12)
-                .unwrap_or_else(Vector3::x);
-            let bias = direction * (rng.uniform() * options.gyro_bias_dps).to_radians();
+            let normals = Vector3::new(rng.normal(), rng.normal(), rng.normal());
+            let bias = options.gyro_bias.draw(normals, rng.uniform());
             biases.push([bias.x, bias.y, bias.z].map(f64::to_degrees));
             let q_rig = |t: f64| self.heading * world_at(s, t) * s.pose * s.mount;
             for &t in &self.times[i] {

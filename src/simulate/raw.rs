@@ -5,8 +5,9 @@
 //!   before the sample, `ω = log(q(t−T)⁻¹ ⊗ q(t)) / T` on the orientation track `q_rig_sensor` —
 //!   what a MEMS gyro that samples fast and decimates (or reports delta angles) outputs; an
 //!   instantaneous rate would fold the fusion's own step error into the test (2–4° on a walk with
-//!   gyro integration alone) — plus a constant bias per sensor (a random direction, a magnitude
-//!   uniform in [0, `gyro_bias_dps`]) and white noise (σ `gyro_noise_dps` per axis).
+//!   gyro integration alone) — plus a constant bias per sensor ([`GyroBias`]: a random
+//!   direction with a magnitude uniform up to a bound, or each axis normal with a standard
+//!   deviation) and white noise (σ `gyro_noise_dps` per axis).
 //! - **Accelerometer** (m/s²): the specific force `f = a − g` of the sensor's position, in the
 //!   sensor frame. The sensor sits at the **midpoint of its source bone** (between the source
 //!   joint and its first child, or its end site), moved by the source's forward kinematics
@@ -33,13 +34,36 @@ use serde::Serialize;
 /// Standard gravity, m/s².
 pub const G: f64 = 9.80665;
 
+/// How each sensor's constant gyro bias is drawn, °/s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum GyroBias {
+    /// A random direction, its magnitude uniform in [0, bound].
+    UpTo(f64),
+    /// Each axis normal, with this standard deviation (the magnitude then averages ≈ 1.6 σ).
+    SdPerAxis(f64),
+}
+
+impl GyroBias {
+    /// The bias, rad/s, from three standard normal draws and one uniform draw in [0, 1) (both
+    /// taken whatever the kind, so that the kind leaves every later draw as it was).
+    pub fn draw(self, normals: Vector3<f64>, uniform: f64) -> Vector3<f64> {
+        match self {
+            GyroBias::UpTo(bound) => {
+                normals.try_normalize(1e-12).unwrap_or_else(Vector3::x)
+                    * (uniform * bound).to_radians()
+            }
+            GyroBias::SdPerAxis(sd) => normals * sd.to_radians(),
+        }
+    }
+}
+
 /// The readings' imperfections and the field.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RawOptions {
     /// Gyro white noise, °/s (σ per axis).
     pub gyro_noise_dps: f64,
-    /// The largest constant gyro bias, °/s (each sensor's is drawn up to it).
-    pub gyro_bias_dps: f64,
+    /// Each sensor's constant gyro bias, as it is drawn.
+    pub gyro_bias: GyroBias,
     /// Accelerometer white noise, m/s² (σ per axis).
     pub accel_noise: f64,
     /// Magnetometer white noise, µT (σ per axis).
@@ -232,7 +256,7 @@ impl Default for RawOptions {
     fn default() -> Self {
         RawOptions {
             gyro_noise_dps: 0.3,
-            gyro_bias_dps: 0.5,
+            gyro_bias: GyroBias::UpTo(0.5),
             accel_noise: 0.05,
             mag_noise_ut: 0.3,
             field_ut: 50.0,
@@ -365,6 +389,35 @@ pub fn on_grid_at(values: &[Vector3<f64>], step_s: f64, t: f64) -> Vector3<f64> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gyro_biases_are_drawn_as_asked() {
+        // 4000 draws from the simulation's own generator: with a standard deviation per axis,
+        // each axis's sample mean is within 4 standard errors of 0 (σ/√n = 0.032 °/s) and its
+        // sample SD within 5 % of σ (its standard error is σ/√(2n), 1.1 %); with a bound, no
+        // magnitude passes it and they average half of it (uniform; SE 0.3/√n·bound).
+        let mut rng = super::super::Rng(7);
+        let n = 4000;
+        let mut draw = |kind: GyroBias| -> Vec<Vector3<f64>> {
+            (0..n)
+                .map(|_| {
+                    let normals = Vector3::new(rng.normal(), rng.normal(), rng.normal());
+                    kind.draw(normals, rng.uniform()).map(f64::to_degrees)
+                })
+                .collect()
+        };
+        let sd = draw(GyroBias::SdPerAxis(2.0));
+        for axis in 0..3 {
+            let mean = sd.iter().map(|b| b[axis]).sum::<f64>() / n as f64;
+            let var = sd.iter().map(|b| (b[axis] - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+            assert!(mean.abs() < 4.0 * 2.0 / (n as f64).sqrt(), "axis {axis}: mean {mean}");
+            assert!((var.sqrt() - 2.0).abs() < 0.1, "axis {axis}: SD {}", var.sqrt());
+        }
+        let up_to = draw(GyroBias::UpTo(2.0));
+        assert!(up_to.iter().all(|b| b.norm() <= 2.0));
+        let mean = up_to.iter().map(|b| b.norm()).sum::<f64>() / n as f64;
+        assert!((mean - 1.0).abs() < 0.05, "mean magnitude {mean}");
+    }
 
     #[test]
     fn a_point_on_a_circle_accelerates_towards_the_centre() {
