@@ -3,9 +3,9 @@
 a brief still pose first) against PyPI `vqf`'s offline mode on the same readings.
 
 Each cell simulates a raw capture (`imubake simulate --raw`: 16 body-worn sensors, gyro noise
-0.3 °/s, each sensor's constant gyro bias drawn up to the cell's, accelerometer 0.05 m/s²,
-magnetometer 0.3 µT) and, with the same seed, the orientations it was simulated from (the
-truth). The readings are fused by `imubake fuse --fusion offline` (the default for files), by
+0.3 °/s, each sensor's constant gyro bias normal on every axis with the cell's standard
+deviation, accelerometer 0.05 m/s², magnetometer 0.3 µT) and, with the same seed, the
+orientations it was simulated from (the truth). The readings are fused by `imubake fuse --fusion offline` (the default for files), by
 `imubake fuse --fusion vqf` (online VQF) and by PyPI `vqf`'s `offlineVQF` (the authors' C++,
 on the mean sample interval: it takes uniform samples). Scores per sensor, over the motion (after
 the still pose and the blend into the first frame), mean over the 16 sensors, degrees:
@@ -15,6 +15,15 @@ the still pose and the blend into the first frame), mean over the 16 sensors, de
   `e(t) = q_fused(t) ⊗ q_true(t)⁻¹` against its mean over the pose — what a bone calibrated in
   that pose sees (a constant error is absorbed by calibration, one that changes is not). It does
   not depend on the fused world's heading.
+
+And through the body — what animation sees: each fusion's orientations (and the truth's, for the
+floor every fusion shares: the pipeline's own error) are converted by `imubake convert` onto the
+source skeleton (`--rig` the source BVH, calibrated over the still pose, no smoothing), and each
+mapped bone's world rotation since the calibration pose is compared with the source joint's
+world rotation since its zero pose (the pose held), computed independently with scipy
+(tests/python/bvh_world_rotations.py): `body`, the mean over the bones of each bone's RMS angle.
+The default fusion is converted from the raw readings (the path users take); the others from
+their orientations.
 
 usage: fusion_matrix.py [--quick] [--out FILE.json] [--bin IMUBAKE] [--data SHARED_DATA]
 `--quick` runs a few cells (CI); the full matrix is issue 51's (lengths, rests, biases, rates,
@@ -31,6 +40,10 @@ import tempfile
 import numpy as np
 from scipy.spatial.transform import Rotation
 from vqf import offlineVQF
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests", "python"))
+from bvh_positions import local_rotations, parse  # noqa: E402
+from bvh_world_rotations import world_rotations  # noqa: E402
 
 MAPPING = "tests/fixtures/mappings/cmu_16imu.json"
 PYMO_MAPPING = "tests/fixtures/mappings/pymo_16imu.json"
@@ -68,15 +81,76 @@ def run(cmd):
     subprocess.run(cmd, check=True, capture_output=True)
 
 
+_sources = {}
+
+
+def source(path):
+    if path not in _sources:
+        _sources[path] = parse(path)[:2]
+    return _sources[path]
+
+
+def write_orientations(path, rows):
+    """An imubake orientation CSV (ENU) from [(time_s, sensor, wxyz)] sorted by time."""
+    with open(path, "w") as f:
+        f.write("# world: enu\ntime_s,sensor,qw,qx,qy,qz\n")
+        for t, sensor, q in rows:
+            f.write(f"{t:.6f},{sensor}," + ",".join(f"{v:.9f}" for v in q) + "\n")
+
+
+def body_error(out_bvh, bvh, info, bones, rest_s, fps):
+    """Mean over the mapped bones of the RMS angle between the bone's world rotation since the
+    calibration pose (the output's mean over [0, rest_s]) and the source joint's world rotation
+    since its zero pose, over the motion, degrees."""
+    joints, values = source(bvh)
+    out_joints, out_values, _ = parse(out_bvh)
+    out_local = local_rotations(out_joints, out_values)
+    out_world = []
+    for k, j in enumerate(out_joints):
+        out_world.append(out_local[k] if j["parent"] is None else out_world[j["parent"]] * out_local[k])
+    times = np.arange(len(out_values)) / fps
+    frames = info["first_frame"] + (times - info["motion_start_s"]) / info["source_frame_time_s"]
+    compared = (times >= info["motion_start_s"]) & (frames <= info["last_frame"])
+    calibration = times <= rest_s
+    src_world = world_rotations(joints, values, frames[compared])
+    index = {j["name"]: k for k, j in enumerate(joints)}
+    out_index = {j["name"]: k for k, j in enumerate(out_joints)}
+    errors = []
+    for bone, joint in bones:
+        w = out_world[out_index[bone]]
+        since = w[compared] * w[calibration].mean().inv()
+        angle = np.degrees((since * src_world[index[joint]].inv()).magnitude())
+        errors.append(float(np.sqrt(np.mean(angle ** 2))))
+    return float(np.mean(errors))
+
+
+FPS = 60
+
+
 def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_ms, seed, work):
     common = [bvh, "--mapping", os.path.join(repo, mapping), "--rig", bvh, "--frames", frames,
               "--hold-s", str(rest_s), "--rate", str(rate_hz), "--jitter-ms", str(jitter_ms),
               "--seed", str(seed)]
-    raw, ori, info = (os.path.join(work, n) for n in ("raw.csv", "truth.csv", "truth.json"))
-    run([binary, "simulate", *common, "--raw", "--gyro-bias-dps", str(bias_dps), "--output", raw,
-         "--truth", info])
+    raw, ori, info_path = (os.path.join(work, n) for n in ("raw.csv", "truth.csv", "truth.json"))
+    run([binary, "simulate", *common, "--raw", "--gyro-bias-sd-dps", str(bias_dps), "--output", raw,
+         "--truth", info_path])
     run([binary, "simulate", *common, "--output", ori])
-    motion_start = json.load(open(info))["motion_start_s"]
+    info = json.load(open(info_path))
+    motion_start = info["motion_start_s"]
+    # The calibration pose is the still pose the take opens with.
+    cell_mapping = json.load(open(os.path.join(repo, mapping)))
+    cell_mapping["calibration"] = {"pose": "rest", "start_s": 0.0, "duration_s": rest_s}
+    mapping_path = os.path.join(work, "mapping.json")
+    json.dump(cell_mapping, open(mapping_path, "w"))
+    bones = [(s["bone"], s["source_joint"]) for s in info["sensors"]]
+
+    def convert(capture, name):
+        out = os.path.join(work, "out_" + name)
+        run([binary, "convert", capture, "--mapping", mapping_path, "--rig", bvh, "--out", out,
+             "--fps", str(FPS), "--format", "bvh", "--smooth", "none", "--root", "fixed"])
+        stem = os.path.splitext(os.path.basename(capture))[0]
+        return body_error(os.path.join(out, stem + ".bvh"), bvh, info, bones, rest_s, FPS)
+
     truth = read_csv(ori, 4)
     readings = read_csv(raw, 9)
     fused = {}
@@ -85,6 +159,7 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
         run([binary, "fuse", raw, "--output", out, "--fusion", fusion])
         fused[fusion] = read_csv(out, 4)
     result = {name: [] for name in ("offline", "vqf", "pypi_offline")}
+    pypi_rows = []
     for sensor, (times, values) in readings.items():
         t_truth, q_truth = truth[sensor]
         true = rotations(q_truth)
@@ -98,7 +173,15 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
         ts = float(np.mean(np.diff(times)))
         q = offlineVQF(gyr, acc, mag, ts)["quat9D"]
         result["pypi_offline"].append(scores(rotations(q), true, times, rest_s, motion_start))
-    return {name: np.mean(np.array(v), axis=0).tolist() for name, v in result.items()}
+        pypi_rows += [(t, sensor, v) for t, v in zip(times, q)]
+    pypi = os.path.join(work, "pypi_offline.csv")
+    write_orientations(pypi, sorted(pypi_rows, key=lambda r: r[0]))
+    per_sensor = {name: np.mean(np.array(v), axis=0).tolist() for name, v in result.items()}
+    body = {"offline": convert(raw, "offline"),
+            "vqf": convert(os.path.join(work, "vqf.csv"), "vqf"),
+            "pypi_offline": convert(pypi, "pypi_offline"),
+            "truth": convert(ori, "truth")}
+    return {**{k: v + [body[k]] for k, v in per_sensor.items()}, "truth": [0.0, 0.0, body["truth"]]}
 
 
 def matrix(quick):
@@ -143,7 +226,7 @@ def main():
                "jitter_ms": jitter, "seeds": seeds, **mean}
         results.append(row)
         print(f"{label:15s} rest {rest:3.1f} s bias {bias:3.1f} °/s {rate:3d} Hz jitter {jitter:3.1f} ms  "
-              + "  ".join(f"{k} {v[0]:.2f}/{v[1]:.2f}" for k, v in mean.items()), flush=True)
+              + "  ".join(f"{k} {v[0]:.2f}/{v[1]:.2f}/{v[2]:.2f}" for k, v in mean.items()), flush=True)
     if args.out:
         with open(args.out, "w") as f:
             json.dump(results, f, indent=1)

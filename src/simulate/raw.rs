@@ -410,8 +410,15 @@ mod tests {
         for axis in 0..3 {
             let mean = sd.iter().map(|b| b[axis]).sum::<f64>() / n as f64;
             let var = sd.iter().map(|b| (b[axis] - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-            assert!(mean.abs() < 4.0 * 2.0 / (n as f64).sqrt(), "axis {axis}: mean {mean}");
-            assert!((var.sqrt() - 2.0).abs() < 0.1, "axis {axis}: SD {}", var.sqrt());
+            assert!(
+                mean.abs() < 4.0 * 2.0 / (n as f64).sqrt(),
+                "axis {axis}: mean {mean}"
+            );
+            assert!(
+                (var.sqrt() - 2.0).abs() < 0.1,
+                "axis {axis}: SD {}",
+                var.sqrt()
+            );
         }
         let up_to = draw(GyroBias::UpTo(2.0));
         assert!(up_to.iter().all(|b| b.norm() <= 2.0));

@@ -12,30 +12,28 @@ import json
 import sys
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Slerp
 
-from bvh_positions import parse
+from bvh_positions import local_rotations, parse
+
+
+def world_rotations(joints, values, frames):
+    """Each joint's world rotation (a Rotation stack) at the fractional `frames`: local rotations
+    interpolated between frames (Slerp), composed down the hierarchy."""
+    local = local_rotations(joints, values)
+    keys = np.arange(len(values))
+    at = np.clip(np.asarray(frames, dtype=float), 0, len(values) - 1)
+    local_at = [Slerp(keys, r)(at) if len(values) > 1 else r[np.zeros(len(at), dtype=int)] for r in local]
+    world = []
+    for k, j in enumerate(joints):
+        world.append(local_at[k] if j["parent"] is None else world[j["parent"]] * local_at[k])
+    return world
 
 
 def main():
     path, names, frames = sys.argv[1], sys.argv[2].split(","), [float(f) for f in sys.argv[3].split(",")]
     joints, values, _ = parse(path)
-    start, local = 0, []
-    for j in joints:
-        rot = [c for c in j["channels"] if c.endswith("rotation")]
-        idx = [start + j["channels"].index(c) for c in rot]
-        start += len(j["channels"])
-        if rot:
-            order = "".join(c[0] for c in rot)
-            local.append(Rotation.from_euler(order, values[:, idx], degrees=True))
-        else:
-            local.append(Rotation.identity(len(values)))
-    keys = np.arange(len(values))
-    at = np.clip(np.array(frames), 0, len(values) - 1)
-    local_at = [Slerp(keys, r)(at) for r in local]
-    world = []
-    for k, j in enumerate(joints):
-        world.append(local_at[k] if j["parent"] is None else world[j["parent"]] * local_at[k])
+    world = world_rotations(joints, values, frames)
     out = {}
     for name in names:
         k = next(i for i, j in enumerate(joints) if j["name"] == name)
