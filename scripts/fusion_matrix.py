@@ -66,7 +66,7 @@ def rotations(wxyz):
 
 
 def scores(fused, truth, times, rest_end, motion_start):
-    """(abs, since) RMS degrees of one sensor (Rotation stacks on the same samples)."""
+    """[abs, since] RMS degrees of one sensor (Rotation stacks on the same samples)."""
     error = fused * truth.inv()
     rest = times <= rest_end
     motion = times >= motion_start
@@ -74,7 +74,7 @@ def scores(fused, truth, times, rest_end, motion_start):
     reference = error[rest].mean() if rest.any() else error[0]
     since = np.degrees((error[motion] * reference.inv()).magnitude())
     rms = lambda x: float(np.sqrt(np.mean(x ** 2)))
-    return rms(absolute), rms(since)
+    return [rms(absolute), rms(since)]
 
 
 def run(cmd):
@@ -143,6 +143,7 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
     mapping_path = os.path.join(work, "mapping.json")
     json.dump(cell_mapping, open(mapping_path, "w"))
     bones = [(s["bone"], s["source_joint"]) for s in info["sensors"]]
+    true_bias = {s["sensor"]: s["gyro_bias_dps"] for s in info["sensors"]}
 
     def convert(capture, name):
         out = os.path.join(work, "out_" + name)
@@ -154,11 +155,15 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
     truth = read_csv(ori, 4)
     readings = read_csv(raw, 9)
     fused = {}
+    stats = {}
     for fusion in ("offline", "vqf"):
         out = os.path.join(work, fusion + ".csv")
-        run([binary, "fuse", raw, "--output", out, "--fusion", fusion])
+        done = subprocess.run([binary, "fuse", raw, "--output", out, "--fusion", fusion, "--json"],
+                              check=True, capture_output=True)
+        stats[fusion] = json.loads(done.stdout)["sensors"]
         fused[fusion] = read_csv(out, 4)
     result = {name: [] for name in ("offline", "vqf", "pypi_offline")}
+    sensors = {}
     pypi_rows = []
     for sensor, (times, values) in readings.items():
         t_truth, q_truth = truth[sensor]
@@ -169,6 +174,8 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
             # jitter later): the same samples, shifted by under a millisecond.
             assert len(t) == len(t_truth) and np.allclose(t - t[0], t_truth - t_truth[0], atol=1e-6), sensor
             result[name].append(scores(rotations(q), true, t_truth, rest_s, motion_start))
+        sensors[sensor] = {"offline": result["offline"][-1], **stats["offline"][sensor],
+                           "true_gyro_bias_dps": true_bias[sensor]}
         gyr, acc, mag = (np.ascontiguousarray(values[:, i:i + 3]) for i in (0, 3, 6))
         ts = float(np.mean(np.diff(times)))
         q = offlineVQF(gyr, acc, mag, ts)["quat9D"]
@@ -181,7 +188,8 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
             "vqf": convert(os.path.join(work, "vqf.csv"), "vqf"),
             "pypi_offline": convert(pypi, "pypi_offline"),
             "truth": convert(ori, "truth")}
-    return {**{k: v + [body[k]] for k, v in per_sensor.items()}, "truth": [0.0, 0.0, body["truth"]]}
+    return {**{k: v + [body[k]] for k, v in per_sensor.items()}, "truth": [0.0, 0.0, body["truth"]],
+            "sensors": sensors}
 
 
 def matrix(quick):
@@ -221,9 +229,10 @@ def main():
             with tempfile.TemporaryDirectory() as work:
                 per_seed.append(cell(args.bin, here, os.path.join(args.data, "bvh", bvh), mapping,
                                      frames, rest, bias, rate, jitter, seed, work))
-        mean = {k: np.mean([s[k] for s in per_seed], axis=0).tolist() for k in per_seed[0]}
+        mean = {k: np.mean([s[k] for s in per_seed], axis=0).tolist() for k in per_seed[0] if k != "sensors"}
         row = {"take": label, "rest_s": rest, "bias_dps": bias, "rate_hz": rate,
-               "jitter_ms": jitter, "seeds": seeds, **mean}
+               "jitter_ms": jitter, "seeds": seeds, **mean,
+               "sensors": [s["sensors"] for s in per_seed]}
         results.append(row)
         print(f"{label:15s} rest {rest:3.1f} s bias {bias:3.1f} °/s {rate:3d} Hz jitter {jitter:3.1f} ms  "
               + "  ".join(f"{k} {v[0]:.2f}/{v[1]:.2f}/{v[2]:.2f}" for k, v in mean.items()), flush=True)

@@ -25,8 +25,9 @@
 //!    large in motion (calibration that depends on orientation, fields that are not uniform) and
 //!    unbounded in a disturbance — found with hindsight: a field whose norm or dip is off the
 //!    take's median by more than 10 % or 10° ([`DISTURBED_NORM`], [`DISTURBED_DIP_DEG`]) is left
-//!    out, however long. `δ` is a random walk (what bias is left drives it, `drift` °/√s) seen
-//!    through those measurements — σ = `rest_deg` at rest, `motion_deg` in motion — and estimated
+//!    out, however long. `δ` is a random walk (what bias is left drives it, `drift` °/√s, and
+//!    what uneven sample times leave unknown of fast turns, [`timing_wander`]) seen through those
+//!    measurements — σ = `rest_deg` at rest, `motion_deg` in motion — and estimated
 //!    by a Kalman filter forward and a Rauch–Tung–Striebel pass backward: the heading leans on the
 //!    field where the field is trustworthy and on the gyro between. `q₉ = R_z(δ) ⊗ q₆`.
 //!
@@ -461,7 +462,7 @@ pub fn fuse_offline(
         let f = fields[i].as_ref().filter(|_| !disturbed[i])?;
         Some((f.heading, if rest[i] { rest_var } else { motion_var }))
     };
-    let drift = params.drift.to_radians().powi(2);
+    let drift = params.drift.to_radians().powi(2) + timing_wander(steps, ts);
     let delta = smooth_heading(steps, measurement, drift);
     drop(fields);
     // q₉ in place of q₆.
@@ -592,6 +593,23 @@ fn wrap(a: f64) -> f64 {
     } else {
         w
     }
+}
+
+/// The heading's wander from the samples' timing, rad²/s: a gyro reads its rate over its own
+/// sampling period before each sample, so where the samples' spacing `Δtᵢ` differs from the
+/// period `T` the rotation between them is partly unknown — about `|ωᵢ − ωᵢ₋₁| · |Δtᵢ − T| / 2`
+/// (the rate's change across the gap or overlap) — and these unknown steps add up as a random
+/// walk: `Σ (|ωᵢ − ωᵢ₋₁| · |Δtᵢ − T| / 2)² / Σ Δtᵢ`. Zero for evenly spaced samples.
+fn timing_wander(steps: &[Step], ts: f64) -> f64 {
+    let duration: f64 = steps.iter().skip(1).map(|s| s.dt).sum();
+    if duration <= 0.0 {
+        return 0.0;
+    }
+    steps
+        .windows(2)
+        .map(|w| ((w[1].gyr - w[0].gyr).norm() * (w[1].dt - ts).abs() / 2.0).powi(2))
+        .sum::<f64>()
+        / duration
 }
 
 /// A scalar random walk `δ` (process noise `drift · Δt`) over the steps, seen through angle
@@ -895,6 +913,27 @@ mod tests {
             assert!(rest_segments(&take(Vector3::z(), true, true)).is_empty());
             assert!(rest_segments(&take(Vector3::z(), false, false)).is_empty());
         }
+    }
+
+    /// Hand calculation: evenly spaced samples leave nothing unknown; samples 2 ms off a 10 ms
+    /// period while the rate changes by 1 rad/s per sample leave 1 mrad per step, and over 1 s
+    /// of such steps (100 of them, the first has no predecessor) a random walk of
+    /// 100 · (1e-3)² rad² per second.
+    #[test]
+    fn uneven_samples_of_a_changing_rate_wander() {
+        let step = |i: usize, dt: f64| Step {
+            gyr: Vector3::new(i as f64, 0.0, 0.0),
+            acc: Vector3::z(),
+            mag: None,
+            dt,
+        };
+        let even: Vec<Step> = (0..101).map(|i| step(i, 0.01)).collect();
+        assert_eq!(timing_wander(&even, 0.01), 0.0);
+        let uneven: Vec<Step> = (0..101)
+            .map(|i| step(i, if i % 2 == 0 { 0.012 } else { 0.008 }))
+            .collect();
+        let wander = timing_wander(&uneven, 0.01);
+        assert!((wander - 100.0 * 1e-6 / 1.0).abs() < 1e-12, "{wander}");
     }
 
     #[test]
