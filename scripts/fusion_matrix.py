@@ -25,9 +25,15 @@ world rotation since its zero pose (the pose held), computed independently with 
 The default fusion is converted from the raw readings (the path users take); the others from
 their orientations.
 
-usage: fusion_matrix.py [--quick] [--out FILE.json] [--bin IMUBAKE] [--data SHARED_DATA]
-`--quick` runs a few cells (CI); the full matrix is issue 51's (lengths, rests, biases, rates,
-jitter, three seeds) and takes about 8 minutes on two cores.
+The offline fusion's own expected error (`expected_error_deg` per sensor, from `fuse --json`) is
+averaged per cell and ranked against the cells' measured errors (Spearman, scipy).
+
+usage: fusion_matrix.py [--cells full|quick|ranking] [--seeds 1,2,3] [--out FILE.json]
+                        [--bin IMUBAKE] [--data SHARED_DATA]
+`quick` is two cells and `ranking` twelve short ones (CI); `full` is issue 51's matrix (lengths,
+rests, biases, rates, jitter; 216 cells) and takes about 45 minutes on two cores with three
+seeds. The JSON has each cell (`offline`, `vqf`, `pypi_offline`, `truth`: [abs, since, body]
+degrees; `expected_deg`; each seed's sensors) and a `summary`.
 """
 import argparse
 import itertools
@@ -39,6 +45,7 @@ import tempfile
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from scipy.stats import spearmanr
 from vqf import offlineVQF
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests", "python"))
@@ -192,15 +199,24 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
             "sensors": sensors}
 
 
-def matrix(quick):
-    """Cells: (label, bvh, mapping, frames at 120 fps, rest s, bias °/s, rate Hz, jitter ms)."""
+def matrix(kind):
+    """Cells: (label, bvh, mapping, frames at 120 fps, rest s, bias SD °/s, rate Hz, jitter ms)."""
     sources = [("CMU 01_01 5 s", "cmu_01_01.bvh", MAPPING, 600),
                ("CMU 01_01 10 s", "cmu_01_01.bvh", MAPPING, 1200),
                ("CMU 01_01 20 s", "cmu_01_01.bvh", MAPPING, 2400),
                ("pymo walk 5 s", "pymo_walk.bvh", PYMO_MAPPING, 600)]
-    if quick:
+    if kind == "quick":
         return [("CMU 01_01 10 s", "cmu_01_01.bvh", MAPPING, "1:1200", 1.5, 0.5, 100, 1.0),
                 ("pymo walk 5 s", "pymo_walk.bvh", PYMO_MAPPING, "0:599", 0.5, 2.0, 60, 0.0)]
+    if kind == "ranking":
+        # Short takes of each source, with and without jitter, a brief pose at a low rate and a
+        # long one at a high rate, one bias each.
+        cells = []
+        for (label, bvh, mapping, n), jitter, (rest, rate, bias) in itertools.product(
+                [sources[0], sources[1], sources[3]], (0.0, 1.0), ((0.5, 60, 2.0), (3.0, 200, 0.5))):
+            first = 1 if bvh.startswith("cmu") else 0
+            cells.append((label, bvh, mapping, f"{first}:{first + n - 1}", rest, bias, rate, jitter))
+        return cells
     cells = []
     for (label, bvh, mapping, n), rest, bias, rate, jitter in itertools.product(
             sources, (0.5, 1.5, 3.0), (0.0, 0.5, 2.0), (60, 100, 200), (0.0, 1.0)):
@@ -215,7 +231,7 @@ def matrix(quick):
 def main():
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     parser = argparse.ArgumentParser()
-    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--cells", choices=("full", "quick", "ranking"), default="full")
     parser.add_argument("--out")
     parser.add_argument("--bin", default=os.path.join(here, "target/release/imubake"))
     parser.add_argument("--data", default=os.path.join(here, "../shared/data"))
@@ -223,22 +239,47 @@ def main():
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     results = []
-    for label, bvh, mapping, frames, rest, bias, rate, jitter in matrix(args.quick):
+    for label, bvh, mapping, frames, rest, bias, rate, jitter in matrix(args.cells):
         per_seed = []
         for seed in seeds:
             with tempfile.TemporaryDirectory() as work:
                 per_seed.append(cell(args.bin, here, os.path.join(args.data, "bvh", bvh), mapping,
                                      frames, rest, bias, rate, jitter, seed, work))
         mean = {k: np.mean([s[k] for s in per_seed], axis=0).tolist() for k in per_seed[0] if k != "sensors"}
-        row = {"take": label, "rest_s": rest, "bias_dps": bias, "rate_hz": rate,
-               "jitter_ms": jitter, "seeds": seeds, **mean,
+        expected = float(np.mean([v["expected_error_deg"] for s in per_seed for v in s["sensors"].values()]))
+        row = {"take": label, "rest_s": rest, "bias_sd_dps": bias, "rate_hz": rate,
+               "jitter_ms": jitter, "seeds": seeds, **mean, "expected_deg": expected,
                "sensors": [s["sensors"] for s in per_seed]}
         results.append(row)
         print(f"{label:15s} rest {rest:3.1f} s bias {bias:3.1f} °/s {rate:3d} Hz jitter {jitter:3.1f} ms  "
-              + "  ".join(f"{k} {v[0]:.2f}/{v[1]:.2f}/{v[2]:.2f}" for k, v in mean.items()), flush=True)
+              + "  ".join(f"{k} {v[0]:.2f}/{v[1]:.2f}/{v[2]:.2f}" for k, v in mean.items())
+              + f"  expected {expected:.2f}", flush=True)
+    summary = summarize(results)
+    print(json.dumps(summary, indent=1))
     if args.out:
         with open(args.out, "w") as f:
-            json.dump(results, f, indent=1)
+            json.dump({"cells": results, "summary": summary}, f, indent=1)
+
+
+def summarize(rows):
+    """Means over the cells, the cells where the default is behind PyPI offline (by more than
+    0.05°) or above imubake's vqf through the body, and the expected error's rank correlation."""
+    col = lambda name, k: np.array([r[name][k] for r in rows])
+    names = ("offline", "vqf", "pypi_offline", "truth")
+    body, pypi, vqf = col("offline", 2), col("pypi_offline", 2), col("vqf", 2)
+    expected = np.array([r["expected_deg"] for r in rows])
+    out = {"cells": len(rows),
+           "mean": {n: {k: float(np.mean(col(n, i))) for i, k in enumerate(("abs", "since", "body"))}
+                    for n in names},
+           "behind_pypi_offline_body": int(np.sum(body > pypi + 0.05)),
+           "worst_body_excess_over_pypi_offline": float(np.max(body - pypi)),
+           "above_own_vqf_body": int(np.sum(body > vqf)),
+           "behind_pypi_offline_since": int(np.sum(col("offline", 1) > col("pypi_offline", 1) + 0.05)),
+           "mean_expected_deg": float(np.mean(expected))}
+    if len(rows) > 2:
+        out["spearman_expected_vs_body"] = float(spearmanr(expected, body).correlation)
+        out["spearman_expected_vs_since"] = float(spearmanr(expected, col("offline", 1)).correlation)
+    return out
 
 
 if __name__ == "__main__":

@@ -255,8 +255,20 @@ pub fn run(args: ConvertArgs) -> anyhow::Result<ExitCode> {
                         .iter()
                         .map(|o| o.path.as_str())
                         .collect();
+                    let fused = outcome
+                        .sidecar
+                        .pipeline
+                        .fusion
+                        .as_ref()
+                        .filter(|f| !f.sensors.is_empty())
+                        .map_or(String::new(), |f| {
+                            format!(
+                                "; fused {}",
+                                imubake::fusion::algorithms_summary(f.sensors.values())
+                            )
+                        });
                     println!(
-                        "{} → {} ({} frames at {} fps, {})",
+                        "{} → {} ({} frames at {} fps, {}{fused})",
                         input.display(),
                         args.out.display(),
                         outcome.sidecar.frames,

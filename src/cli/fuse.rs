@@ -74,6 +74,14 @@ pub fn run(args: FuseArgs) -> anyhow::Result<ExitCode> {
             args.output.display(),
             fused.len()
         );
+        let width = fused
+            .iter()
+            .map(|(id, _)| id.chars().count())
+            .max()
+            .unwrap_or(0);
+        for (id, f) in &fused {
+            eprintln!("  {id:width$}  {}", f.stats.describe());
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

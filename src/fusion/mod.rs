@@ -97,6 +97,18 @@ pub enum Filter {
 }
 
 impl Filter {
+    /// The filter's name, as `--fusion` takes it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Filter::Vqf { .. } => "vqf",
+            Filter::Madgwick { .. } => "madgwick",
+            Filter::Mahony { .. } => "mahony",
+            Filter::Trust { .. } => "trust",
+            Filter::Gyro => "gyro",
+            Filter::Offline { .. } => "offline",
+        }
+    }
+
     /// The offline filter with its default parameters.
     pub fn offline() -> Filter {
         let p = offline::OfflineParams::default();
@@ -353,6 +365,8 @@ pub enum FusionError {
 /// What fusing a sensor came to, for the sidecar and the report.
 #[derive(Debug, Clone, Serialize)]
 pub struct FusionStats {
+    /// The filter that fused this sensor (`offline`, `vqf`, …; `--fusion`'s names).
+    pub algorithm: &'static str,
     /// `9d` or `6d`.
     pub variant: &'static str,
     /// The filter's last gyro bias estimate, °/s (for filters that estimate one).
@@ -370,6 +384,14 @@ pub struct FusionStats {
     /// take has none and the bias came from VQF's passes in motion).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rest_s: Option<f64>,
+    /// The offline fusion: seconds in which the field was disturbed (left out of the heading).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub disturbed_s: Option<f64>,
+    /// The offline fusion: the error it expects of itself, RMS over the take, degrees
+    /// (`offline::ExpectedError`: a model from the bias's uncertainty, the samples' timing and
+    /// the heading smoother's variance; above [`EXPECTED_ERROR_WARN_DEG`] a warning).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub expected_error_deg: Option<f64>,
     /// The corrections of the readings before fusion (the sensor calibration file's kinds, and
     /// where the gyro bias came from).
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -380,6 +402,49 @@ pub struct FusionStats {
     pub series: Vec<(f64, f64, bool, bool)>,
 }
 
+impl FusionStats {
+    /// One line for people: the algorithm and what it found, e.g. `offline 9d, rest 1.5 s, gyro
+    /// bias (0.100, -0.200, 0.200) °/s, expected error 0.75°`.
+    pub fn describe(&self) -> String {
+        let mut out = format!("{} {}", self.algorithm, self.variant);
+        if let Some(r) = self.rest_s {
+            out += &format!(", rest {r:.1} s");
+        }
+        if let Some(b) = self.gyro_bias_dps {
+            out += &format!(", gyro bias ({:.3}, {:.3}, {:.3}) °/s", b[0], b[1], b[2]);
+        }
+        if let Some(d) = self.disturbed_s.filter(|d| *d > 0.0) {
+            out += &format!(", field disturbed {d:.1} s");
+        }
+        if let Some(e) = self.expected_error_deg {
+            out += &format!(", expected error {e:.2}°");
+        }
+        out
+    }
+}
+
+/// Which algorithms fused how many sensors, e.g. `offline 9d ×15, offline 6d ×1` (in order of
+/// first appearance).
+pub fn algorithms_summary<'a>(stats: impl IntoIterator<Item = &'a FusionStats>) -> String {
+    let mut counts: Vec<((&str, &str), usize)> = Vec::new();
+    for s in stats {
+        let key = (s.algorithm, s.variant);
+        match counts.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((key, 1)),
+        }
+    }
+    counts
+        .iter()
+        .map(|((a, v), n)| format!("{a} {v} ×{n}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The offline fusion's expected error above which a sensor gets a warning, degrees: beyond its
+/// worst on the real BROAD trials (1.47°), with a margin for the estimate being a model.
+pub const EXPECTED_ERROR_WARN_DEG: f64 = 2.0;
+
 /// A filter's outputs at each step.
 struct Run {
     orientation: Vec<UnitQuaternion<f64>>,
@@ -387,6 +452,8 @@ struct Run {
     rejected: Vec<Rejected>,
     /// The offline fusion's rest, per step.
     rest: Option<Vec<bool>>,
+    /// The offline fusion's estimate of its error.
+    expected: Option<offline::ExpectedError>,
 }
 
 /// The gyro bias at each step, as the filter gave it (no copy of the offline fusion's).
@@ -636,6 +703,7 @@ pub fn fuse(
                 orientation: r.orientation,
                 bias: StepBias::Offline(r.bias),
                 rest: Some(r.rest),
+                expected: Some(r.expected),
                 rejected: r
                     .magnetic_disturbance
                     .into_iter()
@@ -671,6 +739,7 @@ pub fn fuse(
                 bias: StepBias::Online(bias),
                 rejected,
                 rest: None,
+                expected: None,
             }
         }
     };
@@ -699,6 +768,30 @@ pub fn fuse(
             .map(|(s, _)| s.dt)
             .sum::<f64>()
     });
+    let disturbed_s = run.rest.as_ref().map(|_| {
+        steps
+            .iter()
+            .zip(&run.rejected)
+            .filter(|(_, r)| r.magnetic)
+            .map(|(s, _)| s.dt)
+            .sum::<f64>()
+    });
+    let expected_error_deg = run.expected.map(|e| e.total_deg());
+    if let (Some(total), Some(e)) = (expected_error_deg, run.expected)
+        && total > EXPECTED_ERROR_WARN_DEG
+    {
+        warnings.push(format!(
+            "sensor `{sensor}`: the offline fusion expects {total:.1}° of orientation error \
+             (tilt {:.1}°, heading {:.1}°; rest {:.1} s{}) — above {EXPECTED_ERROR_WARN_DEG}°: \
+             hold still longer before the motion, check the samples' timing, or calibrate the gyro",
+            e.tilt_deg,
+            e.heading_deg,
+            rest_s.unwrap_or(0.0),
+            disturbed_s
+                .filter(|d| *d > 0.0)
+                .map_or(String::new(), |d| format!(", field disturbed {d:.1} s")),
+        ));
+    }
     // Without filled-in steps, every step is a sample: the run's orientations are the track's.
     let out = if filled == 0 {
         run.orientation
@@ -707,12 +800,15 @@ pub fn fuse(
     };
     let n = inertial.len() as f64;
     let stats = FusionStats {
+        algorithm: fusion.filter.name(),
         variant: if nine_d { "9d" } else { "6d" },
         filled_samples: filled,
         gyro_bias_dps: last_bias.map(|b| [b.x.to_degrees(), b.y.to_degrees(), b.z.to_degrees()]),
         magnetic_rejected: mag_rejected as f64 / n,
         acceleration_rejected: acc_rejected as f64 / n,
         rest_s,
+        disturbed_s,
+        expected_error_deg,
         corrections: Vec::new(),
         series,
     };
@@ -835,6 +931,93 @@ mod tests {
         };
         assert!((rest(1.0) - 1.0).abs() < 0.02, "{}", rest(1.0));
         assert_eq!(rest(0.0), 0.0);
+    }
+
+    /// Each fused sensor names its algorithm; the offline fusion's expected error is in the
+    /// stats, and above [`EXPECTED_ERROR_WARN_DEG`] it is a warning: a 6D sensor still for 1 s,
+    /// then turning about the vertical at a rate that swings by 10 rad/s between samples spaced
+    /// 8, 12, 10, 8, … ms (the median period 10 ms), leaves `(10 · 0.002 / 2)²` rad² unknown
+    /// on two steps in three: over the 900 steps of the turn in a 10 s take, `q` =
+    /// 600 · 10⁻⁴ / 10 = 0.006 rad²/s. Without a field nothing corrects the heading (`q·L/2`);
+    /// the tilt sees the walk through the 10 s average (`q·T/3`): in all
+    /// `√(0.006 · 10 · (1/2 + 1/3))` = 0.224 rad = 12.8° (the bias, from the still second, adds
+    /// a tenth of a degree). Evenly spaced, the same sensor expects under a degree.
+    #[test]
+    fn the_offline_fusion_names_itself_and_warns_of_a_large_expected_error() {
+        let track = |uneven: bool| {
+            let mut t = 0.0;
+            let times: Vec<f64> = (0..1001)
+                .map(|i| {
+                    if i > 0 {
+                        t += if uneven {
+                            [0.008, 0.012, 0.01][i % 3]
+                        } else {
+                            0.01
+                        };
+                    }
+                    t
+                })
+                .collect();
+            let samples = (0..1001)
+                .map(|i| ImuSample {
+                    gyro_rad_s: Vector3::new(
+                        0.0,
+                        0.0,
+                        // (a little drift, or it would read as a saturated gyro)
+                        match i {
+                            0..100 => 0.0,
+                            _ if i % 2 == 0 => 5.0 + 1e-4 * i as f64,
+                            _ => -5.0 + 1e-4 * i as f64,
+                        },
+                    ),
+                    accel_m_s2: Vector3::new(0.0, 0.0, G),
+                })
+                .collect();
+            Track::new(times, samples).unwrap()
+        };
+        let offline: Fusion = "offline".parse().unwrap();
+        let uneven = fuse("hand", &track(true), None, &offline).unwrap();
+        assert_eq!(uneven.stats.algorithm, "offline");
+        let expected = uneven.stats.expected_error_deg.unwrap();
+        let by_hand = (0.006f64 * 10.0 * (0.5 + 1.0 / 3.0)).sqrt().to_degrees();
+        assert!((expected - by_hand).abs() < 0.3, "{expected} vs {by_hand}");
+        assert!(
+            uneven
+                .warnings
+                .iter()
+                .any(|w| w.contains("sensor `hand`: the offline fusion expects")),
+            "{:?}",
+            uneven.warnings
+        );
+        let even = fuse("hand", &track(false), None, &offline).unwrap();
+        assert!(even.stats.expected_error_deg.unwrap() < 1.0);
+        assert!(even.warnings.is_empty(), "{:?}", even.warnings);
+        let vqf = fuse("hand", &track(false), None, &"vqf".parse().unwrap()).unwrap();
+        assert_eq!(vqf.stats.algorithm, "vqf");
+        assert_eq!(vqf.stats.expected_error_deg, None);
+        // The seconds of a disturbed field: a still sensor whose field gains 40 µT along east
+        // from 4 s to 6 s of 10 s.
+        let times: Vec<f64> = (0..1000).map(|i| i as f64 * 0.01).collect();
+        let still = vec![
+            ImuSample {
+                gyro_rad_s: Vector3::zeros(),
+                accel_m_s2: Vector3::new(0.0, 0.0, G),
+            };
+            1000
+        ];
+        let field: Vec<Vector3<f64>> = times
+            .iter()
+            .map(|t| Vector3::new(if (4.0..6.0).contains(t) { 40.0 } else { 0.0 }, 20.0, -40.0))
+            .collect();
+        let disturbed = fuse(
+            "hand",
+            &Track::new(times.clone(), still).unwrap(),
+            Some(&Track::new(times, field).unwrap()),
+            &offline,
+        )
+        .unwrap();
+        let seconds = disturbed.stats.disturbed_s.unwrap();
+        assert!((seconds - 2.0).abs() < 0.02, "{seconds}");
     }
 
     #[test]

@@ -85,6 +85,35 @@ pub struct OfflineResult {
     pub bias: Vec<Vector3<f64>>,
     pub rest: Vec<bool>,
     pub magnetic_disturbance: Vec<bool>,
+    /// What the fusion expects its own error to be ([`ExpectedError`]).
+    pub expected: ExpectedError,
+}
+
+/// The offline fusion's own estimate of its error, from what the take gave it — a model, not a
+/// measurement: RMS over the take, degrees.
+///
+/// - **Tilt**: the bias left over (σ_b, the mean standard deviation of each step's bias per
+///   axis: a stretch of rest's mean, `σ/√N`, carried with its wander; or VQF's covariance
+///   without rest) turns the strapdown frame by `σ_b·t`, and uneven sample times add a random
+///   walk `q` ([`timing_wander`]); the two-sided average of `T = min(tau_acc, the take's
+///   length)` sees both through its window: `tilt² = (σ_b·T)² + q·T/3`.
+/// - **Heading** with a magnetometer: the smoother's own posterior variance, averaged over the
+///   take (it grows through a disturbance and with `q`); without one, nothing corrects it after
+///   the first sample: the mean of `(σ_b·t)² + q·t` over the take, `(σ_b·L)²/3 + q·L/2`.
+///
+/// It leaves out what it cannot see: the body's acceleration that the average does not cancel,
+/// and a magnetometer's errors in motion beyond the smoother's model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExpectedError {
+    pub tilt_deg: f64,
+    pub heading_deg: f64,
+}
+
+impl ExpectedError {
+    /// `√(tilt² + heading²)`, degrees.
+    pub fn total_deg(&self) -> f64 {
+        self.tilt_deg.hypot(self.heading_deg)
+    }
 }
 
 /// A VQF for the bias passes.
@@ -247,6 +276,15 @@ const BIAS_FLOOR: f64 = 0.005 * std::f64::consts::PI / 180.0;
 /// grows by [`BIAS_WANDER`] per second, the two merged by their inverse variances; inside a
 /// stretch, its mean.
 pub fn bias_from_rest(steps: &[Step], segments: &[std::ops::Range<usize>]) -> Vec<Vector3<f64>> {
+    bias_and_variance_from_rest(steps, segments).0
+}
+
+/// [`bias_from_rest`] and the variance of each step's bias per axis, (rad/s)²: a stretch's, or
+/// the merged `(1/v₁ + 1/v₂)⁻¹` between two.
+fn bias_and_variance_from_rest(
+    steps: &[Step],
+    segments: &[std::ops::Range<usize>],
+) -> (Vec<Vector3<f64>>, Vec<f64>) {
     let n = steps.len();
     let mut time = Vec::with_capacity(n);
     let mut t = 0.0;
@@ -268,13 +306,14 @@ pub fn bias_from_rest(steps: &[Step], segments: &[std::ops::Range<usize>]) -> Ve
         })
         .collect();
     let mut bias = vec![Vector3::zeros(); n];
+    let mut variance = vec![0.0; n];
     let mut next = 0; // the first segment that ends after step i
     for i in 0..n {
         while next < segments.len() && segments[next].end <= i {
             next += 1;
         }
         if next < segments.len() && segments[next].contains(&i) {
-            bias[i] = stats[next].0;
+            (bias[i], variance[i]) = stats[next];
             continue;
         }
         let before = next.checked_sub(1).map(|k| {
@@ -288,13 +327,16 @@ pub fn bias_from_rest(steps: &[Step], segments: &[std::ops::Range<usize>]) -> Ve
                 stats[next].1 + BIAS_WANDER * (start - time[i]),
             )
         });
-        bias[i] = match (before, after) {
-            (Some((b1, v1)), Some((b2, v2))) => (b1 / v1 + b2 / v2) / (1.0 / v1 + 1.0 / v2),
-            (Some((b, _)), None) | (None, Some((b, _))) => b,
-            (None, None) => Vector3::zeros(),
+        (bias[i], variance[i]) = match (before, after) {
+            (Some((b1, v1)), Some((b2, v2))) => (
+                (b1 / v1 + b2 / v2) / (1.0 / v1 + 1.0 / v2),
+                1.0 / (1.0 / v1 + 1.0 / v2),
+            ),
+            (Some((b, v)), None) | (None, Some((b, v))) => (b, v),
+            (None, None) => (Vector3::zeros(), 0.0),
         };
     }
-    bias
+    (bias, variance)
 }
 
 fn matrix(m: &vqf_rs::Matrix<3, 3>) -> Matrix3<f64> {
@@ -309,7 +351,11 @@ fn matrix(m: &vqf_rs::Matrix<3, 3>) -> Matrix3<f64> {
 /// the gyro and the accelerometer), and run on blocks of steps averaged down to about 25 Hz
 /// ([`PASS_PERIOD_S`]): the bias changes over minutes, and the passes are most of the offline
 /// fusion's cost.
-fn vqf_passes(steps: &[Step], ts: f64, params: &OfflineParams) -> (Vec<Vector3<f64>>, Vec<bool>) {
+fn vqf_passes(
+    steps: &[Step],
+    ts: f64,
+    params: &OfflineParams,
+) -> (Vec<Vector3<f64>>, Vec<f64>, Vec<bool>) {
     let k = ((PASS_PERIOD_S / ts).round() as usize).max(1);
     // A block's mean readings and its length (the blocks are read twice, not stored).
     let block = |c: &[Step]| {
@@ -336,6 +382,9 @@ fn vqf_passes(steps: &[Step], ts: f64, params: &OfflineParams) -> (Vec<Vector3<f
     }
     let mut filter = vqf(params, ts);
     let mut bias = vec![Vector3::zeros(); n];
+    let mut variance = vec![0.0; n];
+    // VQF keeps its bias covariance in (0.01 °/s)².
+    let p_unit = (0.01f64).to_radians().powi(2);
     // Backward, the step from block i + 1 to block i spans the later block's interval.
     let mut later_dt = None;
     for (i, c) in steps.chunks(k).enumerate().rev() {
@@ -346,9 +395,10 @@ fn vqf_passes(steps: &[Step], ts: f64, params: &OfflineParams) -> (Vec<Vector3<f
         let (p1, b1) = forward[i];
         let p2 = matrix(&filter.state().bias_p);
         let b2 = Vector3::from(filter.state().bias);
-        bias[i] = (p1 + p2).try_inverse().map_or(Vector3::zeros(), |s_inv| {
-            p2 * (s_inv * b1) - p1 * (s_inv * b2)
-        });
+        if let Some(s_inv) = (p1 + p2).try_inverse() {
+            bias[i] = p2 * (s_inv * b1) - p1 * (s_inv * b2);
+            variance[i] = (p1 * s_inv * p2).trace() / 3.0 * p_unit;
+        }
         rest[i] |= filter.rest_detected();
     }
     // Back to one value per step.
@@ -363,7 +413,12 @@ fn vqf_passes(steps: &[Step], ts: f64, params: &OfflineParams) -> (Vec<Vector3<f
         .flat_map(|r| std::iter::repeat_n(*r, k))
         .take(steps.len())
         .collect();
-    (per_step(&bias), rest)
+    let variance = variance
+        .iter()
+        .flat_map(|v| std::iter::repeat_n(*v, k))
+        .take(steps.len())
+        .collect();
+    (per_step(&bias), variance, rest)
 }
 
 /// The bias passes' sampling period, seconds (about 25 Hz). Measured with the passes forced on
@@ -384,15 +439,22 @@ pub fn fuse_offline(
     let n = steps.len();
     // 1. The gyro bias: from the stretches of rest where there are some; else from VQF's passes.
     let segments = rest_segments(steps);
-    let (bias, rest) = if segments.is_empty() {
+    let (bias, bias_variance, rest) = if segments.is_empty() {
         vqf_passes(steps, ts, params)
     } else {
         let mut rest = vec![false; n];
         for r in &segments {
             rest[r.clone()].fill(true);
         }
-        (bias_from_rest(steps, &segments), rest)
+        let (bias, variance) = bias_and_variance_from_rest(steps, &segments);
+        (bias, variance, rest)
     };
+
+    let duration: f64 = steps.iter().skip(1).map(|s| s.dt).sum();
+    let wander = timing_wander(steps, ts);
+    let bias_var = bias_variance.iter().sum::<f64>() / n.max(1) as f64;
+    let window = params.tau_acc.min(duration);
+    let tilt_var = bias_var * window * window + wander * window / 3.0;
 
     // 2. Strapdown integration.
     let mut q3 = Vec::with_capacity(n);
@@ -443,11 +505,16 @@ pub fn fuse_offline(
     }
     drop(averaged);
     if !nine_d {
+        let heading_var = bias_var * duration * duration / 3.0 + wander * duration / 2.0;
         return OfflineResult {
             orientation: q6,
             bias,
             rest,
             magnetic_disturbance: vec![false; n],
+            expected: ExpectedError {
+                tilt_deg: tilt_var.sqrt().to_degrees(),
+                heading_deg: heading_var.sqrt().to_degrees(),
+            },
         };
     }
 
@@ -462,8 +529,9 @@ pub fn fuse_offline(
         let f = fields[i].as_ref().filter(|_| !disturbed[i])?;
         Some((f.heading, if rest[i] { rest_var } else { motion_var }))
     };
-    let drift = params.drift.to_radians().powi(2) + timing_wander(steps, ts);
-    let delta = smooth_heading(steps, measurement, drift);
+    let drift = params.drift.to_radians().powi(2) + wander;
+    let (delta, delta_var) = smooth_heading(steps, measurement, drift);
+    let heading_var = delta_var.iter().sum::<f64>() / n.max(1) as f64;
     drop(fields);
     // q₉ in place of q₆.
     let mut orientation = q6;
@@ -475,6 +543,10 @@ pub fn fuse_offline(
         bias,
         rest,
         magnetic_disturbance: disturbed,
+        expected: ExpectedError {
+            tilt_deg: tilt_var.sqrt().to_degrees(),
+            heading_deg: heading_var.sqrt().to_degrees(),
+        },
     }
 }
 
@@ -615,15 +687,16 @@ fn timing_wander(steps: &[Step], ts: f64) -> f64 {
 /// A scalar random walk `δ` (process noise `drift · Δt`) over the steps, seen through angle
 /// measurements with variances (`measurement(i)`: step i's, if it has one): a Kalman filter
 /// forward, a Rauch–Tung–Striebel pass backward; innovations wrapped. Before the first
-/// measurement the estimate is its value; without any, 0.
+/// measurement the estimate is its value; without any, 0. With each step's smoothed variance,
+/// `Pₛ,ᵢ = Pᵢ + Cᵢ² (Pₛ,ᵢ₊₁ − P⁻ᵢ₊₁)` (`Cᵢ = Pᵢ / P⁻ᵢ₊₁`); without measurements, 0.
 fn smooth_heading(
     steps: &[Step],
     measurement: impl Fn(usize) -> Option<(f64, f64)>,
     drift: f64,
-) -> Vec<f64> {
+) -> (Vec<f64>, Vec<f64>) {
     let n = steps.len();
     let Some(first) = (0..n).find_map(&measurement) else {
-        return vec![0.0; n];
+        return (vec![0.0; n], vec![0.0; n]);
     };
     let (mut x, mut p) = (first.0, first.1);
     let mut filtered = Vec::with_capacity(n);
@@ -642,14 +715,16 @@ fn smooth_heading(
         filtered.push((x, p));
     }
     let mut smoothed = vec![0.0; n];
-    smoothed[n - 1] = filtered[n - 1].0;
+    let mut variance = vec![0.0; n];
+    (smoothed[n - 1], variance[n - 1]) = filtered[n - 1];
     for i in (0..n - 1).rev() {
         let (x, p) = filtered[i];
         // The prediction for i + 1 is x itself (a random walk).
         let c = p / predicted_p[i + 1];
         smoothed[i] = wrap(x + c * wrap(smoothed[i + 1] - x));
+        variance[i] = p + c * c * (variance[i + 1] - predicted_p[i + 1]);
     }
-    smoothed
+    (smoothed, variance)
 }
 
 #[cfg(test)]
@@ -762,7 +837,7 @@ mod tests {
                 }
             })
             .collect();
-        let d = smooth_heading(&steps, |i| m[i], 0.02f64.to_radians().powi(2));
+        let (d, _) = smooth_heading(&steps, |i| m[i], 0.02f64.to_radians().powi(2));
         assert!(
             d.iter().all(|x| (x - 0.3).abs() < 0.01),
             "{:?}",
@@ -772,8 +847,42 @@ mod tests {
         let m: Vec<Option<(f64, f64)>> = (0..1000)
             .map(|i| Some((if i % 2 == 0 { 3.1 } else { -3.1 }, 0.01)))
             .collect();
-        let d = smooth_heading(&steps, |i| m[i], 1e-6);
+        let (d, _) = smooth_heading(&steps, |i| m[i], 1e-6);
         assert!(d.iter().all(|x| x.abs() > 3.0), "{:?}", &d[..4]);
+    }
+
+    /// The smoothed variance against the scalar Riccati equation's steady state: a walk of `Q`
+    /// per step seen with variance `r` at every step filters to `P = (−Q + √(Q² + 4Qr)) / 2`,
+    /// predicted `P⁻ = P + Q`, and smooths to `Pₛ = (P − C²P⁻) / (1 − C²)`, `C = P / P⁻` (the RTS
+    /// recursion at its fixed point); at the last step the smoothed variance is the filtered one.
+    /// Without measurements there is nothing to be unsure of: 0.
+    #[test]
+    fn the_smoothers_variance_is_the_riccati_steady_state() {
+        let steps = vec![
+            Step {
+                gyr: Vector3::zeros(),
+                acc: Vector3::z(),
+                mag: None,
+                dt: 0.01
+            };
+            4000
+        ];
+        let (q, r) = (1e-4, 0.05);
+        let (_, var) = smooth_heading(&steps, |_| Some((0.0, r)), q);
+        let step_q = q * 0.01;
+        let p = (-step_q + (step_q * step_q + 4.0 * step_q * r).sqrt()) / 2.0;
+        let p_pred = p + step_q;
+        let c = p / p_pred;
+        let smoothed = (p - c * c * p_pred) / (1.0 - c * c);
+        assert!(
+            (var[2000] / smoothed - 1.0).abs() < 1e-6,
+            "{} vs {smoothed}",
+            var[2000]
+        );
+        assert!((var[3999] / p - 1.0).abs() < 1e-6, "{} vs {p}", var[3999]);
+        assert!(var[3999] > var[2000]);
+        let (_, none) = smooth_heading(&steps, |_| None, q);
+        assert!(none.iter().all(|v| *v == 0.0));
     }
 
     #[test]
@@ -959,6 +1068,22 @@ mod tests {
             .collect();
         let out = fuse_offline(&steps, 0.01, true, &OfflineParams::default());
         assert!(out.magnetic_disturbance[500] && !out.magnetic_disturbance[300]);
+        // Through the disturbance the heading rests on the gyro alone: the fusion expects more
+        // error of its heading than with the field there throughout.
+        let clean: Vec<Step> = steps
+            .iter()
+            .map(|s| Step {
+                mag: Some(field),
+                ..*s
+            })
+            .collect();
+        let clean = fuse_offline(&clean, 0.01, true, &OfflineParams::default());
+        assert!(
+            out.expected.heading_deg > 1.05 * clean.expected.heading_deg,
+            "{:?} vs {:?}",
+            out.expected,
+            clean.expected
+        );
         let worst = out
             .orientation
             .iter()

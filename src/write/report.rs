@@ -389,11 +389,12 @@ fn fusion_section(out: &mut String, fusion: &[(&str, &crate::fusion::FusionStats
         let _ = writeln!(
             out,
             "<figure class=\"fusion\" data-sensor=\"{name}\" data-magnetic-rejected=\"{:.4}\" \
-             data-acceleration-rejected=\"{:.4}\">\n<figcaption><h3>{name}</h3><p>{}, \
-             magnetometer set aside in {:.1} % of the samples, accelerometer in {:.1} %{}.</p>\
+             data-acceleration-rejected=\"{:.4}\">\n<figcaption><h3>{name}</h3><p>{} {}, \
+             magnetometer set aside in {:.1} % of the samples, accelerometer in {:.1} %{}{}.</p>\
              </figcaption>",
             stats.magnetic_rejected,
             stats.acceleration_rejected,
+            stats.algorithm,
             stats.variant,
             100.0 * stats.magnetic_rejected,
             100.0 * stats.acceleration_rejected,
@@ -401,6 +402,9 @@ fn fusion_section(out: &mut String, fusion: &[(&str, &crate::fusion::FusionStats
                 "; final gyro bias ({:.3}, {:.3}, {:.3}) °/s",
                 b[0], b[1], b[2]
             )),
+            stats
+                .expected_error_deg
+                .map_or(String::new(), |e| format!("; expected error {e:.2}°")),
         );
         let mut svg = String::new();
         let drawn = {
@@ -813,12 +817,15 @@ mod tests {
             })
             .collect();
         let stats = crate::fusion::FusionStats {
+            algorithm: "offline",
             variant: "9d",
             filled_samples: 0,
             gyro_bias_dps: Some([0.1, -0.2, 0.2]),
             magnetic_rejected: 0.2,
             acceleration_rejected: 0.0,
             rest_s: Some(1.5),
+            disturbed_s: Some(0.4),
+            expected_error_deg: Some(0.75),
             corrections: Vec::new(),
             series,
         };
@@ -829,7 +836,8 @@ mod tests {
         assert!(html.contains(
             "data-sensor=\"thigh &lt;L&gt;\" data-magnetic-rejected=\"0.2000\" data-acceleration-rejected=\"0.0000\""
         ));
-        assert!(html.contains("magnetometer set aside in 20.0 % of the samples"));
+        assert!(html.contains("offline 9d, magnetometer set aside in 20.0 % of the samples"));
+        assert!(html.contains("; expected error 0.75°."));
         let figure = &html[html.find("class=\"fusion\"").unwrap()..];
         let svg = &figure[..figure.find("</svg>").unwrap()];
         // Ten 0.1 s spans shaded (2.0 … 2.9 s), over the mesh's own rectangles.
