@@ -28,11 +28,12 @@ their orientations.
 The offline fusion's own expected error (`expected_error_deg` per sensor, from `fuse --json`) is
 averaged per cell and ranked against the cells' measured errors (Spearman, scipy).
 
-usage: fusion_matrix.py [--cells full|quick|ranking] [--seeds 1,2,3] [--out FILE.json]
-                        [--bin IMUBAKE] [--data SHARED_DATA]
+usage: fusion_matrix.py [--cells full|quick|ranking|heldout] [--seeds 1,2,3] [--out FILE.json]
+                        [--bin IMUBAKE] [--data SHARED_DATA] [--heldout FILE.bvh=MAPPING,...]
 `quick` is two cells and `ranking` twelve short ones (CI); `full` is issue 51's matrix (lengths,
 rests, biases, rates, jitter; 216 cells) and takes about 45 minutes on two cores with three
-seeds. The JSON has each cell (`offline`, `vqf`, `pypi_offline`, `truth`: [abs, since, body]
+seeds. `heldout` runs each `--heldout` take whole (after its first frame) in four cells: a
+check on takes the fusion was not tuned on. The JSON has each cell (`offline`, `vqf`, `pypi_offline`, `truth`: [abs, since, body]
 degrees; `expected_deg`; each seed's sensors) and a `summary`.
 """
 import argparse
@@ -199,7 +200,15 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
             "sensors": sensors}
 
 
-def matrix(kind):
+def frame_count(bvh):
+    with open(bvh) as f:
+        for line in f:
+            if line.strip().startswith("Frames:"):
+                return int(line.split()[1])
+    raise ValueError(f"{bvh}: no Frames line")
+
+
+def matrix(kind, heldout=()):
     """Cells: (label, bvh, mapping, frames at 120 fps, rest s, bias SD °/s, rate Hz, jitter ms)."""
     sources = [("CMU 01_01 5 s", "cmu_01_01.bvh", MAPPING, 600),
                ("CMU 01_01 10 s", "cmu_01_01.bvh", MAPPING, 1200),
@@ -208,6 +217,14 @@ def matrix(kind):
     if kind == "quick":
         return [("CMU 01_01 10 s", "cmu_01_01.bvh", MAPPING, "1:1200", 1.5, 0.5, 100, 1.0),
                 ("pymo walk 5 s", "pymo_walk.bvh", PYMO_MAPPING, "0:599", 0.5, 2.0, 60, 0.0)]
+    if kind == "heldout":
+        cells = []
+        for bvh, mapping in heldout:
+            label = os.path.basename(bvh)
+            for rest, bias, rate, jitter in ((0.5, 2.0, 60, 0.0), (1.5, 0.5, 100, 1.0),
+                                             (3.0, 0.5, 200, 0.0), (1.5, 2.0, 100, 0.0)):
+                cells.append((label, bvh, mapping, f"1:{frame_count(bvh) - 1}", rest, bias, rate, jitter))
+        return cells
     if kind == "ranking":
         # Short takes of each source, with and without jitter, a brief pose at a low rate and a
         # long one at a high rate, one bias each.
@@ -231,7 +248,8 @@ def matrix(kind):
 def main():
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     parser = argparse.ArgumentParser()
-    parser.add_argument("--cells", choices=("full", "quick", "ranking"), default="full")
+    parser.add_argument("--cells", choices=("full", "quick", "ranking", "heldout"), default="full")
+    parser.add_argument("--heldout", default="", help="FILE.bvh=MAPPING.json,...")
     parser.add_argument("--out")
     parser.add_argument("--bin", default=os.path.join(here, "target/release/imubake"))
     parser.add_argument("--data", default=os.path.join(here, "../shared/data"))
@@ -239,7 +257,8 @@ def main():
     args = parser.parse_args()
     seeds = [int(s) for s in args.seeds.split(",")]
     results = []
-    for label, bvh, mapping, frames, rest, bias, rate, jitter in matrix(args.cells):
+    heldout = [tuple(os.path.abspath(p) for p in item.split("=")) for item in args.heldout.split(",") if item]
+    for label, bvh, mapping, frames, rest, bias, rate, jitter in matrix(args.cells, heldout):
         per_seed = []
         for seed in seeds:
             with tempfile.TemporaryDirectory() as work:
