@@ -1,4 +1,4 @@
-//! The commands as a user runs them: batch, watch, live (and its hostile inputs), the viewer and its server, inspect, mapping errors, the tools.
+//! The commands as a user runs them: batch, watch, live (and its hostile inputs), the viewer and its server, inspect, mapping errors, the tools, fuse.
 //!
 //! One test crate per area (issue 46): each file a module, linked once.
 
@@ -6,6 +6,7 @@
 mod common;
 
 mod batch;
+mod fuse_cli;
 mod inspect_cli;
 mod live;
 mod live_hostile;
