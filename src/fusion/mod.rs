@@ -765,16 +765,16 @@ pub fn fuse(
             .iter()
             .zip(rest)
             .filter(|(_, r)| **r)
-            .map(|(s, _)| s.dt)
-            .sum::<f64>()
+            // (from +0: an empty f64 sum is −0, which JSON would print)
+            .fold(0.0, |sum, (s, _)| sum + s.dt)
     });
     let disturbed_s = run.rest.as_ref().map(|_| {
         steps
             .iter()
             .zip(&run.rejected)
             .filter(|(_, r)| r.magnetic)
-            .map(|(s, _)| s.dt)
-            .sum::<f64>()
+            // (from +0: an empty f64 sum is −0, which JSON would print)
+            .fold(0.0, |sum, (s, _)| sum + s.dt)
     });
     let expected_error_deg = run.expected.map(|e| e.total_deg());
     if let (Some(total), Some(e)) = (expected_error_deg, run.expected)
@@ -930,7 +930,8 @@ mod tests {
                 .unwrap()
         };
         assert!((rest(1.0) - 1.0).abs() < 0.02, "{}", rest(1.0));
-        assert_eq!(rest(0.0), 0.0);
+        // +0, not −0 (JSON prints the sign).
+        assert!(rest(0.0) == 0.0 && rest(0.0).is_sign_positive());
     }
 
     /// Each fused sensor names its algorithm; the offline fusion's expected error is in the
