@@ -19,7 +19,9 @@ fn raw_take(dir: &Path, jitter_ms: f64) -> Option<std::path::PathBuf> {
         .arg(&bvh)
         .arg("--mapping")
         .arg(common::fixture("mappings/pymo_16imu.json"))
-        .args(["--frames", "0:599", "--hold-s", "1", "--rate", "100", "--seed", "1", "--raw"])
+        .args([
+            "--frames", "0:599", "--hold-s", "1", "--rate", "100", "--seed", "1", "--raw",
+        ])
         .args(["--jitter-ms", &jitter_ms.to_string()])
         .arg("--output")
         .arg(&raw));
@@ -88,7 +90,10 @@ fn fuse_names_the_algorithm_and_its_expected_error_per_sensor() {
         .filter(|l| l.contains("offline 9d, rest "))
         .collect();
     assert_eq!(lines.len(), 16, "{stderr}");
-    assert!(lines.iter().all(|l| l.contains("°/s, expected error ")), "{stderr}");
+    assert!(
+        lines.iter().all(|l| l.contains("°/s, expected error ")),
+        "{stderr}"
+    );
 }
 
 /// `convert` says which algorithms fused how many sensors, and its sidecar has each sensor's.
@@ -108,7 +113,11 @@ fn convert_says_which_algorithms_fused_the_take() {
         .arg(&out_dir)
         .args(["--format", "bvh", "--json"]));
     let sidecar: Value = serde_json::from_slice(&out.stdout).unwrap();
-    let sidecar = if sidecar.is_array() { &sidecar[0] } else { &sidecar };
+    let sidecar = if sidecar.is_array() {
+        &sidecar[0]
+    } else {
+        &sidecar
+    };
     let fusion = &sidecar["pipeline"]["fusion"];
     assert_eq!(fusion["method"], "offline");
     for (id, s) in fusion["sensors"].as_object().unwrap() {

@@ -102,7 +102,11 @@ fn the_expected_error_ranks_the_measured_errors() {
             score(cell, "pypi_offline", 2),
             cell["expected_deg"]
         );
-        assert!(body < v_body, "{}: {body:.3}° vs {v_body:.3}°", cell["take"]);
+        assert!(
+            body < v_body,
+            "{}: {body:.3}° vs {v_body:.3}°",
+            cell["take"]
+        );
     }
     let summary = &result["summary"];
     for key in ["spearman_expected_vs_body", "spearman_expected_vs_since"] {
