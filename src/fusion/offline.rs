@@ -848,19 +848,24 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_smoother_follows_the_trustworthy_measurements() {
-        // δ is 0.3 rad throughout; the measurements are exact at rest (first and last 100
-        // steps) and off by ±0.5 rad in motion: the smoothed heading stays near 0.3.
-        let steps = vec![
+    /// `n` steps of a still sensor without a field, 100 Hz.
+    fn still_steps(n: usize) -> Vec<Step> {
+        vec![
             Step {
                 gyr: Vector3::zeros(),
                 acc: Vector3::z(),
                 mag: None,
                 dt: 0.01
             };
-            1000
-        ];
+            n
+        ]
+    }
+
+    #[test]
+    fn the_smoother_follows_the_trustworthy_measurements() {
+        // δ is 0.3 rad throughout; the measurements are exact at rest (first and last 100
+        // steps) and off by ±0.5 rad in motion: the smoothed heading stays near 0.3.
+        let steps = still_steps(1000);
         let m: Vec<Option<(f64, f64)>> = (0..1000)
             .map(|i| {
                 if !(100..900).contains(&i) {
@@ -892,15 +897,7 @@ mod tests {
     /// Without measurements there is nothing to be unsure of: 0.
     #[test]
     fn the_smoothers_variance_is_the_riccati_steady_state() {
-        let steps = vec![
-            Step {
-                gyr: Vector3::zeros(),
-                acc: Vector3::z(),
-                mag: None,
-                dt: 0.01
-            };
-            4000
-        ];
+        let steps = still_steps(4000);
         let (q, r) = (1e-4, 0.05);
         let (_, var) = smooth_heading(&steps, 0.01, |_| Some((0.0, r)), q);
         let step_q = q * 0.01;

@@ -96,6 +96,39 @@ fn fuse_names_the_algorithm_and_its_expected_error_per_sensor() {
     );
 }
 
+/// A take that starts mid-walk (no pose, no rest anywhere) fuses: the unit check's "stillest"
+/// samples of a swinging thigh read 1.5 g, which is no reason to call them g.
+#[test]
+fn a_take_that_never_rests_is_not_taken_for_the_wrong_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(bvh) = shared("bvh/pymo_walk.bvh") else {
+        return;
+    };
+    let raw = dir.path().join("walking.csv");
+    run(Command::new(imubake_bin())
+        .arg("simulate")
+        .arg(&bvh)
+        .arg("--mapping")
+        .arg(common::fixture("mappings/pymo_16imu.json"))
+        .args([
+            "--frames",
+            "100:700",
+            "--hold-s",
+            "0",
+            "--blend-s",
+            "0",
+            "--rate",
+            "100",
+            "--raw",
+        ])
+        .arg("--output")
+        .arg(&raw));
+    let (json, _) = fuse_json(&raw, "offline", dir.path());
+    let sensors = json["sensors"].as_object().unwrap();
+    assert_eq!(sensors.len(), 16);
+    assert!(sensors.values().all(|s| s["rest_s"] == 0.0), "{json}");
+}
+
 /// `convert` says which algorithms fused how many sensors, and its sidecar has each sensor's.
 #[test]
 fn convert_says_which_algorithms_fused_the_take() {
@@ -104,15 +137,18 @@ fn convert_says_which_algorithms_fused_the_take() {
         return;
     };
     let out_dir = dir.path().join("out");
-    let out = run(Command::new(imubake_bin())
-        .arg("convert")
-        .arg(&raw)
-        .arg("--mapping")
-        .arg(common::fixture("mappings/pymo_16imu.json"))
-        .arg("-o")
-        .arg(&out_dir)
-        .args(["--format", "bvh", "--json"]));
-    let sidecar: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let convert = |extra: &[&str]| {
+        run(Command::new(imubake_bin())
+            .arg("convert")
+            .arg(&raw)
+            .arg("--mapping")
+            .arg(common::fixture("mappings/pymo_16imu.json"))
+            .arg("-o")
+            .arg(&out_dir)
+            .args(["--format", "bvh"])
+            .args(extra))
+    };
+    let sidecar: Value = serde_json::from_slice(&convert(&["--json"]).stdout).unwrap();
     let sidecar = if sidecar.is_array() {
         &sidecar[0]
     } else {
@@ -124,14 +160,7 @@ fn convert_says_which_algorithms_fused_the_take() {
         assert_eq!(s["algorithm"], "offline", "{id}");
         assert!(s["expected_error_deg"].as_f64().unwrap() < 2.0, "{id}");
     }
-    let out = run(Command::new(imubake_bin())
-        .arg("convert")
-        .arg(&raw)
-        .arg("--mapping")
-        .arg(common::fixture("mappings/pymo_16imu.json"))
-        .arg("-o")
-        .arg(&out_dir)
-        .args(["--format", "bvh"]));
+    let out = convert(&[]);
     let stdout = String::from_utf8(out.stdout).unwrap();
     assert!(stdout.contains("; fused offline 9d ×16)"), "{stdout}");
 }
