@@ -282,11 +282,18 @@ pub fn temp_path(path: &Path) -> PathBuf {
 }
 
 /// Writes a file atomically: readers see either the old file or the complete new one, never a
-/// partial one. The data is flushed to disk before the rename.
+/// partial one. The data is flushed to disk before the rename. A device or a pipe (`-o
+/// /dev/null`, a FIFO) is written straight into instead: a file renamed over it would replace it
+/// — `/dev/null` a regular file for every program after.
 pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut (dyn Write + Send)) -> io::Result<()>,
 ) -> io::Result<()> {
+    if fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        let mut out = io::BufWriter::new(fs::OpenOptions::new().write(true).open(path)?);
+        write(&mut out)?;
+        return out.flush();
+    }
     let tmp = temp_path(path);
     let file = {
         let mut temps = temps();
@@ -375,6 +382,31 @@ fn start_writeback(_file: &fs::File, _offset: u64, _len: u64) {}
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A FIFO (as `/dev/null`, not a regular file) is written into, not replaced: its read end,
+    /// opened first (without blocking, so a regression fails instead of hanging), gets the
+    /// bytes, and the path is still a FIFO after.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_pipe_is_written_into_not_replaced() {
+        use std::io::Read;
+        use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("pipe");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        let mut reader = fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(&fifo)
+            .unwrap();
+        write_atomic(&fifo, |w| w.write_all(b"hello")).unwrap();
+        let mut got = [0u8; 16];
+        let n = reader.read(&mut got).unwrap_or(0);
+        assert_eq!(&got[..n], b"hello");
+        assert!(fs::metadata(&fifo).unwrap().file_type().is_fifo());
+        assert!(!temp_path(&fifo).exists());
+    }
 
     #[test]
     fn a_large_write_starts_writeback_as_it_goes_and_lands_whole() {
