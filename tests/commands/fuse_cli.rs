@@ -9,23 +9,41 @@ use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
 
-/// 16 sensors of the pymo walk's first 5 s after a 1 s pose, 100 Hz, with `jitter_ms` of
-/// timing jitter.
-fn raw_take(dir: &Path, jitter_ms: f64) -> Option<std::path::PathBuf> {
+/// `simulate --raw` of the shared pymo walk's 16 sensors at 100 Hz into `dir/name` (`args`: the
+/// frames, the pose, the jitter).
+fn simulate_raw(dir: &Path, name: &str, args: &[&str]) -> Option<std::path::PathBuf> {
     let bvh = shared("bvh/pymo_walk.bvh")?;
-    let raw = dir.join(format!("raw_{jitter_ms}.csv"));
+    let raw = dir.join(name);
     run(Command::new(imubake_bin())
         .arg("simulate")
         .arg(&bvh)
         .arg("--mapping")
         .arg(common::fixture("mappings/pymo_16imu.json"))
-        .args([
-            "--frames", "0:599", "--hold-s", "1", "--rate", "100", "--seed", "1", "--raw",
-        ])
-        .args(["--jitter-ms", &jitter_ms.to_string()])
+        .args(["--rate", "100", "--raw"])
+        .args(args)
         .arg("--output")
         .arg(&raw));
     Some(raw)
+}
+
+/// 16 sensors of the pymo walk's first 5 s after a 1 s pose, 100 Hz, with `jitter_ms` of
+/// timing jitter.
+fn raw_take(dir: &Path, jitter_ms: f64) -> Option<std::path::PathBuf> {
+    let jitter = jitter_ms.to_string();
+    simulate_raw(
+        dir,
+        &format!("raw_{jitter_ms}.csv"),
+        &[
+            "--frames",
+            "0:599",
+            "--hold-s",
+            "1",
+            "--seed",
+            "1",
+            "--jitter-ms",
+            &jitter,
+        ],
+    )
 }
 
 fn fuse_json(raw: &Path, fusion: &str, dir: &Path) -> (Value, String) {
@@ -101,28 +119,13 @@ fn fuse_names_the_algorithm_and_its_expected_error_per_sensor() {
 #[test]
 fn a_take_that_never_rests_is_not_taken_for_the_wrong_units() {
     let dir = tempfile::tempdir().unwrap();
-    let Some(bvh) = shared("bvh/pymo_walk.bvh") else {
+    let Some(raw) = simulate_raw(
+        dir.path(),
+        "walking.csv",
+        &["--frames", "100:700", "--hold-s", "0", "--blend-s", "0"],
+    ) else {
         return;
     };
-    let raw = dir.path().join("walking.csv");
-    run(Command::new(imubake_bin())
-        .arg("simulate")
-        .arg(&bvh)
-        .arg("--mapping")
-        .arg(common::fixture("mappings/pymo_16imu.json"))
-        .args([
-            "--frames",
-            "100:700",
-            "--hold-s",
-            "0",
-            "--blend-s",
-            "0",
-            "--rate",
-            "100",
-            "--raw",
-        ])
-        .arg("--output")
-        .arg(&raw));
     let (json, _) = fuse_json(&raw, "offline", dir.path());
     let sensors = json["sensors"].as_object().unwrap();
     assert_eq!(sensors.len(), 16);
