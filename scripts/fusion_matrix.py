@@ -28,12 +28,14 @@ their orientations.
 The offline fusion's own expected error (`expected_error_deg` per sensor, from `fuse --json`) is
 averaged per cell and ranked against the cells' measured errors (Spearman, scipy).
 
-usage: fusion_matrix.py [--cells full|quick|ranking|heldout] [--seeds 1,2,3] [--out FILE.json]
+usage: fusion_matrix.py [--cells full|quick|ranking|heldout|norest] [--seeds 1,2,3] [--out FILE.json]
                         [--bin IMUBAKE] [--data SHARED_DATA] [--heldout FILE.bvh=MAPPING,...]
 `quick` is two cells and `ranking` twelve short ones (CI); `full` is issue 51's matrix (lengths,
 rests, biases, rates, jitter; 216 cells) and takes about 45 minutes on two cores with three
 seeds. `heldout` runs each `--heldout` take whole (after its first frame) in four cells: a
-check on takes the fusion was not tuned on. The JSON has each cell (`offline`, `vqf`, `pypi_offline`, `truth`: [abs, since, body]
+check on takes the fusion was not tuned on. `norest` runs each source without a pose (the motion
+from the first sample) at 100 Hz for each bias, scored per sensor only (`since` is then since
+the first sample): nothing to calibrate the body on. The JSON has each cell (`offline`, `vqf`, `pypi_offline`, `truth`: [abs, since, body]
 degrees; `expected_deg`; each seed's sensors) and a `summary`.
 """
 import argparse
@@ -139,6 +141,9 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
     common = [bvh, "--mapping", os.path.join(repo, mapping), "--rig", bvh, "--frames", frames,
               "--hold-s", str(rest_s), "--rate", str(rate_hz), "--jitter-ms", str(jitter_ms),
               "--seed", str(seed)]
+    if rest_s == 0:
+        # No pose: the motion from the first sample (no blend from the zero pose either).
+        common += ["--blend-s", "0"]
     raw, ori, info_path = (os.path.join(work, n) for n in ("raw.csv", "truth.csv", "truth.json"))
     run([binary, "simulate", *common, "--raw", "--gyro-bias-sd-dps", str(bias_dps), "--output", raw,
          "--truth", info_path])
@@ -192,10 +197,14 @@ def cell(binary, repo, bvh, mapping, frames, rest_s, bias_dps, rate_hz, jitter_m
     pypi = os.path.join(work, "pypi_offline.csv")
     write_orientations(pypi, sorted(pypi_rows, key=lambda r: r[0]))
     per_sensor = {name: np.mean(np.array(v), axis=0).tolist() for name, v in result.items()}
-    body = {"offline": convert(raw, "offline"),
-            "vqf": convert(os.path.join(work, "vqf.csv"), "vqf"),
-            "pypi_offline": convert(pypi, "pypi_offline"),
-            "truth": convert(ori, "truth")}
+    if rest_s == 0:
+        # Without a pose there is nothing to calibrate on: per sensor only.
+        body = {k: float("nan") for k in ("offline", "vqf", "pypi_offline", "truth")}
+    else:
+        body = {"offline": convert(raw, "offline"),
+                "vqf": convert(os.path.join(work, "vqf.csv"), "vqf"),
+                "pypi_offline": convert(pypi, "pypi_offline"),
+                "truth": convert(ori, "truth")}
     return {**{k: v + [body[k]] for k, v in per_sensor.items()}, "truth": [0.0, 0.0, body["truth"]],
             "sensors": sensors}
 
@@ -217,6 +226,10 @@ def matrix(kind, heldout=()):
     if kind == "quick":
         return [("CMU 01_01 10 s", "cmu_01_01.bvh", MAPPING, "1:1200", 1.5, 0.5, 100, 1.0),
                 ("pymo walk 5 s", "pymo_walk.bvh", PYMO_MAPPING, "0:599", 0.5, 2.0, 60, 0.0)]
+    if kind == "norest":
+        # Takes that never rest: each source at 100 Hz, evenly sampled, each bias SD.
+        return [(label, bvh, mapping, f"{1 if bvh.startswith('cmu') else 0}:{(1 if bvh.startswith('cmu') else 0) + n - 1}",
+                 0.0, bias, 100, 0.0) for (label, bvh, mapping, n), bias in itertools.product(sources, (0.0, 0.5, 2.0))]
     if kind == "heldout":
         cells = []
         for bvh, mapping in heldout:
@@ -248,7 +261,7 @@ def matrix(kind, heldout=()):
 def main():
     here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     parser = argparse.ArgumentParser()
-    parser.add_argument("--cells", choices=("full", "quick", "ranking", "heldout"), default="full")
+    parser.add_argument("--cells", choices=("full", "quick", "ranking", "heldout", "norest"), default="full")
     parser.add_argument("--heldout", default="", help="FILE.bvh=MAPPING.json,...")
     parser.add_argument("--out")
     parser.add_argument("--bin", default=os.path.join(here, "target/release/imubake"))
@@ -287,6 +300,13 @@ def summarize(rows):
     names = ("offline", "vqf", "pypi_offline", "truth")
     body, pypi, vqf = col("offline", 2), col("pypi_offline", 2), col("vqf", 2)
     expected = np.array([r["expected_deg"] for r in rows])
+    if np.isnan(body).all():
+        # No pose (`norest`): per sensor only.
+        return {"cells": len(rows),
+                "mean": {n: {k: float(np.mean(col(n, i))) for i, k in enumerate(("abs", "since"))}
+                         for n in names},
+                "behind_pypi_offline_abs": int(np.sum(col("offline", 0) > col("pypi_offline", 0) + 0.05)),
+                "mean_expected_deg": float(np.mean(expected))}
     out = {"cells": len(rows),
            "mean": {n: {k: float(np.mean(col(n, i))) for i, k in enumerate(("abs", "since", "body"))}
                     for n in names},

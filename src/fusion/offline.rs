@@ -21,8 +21,9 @@
 //!    of centripetal acceleration for seconds, which a 3 s one-sided filter takes for ~3° of tilt.
 //!    But the strapdown frame is only almost inertial: where uneven sample times leave a random
 //!    walk `q` of unknown rotation ([`timing_wander`]), a window `τ` lets `q·τ/3` of it through
-//!    while the body's velocity leaves `(V/(g·τ))²` ([`BODY_SPEED`]); the window is the one that
-//!    balances them, `τ = ∛(6 (V/g)² / q)`, when that is shorter than `tau_acc`.
+//!    while each change of the body's velocity leaves a tilt `V/(g·τ)` for about `τ`
+//!    ([`BODY_SPEED`]); the window is the one that balances them ([`inclination_window`]) when
+//!    that is shorter than `tau_acc`.
 //!    Each sample is then turned so its averaged specific force points up (`q₆`).
 //! 4. **Heading, smoothed.** The field's heading in that frame, `zᵢ = atan2(mᴱₓ, mᴱᵧ)`, measures
 //!    the heading offset `δ` up to the magnetometer's own errors, which are small at rest and
@@ -462,15 +463,9 @@ pub fn fuse_offline(
     };
 
     let duration: f64 = steps.iter().skip(1).map(|s| s.dt).sum();
-    let wander = timing_wander(steps, ts);
+    let wander = timing_wander(steps, duration, ts);
     let bias_var = bias_variance.iter().sum::<f64>() / n.max(1) as f64;
-    let tau_acc = if wander > 0.0 {
-        params
-            .tau_acc
-            .min((6.0 * (BODY_SPEED / G).powi(2) / wander).cbrt())
-    } else {
-        params.tau_acc
-    };
+    let tau_acc = inclination_window(params.tau_acc, wander, duration);
     let window = tau_acc.min(duration);
     let tilt_var = bias_var * window * window + wander * window / 3.0;
 
@@ -685,6 +680,32 @@ fn wrap(a: f64) -> f64 {
     }
 }
 
+/// The inclination average's time constant, seconds: `tau_acc` (the longest), shortened where
+/// the strapdown frame wanders (`wander`, rad²/s, [`timing_wander`]) to the window that balances
+/// the wander it lets through against the body's acceleration it leaves.
+///
+/// A window `τ` lets `q·τ/3` rad² of the wander through (the mean square of a random walk's
+/// departure from its own centred mean). A velocity change `V` ([`BODY_SPEED`]) leaves a tilt of
+/// `V/(g·τ)` for about `τ` seconds; the take has at least one (the move out of the opening pose)
+/// and one per `tau_acc` in a longer take, so over `L = min(duration, tau_acc)` its mean square
+/// is `(V/(g·τ))² · τ/L` for `τ < L`. The sum is least at `τ = (V/g)·√(3/(q·L))`; where that is
+/// not under `L` the change covers the whole window, `(V/(g·τ))² + q·τ/3`, least at
+/// `τ = ∛(6 (V/g)²/q)`.
+fn inclination_window(tau_acc: f64, wander: f64, duration: f64) -> f64 {
+    if wander <= 0.0 {
+        return tau_acc;
+    }
+    let v = BODY_SPEED / G;
+    let between_changes = duration.min(tau_acc);
+    let within = v * (3.0 / (wander * between_changes)).sqrt();
+    let tau = if within < between_changes {
+        within
+    } else {
+        (6.0 * v * v / wander).cbrt()
+    };
+    tau.min(tau_acc)
+}
+
 /// What the samples' timing leaves unknown of the rotation into `step` from `prev`, rad²: a gyro
 /// reads its rate over its own sampling period `T` before each sample, so where the samples'
 /// spacing `Δt` differs from it the rotation between them is partly unknown — about
@@ -703,9 +724,8 @@ fn timing_unknown(prev: &Step, step: &Step, ts: f64) -> f64 {
 }
 
 /// The take's [`timing_unknown`] steps as the rate of a random walk, rad²/s: their sum over the
-/// take's length.
-fn timing_wander(steps: &[Step], ts: f64) -> f64 {
-    let duration: f64 = steps.iter().skip(1).map(|s| s.dt).sum();
+/// take's length (`duration`, seconds).
+fn timing_wander(steps: &[Step], duration: f64, ts: f64) -> f64 {
     if duration <= 0.0 {
         return 0.0;
     }
@@ -1082,12 +1102,26 @@ mod tests {
             dt,
         };
         let even: Vec<Step> = (0..101).map(|i| step(i, 0.01)).collect();
-        assert_eq!(timing_wander(&even, 0.01), 0.0);
+        assert_eq!(timing_wander(&even, 1.0, 0.01), 0.0);
         let uneven: Vec<Step> = (0..101)
             .map(|i| step(i, if i % 2 == 0 { 0.012 } else { 0.008 }))
             .collect();
-        let wander = timing_wander(&uneven, 0.01);
+        let wander = timing_wander(&uneven, 1.0, 0.01);
         assert!((wander - 100.0 * 4e-6 / 1.0).abs() < 1e-12, "{wander}");
+    }
+
+    /// Hand calculation (V/g = 1/9.80665 = 0.10197 s): with `q` = 1.2e-4 rad²/s a 20 s take
+    /// balances over 10 s, `0.10197·√(3/(1.2e-4·10))` = 5.099 s, and so does a 10 s one; a 5 s
+    /// take over its 5 s, 7.21 s — not under 5, so the cube root, `∛(6·0.10197²/1.2e-4)` =
+    /// 8.041 s; a steadier frame keeps 10 s, and even samples (`q` = 0) always do.
+    #[test]
+    fn the_inclination_window_balances_wander_against_velocity_changes() {
+        let close = |a: f64, b: f64| (a - b).abs() < 2e-3;
+        assert!(close(inclination_window(10.0, 1.2e-4, 20.0), 5.099));
+        assert!(close(inclination_window(10.0, 1.2e-4, 10.0), 5.099));
+        assert!(close(inclination_window(10.0, 1.2e-4, 5.0), 8.041));
+        assert_eq!(inclination_window(10.0, 1e-6, 20.0), 10.0);
+        assert_eq!(inclination_window(10.0, 0.0, 20.0), 10.0);
     }
 
     #[test]
