@@ -35,8 +35,9 @@ rests, biases, rates, jitter; 216 cells) and takes about 45 minutes on two cores
 seeds. `heldout` runs each `--heldout` take whole (after its first frame) in four cells: a
 check on takes the fusion was not tuned on. `norest` runs each source without a pose (the motion
 from the first sample) at 100 Hz for each bias, scored per sensor only (`since` is then since
-the first sample): nothing to calibrate the body on. The JSON has each cell (`offline`, `vqf`, `pypi_offline`, `truth`: [abs, since, body]
-degrees; `expected_deg`; each seed's sensors) and a `summary`.
+the first sample): nothing to calibrate the body on. The JSON has each cell (`offline`, `vqf`,
+`pypi_offline`, `truth`: [abs, since, body] degrees; `expected_deg`; each seed's sensors) and a
+`summary`.
 """
 import argparse
 import itertools
@@ -228,8 +229,11 @@ def matrix(kind, heldout=()):
                 ("pymo walk 5 s", "pymo_walk.bvh", PYMO_MAPPING, "0:599", 0.5, 2.0, 60, 0.0)]
     if kind == "norest":
         # Takes that never rest: each source at 100 Hz, evenly sampled, each bias SD.
-        return [(label, bvh, mapping, f"{1 if bvh.startswith('cmu') else 0}:{(1 if bvh.startswith('cmu') else 0) + n - 1}",
-                 0.0, bias, 100, 0.0) for (label, bvh, mapping, n), bias in itertools.product(sources, (0.0, 0.5, 2.0))]
+        cells = []
+        for (label, bvh, mapping, n), bias in itertools.product(sources, (0.0, 0.5, 2.0)):
+            first = 1 if bvh.startswith("cmu") else 0
+            cells.append((label, bvh, mapping, f"{first}:{first + n - 1}", 0.0, bias, 100, 0.0))
+        return cells
     if kind == "heldout":
         cells = []
         for bvh, mapping in heldout:
