@@ -945,10 +945,11 @@ mod tests {
     /// then turning about the vertical at a rate that swings by 10 rad/s between samples spaced
     /// 8, 12, 10, 8, … ms (the median period 10 ms), leaves `(10 · 0.002)²` rad² unknown on two
     /// steps in three: over the 900 steps of the turn in a 10 s take, `q` = 600 · 4·10⁻⁴ / 10 =
-    /// 0.024 rad²/s. The inclination average shortens to `τ = ∛(6 (1 / 9.80665)² / 0.024)` =
-    /// 1.375 s and lets `q·τ/3` through; without a field nothing corrects the heading, `q·L/2`:
-    /// in all `√(0.024 · (1.375/3 + 10/2))` = 0.362 rad = 20.7° (the bias, from the still second,
-    /// adds a hundredth of a degree). Evenly spaced, the same sensor expects under a degree.
+    /// 0.024 rad²/s. The inclination average shortens to `τ = (1 / 9.80665)·√(3 / (0.024 · 10))`
+    /// = 0.3605 s and lets `q·τ/3` through; without a field nothing corrects the heading, `q·L/2`:
+    /// in all `√(0.024 · (0.3605/3 + 10/2))` = 0.3506 rad = 20.09° (the bias, from the still
+    /// second, adds a hundredth of a degree). Evenly spaced, the same sensor expects under a
+    /// degree.
     #[test]
     fn the_offline_fusion_names_itself_and_warns_of_a_large_expected_error() {
         let track = |uneven: bool| {
@@ -987,7 +988,7 @@ mod tests {
         assert_eq!(uneven.stats.algorithm, "offline");
         let expected = uneven.stats.expected_error_deg.unwrap();
         let q = 0.024f64;
-        let tau = (6.0 * (1.0 / 9.80665f64).powi(2) / q).cbrt();
+        let tau = (1.0 / 9.80665f64) * (3.0 / (q * 10.0)).sqrt();
         let by_hand = (q * (tau / 3.0 + 10.0 / 2.0)).sqrt().to_degrees();
         assert!((expected - by_hand).abs() < 0.3, "{expected} vs {by_hand}");
         assert!(

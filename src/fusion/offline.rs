@@ -30,16 +30,17 @@
 //!    large in motion (calibration that depends on orientation, fields that are not uniform) and
 //!    unbounded in a disturbance — found with hindsight: a field whose norm or dip is off the
 //!    take's median by more than 10 % or 10° ([`DISTURBED_NORM`], [`DISTURBED_DIP_DEG`]) is left
-//!    out, however long. `δ` is a random walk (what bias is left drives it, `drift` °/√s, and
-//!    what uneven sample times leave unknown of fast turns, [`timing_unknown`]) seen through those
-//!    measurements — σ = `rest_deg` at rest, `motion_deg` in motion — and estimated
-//!    by a Kalman filter forward and a Rauch–Tung–Striebel pass backward: the heading leans on the
-//!    field where the field is trustworthy and on the gyro between. `q₉ = R_z(δ) ⊗ q₆`.
+//!    out, however long. `δ` drifts at a rate `β` (the bias left over about the vertical, prior
+//!    variance the bias's own) plus a random walk (`drift` °/√s, and what uneven sample times
+//!    leave unknown of fast turns, [`timing_unknown`]), seen through those measurements — σ =
+//!    `rest_deg` at rest, `motion_deg` in motion — and `[δ, β]` is estimated by a Kalman filter
+//!    forward and a Rauch–Tung–Striebel pass backward ([`smooth_heading`]): the heading leans on
+//!    the field where the field is trustworthy and on the gyro between. `q₉ = R_z(δ) ⊗ q₆`.
 //!
 //! Measured on BROAD and on simulated bodies (docs, "Accuracy"); every step is in this file.
 
 use crate::smooth::butterworth::{design_lowpass_sos, lane_state, sosfilt_step_lanes, sosfilt_zi};
-use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{Matrix2, Matrix3, Quaternion, UnitQuaternion, Vector2, Vector3};
 use vqf_rs::{Params, VQF};
 
 /// One step of the take: readings (sensor frame) and the time since the previous step.
@@ -543,7 +544,8 @@ pub fn fuse_offline(
         Some((f.heading, if rest[i] { rest_var } else { motion_var }))
     };
     let drift = params.drift.to_radians().powi(2);
-    let (delta, delta_var) = smooth_heading(steps, ts, measurement, drift);
+    // The bias left over turns the heading at a rate: its vertical part, one axis's variance.
+    let (delta, delta_var) = smooth_heading(steps, ts, measurement, drift, bias_var);
     let heading_var = delta_var.iter().sum::<f64>() / n.max(1) as f64;
     drop(fields);
     // q₉ in place of q₆.
@@ -736,47 +738,81 @@ fn timing_wander(steps: &[Step], duration: f64, ts: f64) -> f64 {
         / duration
 }
 
-/// A scalar random walk `δ` (process noise `drift · Δt` and each step's [`timing_unknown`],
-/// `ts` the sampling period) over the steps, seen through angle
-/// measurements with variances (`measurement(i)`: step i's, if it has one): a Kalman filter
-/// forward, a Rauch–Tung–Striebel pass backward; innovations wrapped. Before the first
-/// measurement the estimate is its value; without any, 0. With each step's smoothed variance,
-/// `Pₛ,ᵢ = Pᵢ + Cᵢ² (Pₛ,ᵢ₊₁ − P⁻ᵢ₊₁)` (`Cᵢ = Pᵢ / P⁻ᵢ₊₁`); without measurements, 0.
+/// `P⁻¹` of a covariance, or where the rate is known exactly (`rate_var` = 0: its row and
+/// column stay 0) the scalar walk's `1/P₁₁` — its pseudo-inverse; 0 where nothing is uncertain.
+fn pseudo_inverse(p: &Matrix2<f64>) -> Matrix2<f64> {
+    if p.m22 > 0.0
+        && let Some(inv) = p.try_inverse()
+    {
+        return inv;
+    }
+    if p.m11 > 0.0 {
+        Matrix2::new(1.0 / p.m11, 0.0, 0.0, 0.0)
+    } else {
+        Matrix2::zeros()
+    }
+}
+
+/// The heading offset `δ` over the steps, seen through angle measurements with variances
+/// (`measurement(i)`: step i's, if it has one), estimated with the rate `β` it drifts at by what
+/// is left of the gyro bias about the vertical: `δᵢ = δᵢ₋₁ + β·Δtᵢ + wᵢ`, `β` constant with prior
+/// `N(0, rate_var)` (rad/s)² and `w` a random walk (`drift · Δt` and each step's
+/// [`timing_unknown`], `ts` the sampling period). A Kalman filter forward on `x = [δ, β]`
+/// (`F = [[1, Δt], [0, 1]]`, innovations wrapped), a Rauch–Tung–Striebel pass backward,
+/// `xₛ,ᵢ = xᵢ + Cᵢ (xₛ,ᵢ₊₁ − F xᵢ)`, `Pₛ,ᵢ = Pᵢ + Cᵢ (Pₛ,ᵢ₊₁ − P⁻ᵢ₊₁) Cᵢᵀ`, `Cᵢ = Pᵢ Fᵀ (P⁻ᵢ₊₁)⁻¹`.
+/// With `rate_var` = 0 it is the scalar walk. A rate matters where the bias came from motion:
+/// a take without rest leaves ~0.3 °/s, 6° in 20 s, which the field at 20° per sample in motion
+/// pins down over the take where a walk of 0.02 °/√s would not follow it. Before the first
+/// measurement the estimate is its value; without any, 0. Returns the smoothed `δ` and its
+/// variance (without measurements, 0).
 fn smooth_heading(
     steps: &[Step],
     ts: f64,
     measurement: impl Fn(usize) -> Option<(f64, f64)>,
     drift: f64,
+    rate_var: f64,
 ) -> (Vec<f64>, Vec<f64>) {
     let n = steps.len();
     let Some(first) = (0..n).find_map(&measurement) else {
         return (vec![0.0; n], vec![0.0; n]);
     };
-    let (mut x, mut p) = (first.0, first.1);
+    let transition = |dt: f64| Matrix2::new(1.0, dt, 0.0, 1.0);
+    let mut x = Vector2::new(first.0, 0.0);
+    let mut p = Matrix2::new(first.1, 0.0, 0.0, rate_var);
+    // Per step: the filtered state and covariance, and the covariance predicted into it.
     let mut filtered = Vec::with_capacity(n);
-    let mut predicted_p = Vec::with_capacity(n);
+    let mut predicted = Vec::with_capacity(n);
     for (i, step) in steps.iter().enumerate() {
-        let m = measurement(i);
         if i > 0 {
-            p += drift * step.dt + timing_unknown(&steps[i - 1], step, ts);
+            let f = transition(step.dt);
+            x = f * x;
+            x.x = wrap(x.x);
+            p = f * p * f.transpose();
+            p.m11 += drift * step.dt + timing_unknown(&steps[i - 1], step, ts);
         }
-        predicted_p.push(p);
-        if let Some((z, r)) = m {
-            let k = p / (p + r);
-            x = wrap(x + k * wrap(z - x));
-            p *= 1.0 - k;
+        predicted.push(p);
+        if let Some((z, r)) = measurement(i) {
+            let k = p.column(0) / (p.m11 + r);
+            x += k * wrap(z - x.x);
+            x.x = wrap(x.x);
+            p -= k * p.row(0);
         }
         filtered.push((x, p));
     }
     let mut smoothed = vec![0.0; n];
     let mut variance = vec![0.0; n];
-    (smoothed[n - 1], variance[n - 1]) = filtered[n - 1];
+    let (mut xs, mut ps) = filtered[n - 1];
+    (smoothed[n - 1], variance[n - 1]) = (xs.x, ps.m11);
     for i in (0..n - 1).rev() {
-        let (x, p) = filtered[i];
-        // The prediction for i + 1 is x itself (a random walk).
-        let c = p / predicted_p[i + 1];
-        smoothed[i] = wrap(x + c * wrap(smoothed[i + 1] - x));
-        variance[i] = p + c * c * (variance[i + 1] - predicted_p[i + 1]);
+        let (xf, pf) = filtered[i];
+        let f = transition(steps[i + 1].dt);
+        let c = pf * f.transpose() * pseudo_inverse(&predicted[i + 1]);
+        let mut ahead = xs - f * xf;
+        ahead.x = wrap(ahead.x);
+        xs = xf + c * ahead;
+        xs.x = wrap(xs.x);
+        ps = pf + c * (ps - predicted[i + 1]) * c.transpose();
+        (smoothed[i], variance[i]) = (xs.x, ps.m11);
     }
     (smoothed, variance)
 }
@@ -896,7 +932,7 @@ mod tests {
                 }
             })
             .collect();
-        let (d, _) = smooth_heading(&steps, 0.01, |i| m[i], 0.02f64.to_radians().powi(2));
+        let (d, _) = smooth_heading(&steps, 0.01, |i| m[i], 0.02f64.to_radians().powi(2), 0.0);
         assert!(
             d.iter().all(|x| (x - 0.3).abs() < 0.01),
             "{:?}",
@@ -906,8 +942,38 @@ mod tests {
         let m: Vec<Option<(f64, f64)>> = (0..1000)
             .map(|i| Some((if i % 2 == 0 { 3.1 } else { -3.1 }, 0.01)))
             .collect();
-        let (d, _) = smooth_heading(&steps, 0.01, |i| m[i], 1e-6);
+        let (d, _) = smooth_heading(&steps, 0.01, |i| m[i], 1e-6, 0.0);
         assert!(d.iter().all(|x| x.abs() > 3.0), "{:?}", &d[..4]);
+    }
+
+    /// A heading drifting at 0.5 °/s for 20 s (what a bias left over by 0.5 °/s about the
+    /// vertical does), seen at 100 Hz through a field 20° off either way in turn (σ in motion).
+    /// As a walk of 0.02 °/√s alone the smoother holds nearly one value, and a flat line misses
+    /// a ramp of 10° by `10/√12` = 2.9° RMS; with the rate (prior 0.3 °/s) it follows the ramp.
+    #[test]
+    fn the_smoother_follows_a_heading_that_drifts_at_a_rate() {
+        let steps = still_steps(2000);
+        let truth = |i: usize| (0.5 * i as f64 * 0.01).to_radians();
+        let r = 20f64.to_radians().powi(2);
+        let m: Vec<Option<(f64, f64)>> = (0..2000)
+            .map(|i| {
+                let off = if i % 2 == 0 { 20.0 } else { -20.0 };
+                Some((truth(i) + f64::to_radians(off), r))
+            })
+            .collect();
+        let drift = 0.02f64.to_radians().powi(2);
+        let rms = |d: &[f64]| {
+            let sum: f64 = d
+                .iter()
+                .enumerate()
+                .map(|(i, x)| (x - truth(i)).powi(2))
+                .sum();
+            (sum / d.len() as f64).sqrt().to_degrees()
+        };
+        let (walk, _) = smooth_heading(&steps, 0.01, |i| m[i], drift, 0.0);
+        let (rate, _) = smooth_heading(&steps, 0.01, |i| m[i], drift, 0.3f64.to_radians().powi(2));
+        assert!(rms(&walk) > 2.5, "{}", rms(&walk));
+        assert!(rms(&rate) < 0.5, "{}", rms(&rate));
     }
 
     /// The smoothed variance against the scalar Riccati equation's steady state: a walk of `Q`
@@ -919,7 +985,7 @@ mod tests {
     fn the_smoothers_variance_is_the_riccati_steady_state() {
         let steps = still_steps(4000);
         let (q, r) = (1e-4, 0.05);
-        let (_, var) = smooth_heading(&steps, 0.01, |_| Some((0.0, r)), q);
+        let (_, var) = smooth_heading(&steps, 0.01, |_| Some((0.0, r)), q, 0.0);
         let step_q = q * 0.01;
         let p = (-step_q + (step_q * step_q + 4.0 * step_q * r).sqrt()) / 2.0;
         let p_pred = p + step_q;
@@ -932,7 +998,7 @@ mod tests {
         );
         assert!((var[3999] / p - 1.0).abs() < 1e-6, "{} vs {p}", var[3999]);
         assert!(var[3999] > var[2000]);
-        let (_, none) = smooth_heading(&steps, 0.01, |_| None, q);
+        let (_, none) = smooth_heading(&steps, 0.01, |_| None, q, 0.0);
         assert!(none.iter().all(|v| *v == 0.0));
         // One step 5 ms late while the rate changes by 2 rad/s leaves (2 · 0.005)² rad²
         // unknown there: without measurements after it, the last variance is the steady one
@@ -940,7 +1006,7 @@ mod tests {
         let mut late = steps.clone();
         late[3990].dt = 0.015;
         late[3990].gyr = Vector3::new(2.0, 0.0, 0.0);
-        let (_, var) = smooth_heading(&late, 0.01, |i| (i < 3990).then_some((0.0, r)), q);
+        let (_, var) = smooth_heading(&late, 0.01, |i| (i < 3990).then_some((0.0, r)), q, 0.0);
         let unknown = (2.0f64 * 0.005).powi(2);
         let by_hand = p + 10.0 * step_q + 0.005 * q + unknown;
         assert!(
