@@ -40,7 +40,7 @@
 //! Measured on BROAD and on simulated bodies (docs, "Accuracy"); every step is in this file.
 
 use crate::smooth::butterworth::{design_lowpass_sos, lane_state, sosfilt_step_lanes, sosfilt_zi};
-use nalgebra::{Matrix2, Matrix3, Quaternion, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use vqf_rs::{Params, VQF};
 
 /// One step of the take: readings (sensor frame) and the time since the previous step.
@@ -738,18 +738,44 @@ fn timing_wander(steps: &[Step], duration: f64, ts: f64) -> f64 {
         / duration
 }
 
-/// `P⁻¹` of a covariance, or where the rate is known exactly (`rate_var` = 0: its row and
-/// column stay 0) the scalar walk's `1/P₁₁` — its pseudo-inverse; 0 where nothing is uncertain.
-fn pseudo_inverse(p: &Matrix2<f64>) -> Matrix2<f64> {
-    if p.m22 > 0.0
-        && let Some(inv) = p.try_inverse()
-    {
-        return inv;
+/// A symmetric 2 × 2 covariance `[[a, c], [c, e]]` of `[δ, β]`.
+#[derive(Debug, Clone, Copy)]
+struct Cov2 {
+    a: f64,
+    c: f64,
+    e: f64,
+}
+
+impl Cov2 {
+    /// `F P Fᵀ` for `F = [[1, Δt], [0, 1]]`.
+    fn predicted(self, dt: f64) -> Cov2 {
+        Cov2 {
+            a: self.a + dt * (2.0 * self.c + dt * self.e),
+            c: self.c + dt * self.e,
+            e: self.e,
+        }
     }
-    if p.m11 > 0.0 {
-        Matrix2::new(1.0 / p.m11, 0.0, 0.0, 0.0)
-    } else {
-        Matrix2::zeros()
+
+    /// The RTS gain `C = P Fᵀ (P⁻)⁻¹` into a step `dt` later whose predicted covariance is
+    /// `next`; where the rate is known exactly (`rate_var` = 0: its row and column stay 0) the
+    /// pseudo-inverse, `1/P⁻₁₁` — the scalar walk's gain; 0 where nothing is uncertain.
+    fn gain(self, dt: f64, next: Cov2) -> [[f64; 2]; 2] {
+        // P Fᵀ = [[a + c Δt, c], [c + e Δt, e]].
+        let pf = [
+            [self.a + self.c * dt, self.c],
+            [self.c + self.e * dt, self.e],
+        ];
+        let det = next.a * next.e - next.c * next.c;
+        let inv = if next.e > 0.0 && det > 0.0 {
+            [[next.e / det, -next.c / det], [-next.c / det, next.a / det]]
+        } else if next.a > 0.0 {
+            [[1.0 / next.a, 0.0], [0.0, 0.0]]
+        } else {
+            [[0.0; 2]; 2]
+        };
+        std::array::from_fn(|r| {
+            std::array::from_fn(|k| pf[r][0] * inv[0][k] + pf[r][1] * inv[1][k])
+        })
     }
 }
 
@@ -776,43 +802,61 @@ fn smooth_heading(
     let Some(first) = (0..n).find_map(&measurement) else {
         return (vec![0.0; n], vec![0.0; n]);
     };
-    let transition = |dt: f64| Matrix2::new(1.0, dt, 0.0, 1.0);
-    let mut x = Vector2::new(first.0, 0.0);
-    let mut p = Matrix2::new(first.1, 0.0, 0.0, rate_var);
+    let (mut delta, mut rate) = (first.0, 0.0);
+    let mut p = Cov2 {
+        a: first.1,
+        c: 0.0,
+        e: rate_var,
+    };
     // Per step: the filtered state and covariance, and the covariance predicted into it.
     let mut filtered = Vec::with_capacity(n);
     let mut predicted = Vec::with_capacity(n);
     for (i, step) in steps.iter().enumerate() {
         if i > 0 {
-            let f = transition(step.dt);
-            x = f * x;
-            x.x = wrap(x.x);
-            p = f * p * f.transpose();
-            p.m11 += drift * step.dt + timing_unknown(&steps[i - 1], step, ts);
+            delta = wrap(delta + rate * step.dt);
+            p = p.predicted(step.dt);
+            p.a += drift * step.dt + timing_unknown(&steps[i - 1], step, ts);
         }
         predicted.push(p);
         if let Some((z, r)) = measurement(i) {
-            let k = p.column(0) / (p.m11 + r);
-            x += k * wrap(z - x.x);
-            x.x = wrap(x.x);
-            p -= k * p.row(0);
+            // K = P Hᵀ / (H P Hᵀ + r), H = [1, 0]; P ← P − K H P.
+            let (k1, k2) = (p.a / (p.a + r), p.c / (p.a + r));
+            let innovation = wrap(z - delta);
+            delta = wrap(delta + k1 * innovation);
+            rate += k2 * innovation;
+            p = Cov2 {
+                a: p.a - k1 * p.a,
+                c: p.c - k1 * p.c,
+                e: p.e - k2 * p.c,
+            };
         }
-        filtered.push((x, p));
+        filtered.push(([delta, rate], p));
     }
     let mut smoothed = vec![0.0; n];
     let mut variance = vec![0.0; n];
-    let (mut xs, mut ps) = filtered[n - 1];
-    (smoothed[n - 1], variance[n - 1]) = (xs.x, ps.m11);
+    let ([mut ds, mut bs], mut ps) = filtered[n - 1];
+    (smoothed[n - 1], variance[n - 1]) = (ds, ps.a);
     for i in (0..n - 1).rev() {
-        let (xf, pf) = filtered[i];
-        let f = transition(steps[i + 1].dt);
-        let c = pf * f.transpose() * pseudo_inverse(&predicted[i + 1]);
-        let mut ahead = xs - f * xf;
-        ahead.x = wrap(ahead.x);
-        xs = xf + c * ahead;
-        xs.x = wrap(xs.x);
-        ps = pf + c * (ps - predicted[i + 1]) * c.transpose();
-        (smoothed[i], variance[i]) = (xs.x, ps.m11);
+        let ([d, b], pf) = filtered[i];
+        let dt = steps[i + 1].dt;
+        let next = predicted[i + 1];
+        let g = pf.gain(dt, next);
+        // xₛ = x + C (xₛ₊₁ − F x), Pₛ = P + C (Pₛ₊₁ − P⁻₊₁) Cᵀ.
+        let ahead = [wrap(ds - (d + b * dt)), bs - b];
+        ds = wrap(d + g[0][0] * ahead[0] + g[0][1] * ahead[1]);
+        bs = b + g[1][0] * ahead[0] + g[1][1] * ahead[1];
+        let m = [
+            [ps.a - next.a, ps.c - next.c],
+            [ps.c - next.c, ps.e - next.e],
+        ];
+        let gm = |r: usize, k: usize| g[r][0] * m[0][k] + g[r][1] * m[1][k];
+        let gmg = |r: usize, k: usize| gm(r, 0) * g[k][0] + gm(r, 1) * g[k][1];
+        ps = Cov2 {
+            a: pf.a + gmg(0, 0),
+            c: pf.c + gmg(0, 1),
+            e: pf.e + gmg(1, 1),
+        };
+        (smoothed[i], variance[i]) = (ds, ps.a);
     }
     (smoothed, variance)
 }
