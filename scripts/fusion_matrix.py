@@ -294,7 +294,18 @@ def main():
     print(json.dumps(summary, indent=1))
     if args.out:
         with open(args.out, "w") as f:
-            json.dump({"cells": results, "summary": summary}, f, indent=1)
+            # Strict JSON: a score that does not exist (no pose, no body) is null, not NaN.
+            json.dump(without_nan({"cells": results, "summary": summary}), f, indent=1, allow_nan=False)
+
+
+def without_nan(value):
+    if isinstance(value, float) and value != value:
+        return None
+    if isinstance(value, dict):
+        return {k: without_nan(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [without_nan(v) for v in value]
+    return value
 
 
 def summarize(rows):
