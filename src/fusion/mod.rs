@@ -763,23 +763,22 @@ pub fn fuse(
             next_series_t = t + 0.1;
         }
     }
-    let rest_s = run.rest.as_ref().map(|rest| {
+    // The seconds of the steps flagged, from +0 (an empty f64 sum is −0, which JSON would print).
+    let seconds_where = |flags: &mut dyn Iterator<Item = bool>| {
         steps
             .iter()
-            .zip(rest)
-            .filter(|(_, r)| **r)
-            // (from +0: an empty f64 sum is −0, which JSON would print)
+            .zip(flags)
+            .filter(|(_, f)| *f)
             .fold(0.0, |sum, (s, _)| sum + s.dt)
-    });
+    };
+    let rest_s = run
+        .rest
+        .as_ref()
+        .map(|rest| seconds_where(&mut rest.iter().copied()));
     // The offline fusion's own accounts (it alone has an expected error).
-    let disturbed_s = run.expected.map(|_| {
-        steps
-            .iter()
-            .zip(&run.rejected)
-            .filter(|(_, r)| r.magnetic)
-            // (from +0: an empty f64 sum is −0, which JSON would print)
-            .fold(0.0, |sum, (s, _)| sum + s.dt)
-    });
+    let disturbed_s = run
+        .expected
+        .map(|_| seconds_where(&mut run.rejected.iter().map(|r| r.magnetic)));
     let expected_error_deg = run.expected.map(|e| e.total_deg());
     if let Some(e) = run
         .expected
@@ -1090,24 +1089,21 @@ mod tests {
             .unwrap()
         };
         let f = Fusion::default();
-        let e = fuse("s", &track(90.0, G), None, &f)
-            .unwrap_err()
-            .to_string();
+        let error = |gyr: f64, acc: f64| {
+            fuse("s", &track(gyr, acc), None, &f)
+                .unwrap_err()
+                .to_string()
+        };
+        let e = error(90.0, G);
         assert!(e.contains("gx_dps"), "{e}");
-        let e = fuse("s", &track(0.1, 1.0), None, &f)
-            .unwrap_err()
-            .to_string();
+        let e = error(0.1, 1.0);
         assert!(e.contains("ax_g"), "{e}");
         assert!(fuse("s", &track(0.1, G), None, &f).is_ok());
         // A limb that never rests reads 1.5 g where it turns slowest; in g it would read 1.5.
         assert!(fuse("s", &track(0.1, 1.5 * G), None, &f).is_ok());
-        let e = fuse("s", &track(0.1, 1.5), None, &f)
-            .unwrap_err()
-            .to_string();
+        let e = error(0.1, 1.5);
         assert!(e.contains("ax_g"), "{e}");
-        let e = fuse("s", &track(0.1, 100.0), None, &f)
-            .unwrap_err()
-            .to_string();
+        let e = error(0.1, 100.0);
         assert!(e.contains("check the accelerometer's unit"), "{e}");
     }
 }
