@@ -62,6 +62,7 @@ fn main() {
         clock: None,
         keys: false,
         preview: None,
+        setup: None,
         time_horizon_s: imubake::live::clock::DEFAULT_HORIZON_S,
     };
     let stop = Arc::new(AtomicBool::new(false));

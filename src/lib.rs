@@ -24,6 +24,7 @@ pub mod read;
 pub mod retarget;
 pub mod rig;
 pub mod rotation;
+pub mod setup;
 pub mod simulate;
 pub mod smooth;
 pub mod take;

@@ -177,6 +177,7 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
         clock: args.clock,
         keys: std::io::stdin().is_terminal() && !args.sources.contains(&SourceSpec::Stdin),
         preview,
+        setup: None,
         time_horizon_s: args
             .time_horizon
             .unwrap_or(imubake::live::clock::DEFAULT_HORIZON_S),

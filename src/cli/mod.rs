@@ -8,6 +8,7 @@ mod convert;
 mod fuse;
 mod inspect;
 mod live;
+mod setup;
 mod simulate;
 mod view;
 mod watch;
@@ -58,6 +59,9 @@ enum Command {
     Compare(compare::CompareArgs),
     /// A take in the browser: the character in 3D, play, scrub, sensors' axes, foot contacts.
     View(view::ViewArgs),
+    /// Bring up a suit in the browser: every sensor live, lit when moved, put on a bone, its
+    /// gyro bias and the pose calibrated; saves the mapping, subject and sensor calibration.
+    Setup(setup::SetupArgs),
 }
 
 /// Flags shared by every command that reads captures.
@@ -166,5 +170,6 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Angles(args) => angles::run(args),
         Command::Compare(args) => compare::run(args),
         Command::View(args) => view::run(args),
+        Command::Setup(args) => setup::run(args),
     }
 }

@@ -132,6 +132,9 @@ pub struct LiveSettings {
     pub keys: bool,
     /// The browser preview's poses and status (`--preview`; its server runs beside the session).
     pub preview: Option<Arc<crate::view::Preview>>,
+    /// `imubake setup`: every sample goes to its board; the plan needs no mapping then (without
+    /// one the session makes no poses).
+    pub setup: Option<Arc<crate::setup::Setup>>,
     /// How far ahead of its latest a source's time may be and still be in step (seconds,
     /// [`clock::DEFAULT_HORIZON_S`] by default): a time further is a jump ([`clock`]).
     pub time_horizon_s: f64,
@@ -237,7 +240,8 @@ impl Latencies {
 /// The stages once the format (and so the world) is known.
 struct Running {
     lines: LineStream,
-    poses: PoseStream,
+    /// `None`: a setup session without a mapping (samples go to the board only).
+    poses: Option<PoseStream>,
     /// LineStream sensor index → PoseStream index (`None`: not mapped).
     index: Vec<Option<Option<usize>>>,
     /// Sensors whose raw readings could not be fused (left out).
@@ -253,11 +257,20 @@ pub fn run(
     stop: Arc<AtomicBool>,
     mut report: impl FnMut(Report),
 ) -> Result<Summary, LiveError> {
-    let (rig, mapping, mapping_file, options) = settings.plan.stream()?;
-    let options = crate::pipeline::PipelineOptions {
-        causal: true,
-        ..options.clone()
+    // What the pose stream runs on; a setup session may have no mapping yet.
+    let stream = match settings.plan.stream() {
+        Ok((_, mapping, mapping_file, options)) => Some((
+            mapping,
+            mapping_file,
+            crate::pipeline::PipelineOptions {
+                causal: true,
+                ..options.clone()
+            },
+        )),
+        Err(_) if settings.setup.is_some() => None,
+        Err(e) => return Err(e.into()),
     };
+    let rig = settings.plan.rig();
     let skeleton = vmc::VmcSkeleton::new(rig);
     let vmc_out = match settings.vmc {
         Some(addr) => {
@@ -548,7 +561,7 @@ pub fn run(
                         }
                         lines.push_line(line_no, &l, &mut samples)?;
                     }
-                    running = start_running(lines, rig, mapping, mapping_file, &options, settings)?;
+                    running = Some(start_running(lines, rig, stream.as_ref(), settings)?);
                 }
                 line_no += 1;
                 if let Some(r) = &mut recorder {
@@ -563,20 +576,26 @@ pub fn run(
                 };
                 run.lines.push_line(line_no, &line, &mut samples)?;
                 let at = batch_at;
-                feed(run, &mut samples, &mut per_sensor, &mut |pose: &Pose| {
-                    frames += 1;
-                    send_out(pose);
-                    latencies.push(at.elapsed().as_secs_f64() * 1e3);
-                });
+                feed(
+                    run,
+                    settings.setup.as_deref(),
+                    &mut samples,
+                    &mut per_sensor,
+                    &mut |pose: &Pose| {
+                        frames += 1;
+                        send_out(pose);
+                        latencies.push(at.elapsed().as_secs_f64() * 1e3);
+                    },
+                );
             }
             if let Some(r) = &mut recorder {
                 r.batch_done().map_err(|e| record_error(settings, e))?;
             }
             if pending_calibration {
                 pending_calibration = false;
-                if let Some(run) = &mut running {
-                    let t = run.poses.latest_s().max(0.0);
-                    match run.poses.recalibrate(t) {
+                if let Some(poses) = running.as_mut().and_then(|r| r.poses.as_mut()) {
+                    let t = poses.latest_s().max(0.0);
+                    match poses.recalibrate(t) {
                         Ok(left) => {
                             if let Some(r) = &mut recorder {
                                 r.line(format!("# calibrate t={t:.6}").as_bytes())
@@ -592,12 +611,14 @@ pub fn run(
                 }
             }
             if let Some(run) = &mut running {
-                for w in &run.poses.warnings()[warned.min(run.poses.warnings().len())..] {
-                    report(Report::Notice(format!("warning: {w}")));
-                }
-                warned = run.poses.warnings().len();
-                for w in run.poses.take_fusion_warnings() {
-                    report(Report::Notice(format!("warning: {w}")));
+                if let Some(poses) = &mut run.poses {
+                    for w in &poses.warnings()[warned.min(poses.warnings().len())..] {
+                        report(Report::Notice(format!("warning: {w}")));
+                    }
+                    warned = poses.warnings().len();
+                    for w in poses.take_fusion_warnings() {
+                        report(Report::Notice(format!("warning: {w}")));
+                    }
                 }
                 for n in run.notices.drain(..) {
                     report(Report::Notice(n));
@@ -606,10 +627,11 @@ pub fn run(
             if let Some((socket, _)) = &vmc_out
                 && last_ok.elapsed() >= Duration::from_secs(1)
             {
-                let state = match running.as_ref().map(|r| r.poses.status()) {
+                let poses = running.as_ref().and_then(|r| r.poses.as_ref());
+                let state = match poses.map(|p| p.status()) {
                     // A heading too unsure to trust: calibrated, but waiting for a better one.
                     Some(StreamStatus::Running { .. })
-                        if running.as_ref().is_some_and(|r| r.poses.heading_unsure()) =>
+                        if poses.is_some_and(|p| p.heading_unsure()) =>
                     {
                         vmc::CalibrationState::WaitingForCalibrating
                     }
@@ -672,11 +694,19 @@ pub fn run(
             send_out(pose);
         };
         let _ = run.lines.finish(&mut samples);
-        feed(run, &mut samples, &mut per_sensor, &mut send);
-        if let Err(e) = run.poses.finish(&mut send) {
-            warnings.push(e.to_string());
+        feed(
+            run,
+            settings.setup.as_deref(),
+            &mut samples,
+            &mut per_sensor,
+            &mut send,
+        );
+        if let Some(poses) = &mut run.poses {
+            if let Err(e) = poses.finish(&mut send) {
+                warnings.push(e.to_string());
+            }
+            warnings.extend(poses.warnings().iter().cloned());
         }
-        warnings.extend(run.poses.warnings().iter().cloned());
     }
     // Every stage's dropped lines, in line order: the source clocks', the line parsers', the
     // stream's.
@@ -719,34 +749,48 @@ fn record_error(settings: &LiveSettings, source: std::io::Error) -> LiveError {
 }
 
 /// The pose stream for `lines`, once the format has said the sensors' world (a CSV after its
-/// header); `None` until then.
+/// header); none without a mapping (`stream`).
 fn start_running(
     lines: LineStream,
     rig: &crate::rig::Rig,
-    mapping: &crate::mapping::Mapping,
-    mapping_file: &std::path::Path,
-    options: &crate::pipeline::PipelineOptions,
+    stream: Option<&(
+        &crate::mapping::Mapping,
+        &std::path::Path,
+        crate::pipeline::PipelineOptions,
+    )>,
     settings: &LiveSettings,
-) -> Result<Option<Running>, LiveError> {
-    let world = settings
-        .plan
-        .read_options()
-        .world
-        .or(mapping.world)
-        .unwrap_or(lines.world());
-    let poses = PoseStream::from_mapping(rig, mapping, mapping_file, world, options)?;
-    Ok(Some(Running {
+) -> Result<Running, LiveError> {
+    let poses = match stream {
+        Some((mapping, mapping_file, options)) => {
+            let world = settings
+                .plan
+                .read_options()
+                .world
+                .or(mapping.world)
+                .unwrap_or(lines.world());
+            Some(PoseStream::from_mapping(
+                rig,
+                mapping,
+                mapping_file,
+                world,
+                options,
+            )?)
+        }
+        None => None,
+    };
+    Ok(Running {
         lines,
         poses,
         index: Vec::new(),
         refused: Vec::new(),
         notices: Vec::new(),
-    }))
+    })
 }
 
-/// The samples a line let out, through the pose stream.
+/// The samples a line let out, to the setup's board and through the pose stream.
 fn feed(
     run: &mut Running,
+    setup: Option<&crate::setup::Setup>,
     samples: &mut Vec<StreamSample>,
     per_sensor: &mut Vec<(u64, f64)>,
     on_pose: &mut impl FnMut(&Pose),
@@ -761,10 +805,16 @@ fn feed(
     let ids = take.sensor_ids();
     for s in samples.drain(..) {
         let k = s.sensor.index();
+        if let Some(setup) = setup {
+            setup.sample(&ids[k], s.t_s, s.value);
+        }
+        let Some(poses) = &mut run.poses else {
+            continue;
+        };
         if k >= run.index.len() {
             run.index.resize(k + 1, None);
         }
-        let i = *run.index[k].get_or_insert_with(|| run.poses.sensor_index(&ids[k]));
+        let i = *run.index[k].get_or_insert_with(|| poses.sensor_index(&ids[k]));
         if let Some(i) = i {
             if i >= per_sensor.len() {
                 per_sensor.resize(i + 1, (0, f64::NEG_INFINITY));
@@ -776,9 +826,9 @@ fn feed(
                     if run.refused.get(i).copied().unwrap_or(false) {
                         continue;
                     }
-                    if let Err(e) = run.poses.push_raw(i, s.t_s, imu, mag, &mut *on_pose) {
+                    if let Err(e) = poses.push_raw(i, s.t_s, imu, mag, &mut *on_pose) {
                         // Readings in the wrong units: the sensor is left out, said once.
-                        run.refused.resize(run.poses.sensors().len(), false);
+                        run.refused.resize(poses.sensors().len(), false);
                         run.refused[i] = true;
                         run.notices
                             .push(format!("error: {e}; its readings are left out"));
@@ -786,7 +836,7 @@ fn feed(
                 }
                 value => {
                     if let Some(q) = value.orientation() {
-                        run.poses.push(i, s.t_s, q, &mut *on_pose);
+                        poses.push(i, s.t_s, q, &mut *on_pose);
                     }
                 }
             }
@@ -830,26 +880,29 @@ fn status(
     latency_ms: Option<(f64, f64)>,
     clock_dropped: u64,
 ) -> Status {
-    let phase = match running.map(|r| r.poses.status()) {
+    let phase = match running.map(|r| r.poses.as_ref().map(|p| p.status())) {
         None => Phase::Waiting,
-        Some(StreamStatus::Calibrating { left_s }) => Phase::Calibrating { left_s },
-        Some(StreamStatus::Running { .. }) => Phase::Running,
+        Some(None) => Phase::Running,
+        Some(Some(StreamStatus::Calibrating { left_s })) => Phase::Calibrating { left_s },
+        Some(Some(StreamStatus::Running { .. })) => Phase::Running,
     };
     let mut sensors = Vec::new();
     let mut dropped_lines = clock_dropped;
     if let Some(run) = running {
-        let latest = run.poses.latest_s();
-        for (i, s) in run.poses.sensors().iter().enumerate() {
-            let (n, last) = per_sensor.get(i).copied().unwrap_or((0, f64::NEG_INFINITY));
-            sensors.push(SensorStatus {
-                id: s.sensor.clone(),
-                rate_hz: n as f64 / period_s,
-                silent_s: if last.is_finite() {
-                    (latest - last).max(0.0)
-                } else {
-                    f64::INFINITY
-                },
-            });
+        if let Some(poses) = &run.poses {
+            let latest = poses.latest_s();
+            for (i, s) in poses.sensors().iter().enumerate() {
+                let (n, last) = per_sensor.get(i).copied().unwrap_or((0, f64::NEG_INFINITY));
+                sensors.push(SensorStatus {
+                    id: s.sensor.clone(),
+                    rate_hz: n as f64 / period_s,
+                    silent_s: if last.is_finite() {
+                        (latest - last).max(0.0)
+                    } else {
+                        f64::INFINITY
+                    },
+                });
+            }
         }
         dropped_lines += run.lines.dropped_lines().total()
             + run.lines.take().map_or(0, |t| t.dropped_lines().total());

@@ -31,6 +31,10 @@ pub const ASSETS: &[Asset] = &[
     },
     asset!("/viewer.js", JS),
     asset!("/viewer.css", "text/css; charset=utf-8"),
+    // `imubake setup`'s page (at `/` in a setup session).
+    asset!("/setup.html", "text/html; charset=utf-8"),
+    asset!("/setup.js", JS),
+    asset!("/setup.css", "text/css; charset=utf-8"),
     asset!("/vendor/three/three.module.min.js", JS),
     asset!("/vendor/three/addons/loaders/GLTFLoader.js", JS),
     asset!("/vendor/three/addons/controls/OrbitControls.js", JS),

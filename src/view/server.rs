@@ -3,7 +3,9 @@
 //! upgraded `/live` connection (ARCHITECTURE.md says why not an async stack or a server crate).
 //!
 //! Paths: the page's assets ([`super::assets`]), `/take.json`, `/chunk/<k>.glb` (`k` in
-//! decimal digits, below the take's chunk count) and, in a live session, `/live`. Anything else
+//! decimal digits, below the take's chunk count), in a live session `/live`, and in `imubake
+//! setup` its page at `/` (the viewer's at `/index.html`) and its board's socket `/setup` (the
+//! page's commands come back over it, so the same `Origin` check guards them). Anything else
 //! is 404: the server opens no file after it starts. Against DNS rebinding (a web page reaching
 //! it under a name of its own), it refuses (403) a request whose `Host` is not, bound to
 //! loopback, `127.0.0.1`, `localhost`, `[::1]` or the address it listens on, and, bound
@@ -32,6 +34,7 @@
 use super::live::{Preview, Seen};
 use super::motion::{MAX_JOINTS, ViewTake};
 use super::{ViewError, assets};
+use crate::setup::Setup;
 use std::collections::{BTreeMap, VecDeque};
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
@@ -68,6 +71,8 @@ pub const WRITE_RATE: usize = 64 << 10;
 /// closing with unread bytes does not reset the connection before the client reads the answer.
 /// A lingering connection is closed early to make room for a new one.
 pub const LINGER: Duration = Duration::from_secs(2);
+/// How often the setup page gets the board.
+const SETUP_PERIOD: Duration = Duration::from_millis(100);
 /// Chunks kept made (the page asks for the one it shows and the next).
 const KEEP_CHUNKS: usize = 4;
 
@@ -89,6 +94,8 @@ struct Shared {
     take: ViewTake,
     take_json: Arc<Vec<u8>>,
     preview: Option<Arc<Preview>>,
+    /// `imubake setup`'s board: `/` is its page, `/setup` its WebSocket.
+    setup: Option<Arc<Setup>>,
     /// The last chunks made, newest last.
     chunks: Mutex<VecDeque<(usize, Arc<Vec<u8>>)>>,
     /// `Host` values accepted, lower case (bound to loopback); `None`: an IP address or
@@ -158,6 +165,7 @@ impl Server {
                 take,
                 take_json: Arc::new(take_json),
                 preview,
+                setup: None,
                 chunks: Mutex::new(VecDeque::new()),
                 hosts,
                 port: addr.port(),
@@ -166,6 +174,15 @@ impl Server {
                 waiting: Mutex::new(BTreeMap::new()),
             }),
         })
+    }
+
+    /// Serves `imubake setup`'s page at `/` and its board on the `/setup` WebSocket (the
+    /// viewer's page stays at `/index.html`).
+    pub fn with_setup(mut self, setup: Arc<Setup>) -> Server {
+        Arc::get_mut(&mut self.shared)
+            .expect("not serving yet: the only handle")
+            .setup = Some(setup);
+        self
     }
 
     /// The address it listens on.
@@ -310,7 +327,7 @@ fn connection(
     };
     match route(shared, &head) {
         Route::Reply(reply) => answer(shared, id, stream, &reply, head.method != "HEAD"),
-        Route::Live(preview) => live(shared, id, preview, stream, head, stop, slot),
+        Route::Live(feed) => live(shared, id, feed, stream, head, stop, slot),
     }
 }
 
@@ -665,7 +682,16 @@ fn linger(shared: &Shared, id: u64, mut stream: TcpStream) {
 
 enum Route<'a> {
     Reply(Reply),
-    Live(&'a Preview),
+    Live(Feed<'a>),
+}
+
+/// What a WebSocket carries.
+#[derive(Clone, Copy)]
+enum Feed<'a> {
+    /// A live session's poses and status (`/live`).
+    Preview(&'a Preview),
+    /// The setup board, and the page's commands back (`/setup`).
+    Setup(&'a Setup),
 }
 
 /// `/chunk/<k>.glb` → k (decimal digits only).
@@ -689,6 +715,10 @@ fn route<'a>(shared: &'a Shared, head: &Head) -> Route<'a> {
     }
     // The path without its query; nothing is decoded, so `%2f` is never a separator.
     let path = head.target.split(['?', '#']).next().unwrap_or("");
+    let path = match (path, &shared.setup) {
+        ("/", Some(_)) => "/setup.html",
+        _ => path,
+    };
     if let Some(asset) = assets::find(path) {
         return Route::Reply(Reply::bytes(
             asset.content_type,
@@ -716,7 +746,12 @@ fn route<'a>(shared: &'a Shared, head: &Head) -> Route<'a> {
     if path == "/live"
         && let Some(preview) = &shared.preview
     {
-        return Route::Live(preview);
+        return Route::Live(Feed::Preview(preview));
+    }
+    if path == "/setup"
+        && let Some(setup) = &shared.setup
+    {
+        return Route::Live(Feed::Setup(setup));
     }
     Route::Reply(Reply::text(404, "not found"))
 }
@@ -789,12 +824,12 @@ impl Drop for LiveSlot<'_> {
     }
 }
 
-/// The WebSocket of a live session: each new status and pose, until the page goes or the
-/// session stops.
+/// The WebSocket of a live session (each new status and pose) or of a setup (the board, and the
+/// page's commands), until the page goes or the session stops.
 fn live(
     shared: &Shared,
     id: u64,
-    preview: &Preview,
+    feed: Feed<'_>,
     mut stream: TcpStream,
     head: Head,
     stop: &AtomicBool,
@@ -848,7 +883,8 @@ fn live(
     {
         return;
     }
-    // The page sends nothing but pings and its close: small frames, small buffers.
+    // The page sends pings, its close and (the setup page) short commands: small frames,
+    // small buffers.
     let config = tungstenite::protocol::WebSocketConfig::default()
         .read_buffer_size(4096)
         .write_buffer_size(0)
@@ -862,16 +898,43 @@ fn live(
     );
     let mut seen = Seen::default();
     while !stop.load(Ordering::Relaxed) {
-        for message in preview.wait(&mut seen, Duration::from_millis(200)) {
-            if socket
-                .send(tungstenite::Message::text(message.to_string()))
-                .is_err()
-            {
-                return;
+        match feed {
+            Feed::Preview(preview) => {
+                for message in preview.wait(&mut seen, Duration::from_millis(200)) {
+                    if socket
+                        .send(tungstenite::Message::text(message.to_string()))
+                        .is_err()
+                    {
+                        return;
+                    }
+                }
+                if !still_open(&mut socket, &mut |_| {}) {
+                    return;
+                }
             }
-        }
-        if !still_open(&mut socket) {
-            return;
+            Feed::Setup(setup) => {
+                // The board ten times a second; the page's commands between, each answered by
+                // the next board at once.
+                if socket
+                    .send(tungstenite::Message::text(setup.snapshot_json()))
+                    .is_err()
+                {
+                    return;
+                }
+                let until = Instant::now() + SETUP_PERIOD;
+                let mut commanded = false;
+                while !commanded && Instant::now() < until {
+                    if !still_open(&mut socket, &mut |text| {
+                        setup.command_json(text);
+                        commanded = true;
+                    }) {
+                        return;
+                    }
+                    if !commanded {
+                        std::thread::sleep(Duration::from_millis(10));
+                    }
+                }
+            }
         }
     }
     let _ = socket.close(None);
@@ -879,7 +942,11 @@ fn live(
 }
 
 /// Reads what the page sent (pings, its close) without waiting; false once it has gone.
-fn still_open(socket: &mut tungstenite::WebSocket<TcpStream>) -> bool {
+/// Text messages go to `on_text` (the setup page's commands).
+fn still_open(
+    socket: &mut tungstenite::WebSocket<TcpStream>,
+    on_text: &mut dyn FnMut(&str),
+) -> bool {
     if socket.get_mut().set_nonblocking(true).is_err() {
         return false;
     }
@@ -891,6 +958,7 @@ fn still_open(socket: &mut tungstenite::WebSocket<TcpStream>) -> bool {
                 open = false;
                 break;
             }
+            Ok(tungstenite::Message::Text(text)) => on_text(text.as_str()),
             Ok(_) => {}
             Err(tungstenite::Error::Io(e)) if e.kind() == io::ErrorKind::WouldBlock => break,
             Err(_) => {

@@ -1,4 +1,4 @@
-//! The commands as a user runs them: batch, watch, live (and its hostile inputs), the viewer and its server, inspect, mapping errors, the tools, fuse.
+//! The commands as a user runs them: batch, watch, live (and its hostile inputs), the viewer and its server, setup, inspect, mapping errors, the tools, fuse.
 //!
 //! One test crate per area (issue 46): each file a module, linked once.
 
@@ -11,6 +11,7 @@ mod inspect_cli;
 mod live;
 mod live_hostile;
 mod mapping_errors;
+mod setup;
 mod slurm;
 mod tools;
 mod viewer;

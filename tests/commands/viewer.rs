@@ -15,7 +15,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Debian's Chromium (`IMUBAKE_CHROMIUM` overrides), with playwright-core beside the validator.
-fn browser() -> Option<PathBuf> {
+pub(crate) fn browser() -> Option<PathBuf> {
     let modules = node_modules()?;
     if !modules.join("playwright-core/package.json").is_file() {
         return missing(&format!(
@@ -34,9 +34,9 @@ fn browser() -> Option<PathBuf> {
 }
 
 /// A running server, stopped when dropped.
-struct Served {
+pub(crate) struct Served {
     child: Child,
-    url: String,
+    pub(crate) url: String,
 }
 
 impl Drop for Served {
@@ -48,14 +48,14 @@ impl Drop for Served {
 
 impl Served {
     /// `host:port` of the URL.
-    fn authority(&self) -> &str {
+    pub(crate) fn authority(&self) -> &str {
         self.url.trim_start_matches("http://").trim_end_matches('/')
     }
 }
 
 /// Starts `cmd` and waits (up to 60 s) for a line on stdout (`view`) or stderr (`live`) holding
 /// its URL.
-fn serve(mut cmd: Command, url_on_stderr: bool) -> Served {
+pub(crate) fn serve(mut cmd: Command, url_on_stderr: bool) -> Served {
     cmd.stdout(Stdio::piped()).stderr(Stdio::piped());
     let mut child = cmd.spawn().unwrap();
     let (out, other): (Box<dyn Read + Send>, Box<dyn Read + Send>) = if url_on_stderr {

@@ -594,11 +594,21 @@ fn bound_to_loopback_the_bound_address_and_any_case_are_served() {
 /// A WebSocket upgrade of `/live` with `Host: host` and `origin`: the status and the stream
 /// (only the answer's head read from it).
 fn upgrade(authority: &str, host: &str, origin: Option<&str>) -> (u16, TcpStream) {
+    upgrade_at(authority, "/live", host, origin)
+}
+
+/// A WebSocket upgrade of `path` (`/live`, `/setup`), as [`upgrade`].
+pub(crate) fn upgrade_at(
+    authority: &str,
+    path: &str,
+    host: &str,
+    origin: Option<&str>,
+) -> (u16, TcpStream) {
     let mut stream = TcpStream::connect(authority).unwrap();
     let origin = origin.map_or(String::new(), |o| format!("Origin: {o}\r\n"));
     write!(
         stream,
-        "GET /live HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+        "GET {path} HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
          Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n{origin}\r\n"
     )
     .unwrap();

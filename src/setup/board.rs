@@ -1,0 +1,854 @@
+//! What `imubake setup` knows of a suit, fed sample by sample: each sensor's latest readings and
+//! their norms, its rate and gaps, how fast it turns (the one turning fastest "lights up"), which
+//! bone it sits on, and the calibrations taken from the stream: the gyro bias (hold still), the
+//! held pose and the bow that gives the heading source. Pure: no clock but the samples' own
+//! (stream time, seconds), no threads; [`super::Setup`] shares it with the page.
+//!
+//! Units: gyro rad/s in, °/s shown; specific force m/s²; the field in the log's unit (µT by the
+//! conventions); quaternions `[w, x, y, z]`, `q_world_sensor`.
+
+use crate::intrinsics::gyro_bias::{BiasWindow, GyroBias, gyro_bias};
+use crate::take::{ImuSample, StreamValue, Track};
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap};
+
+/// A sensor turning faster than this, °/s (its turn rate low-passed over [`ACTIVITY_TAU_S`]),
+/// is moving; the fastest of those is lit.
+pub const LIT_DPS: f64 = 30.0;
+/// The turn rate's low-pass time constant, seconds: short enough to light within 0.2 s of a
+/// wave, long enough that one noisy sample does not.
+pub const ACTIVITY_TAU_S: f64 = 0.1;
+/// A specific force whose norm is off g by more than this fraction: the sensor accelerates.
+pub const ACC_DISTURBED: f64 = 0.1;
+/// A field whose norm is off the sensor's running median by more than this fraction: disturbed.
+pub const MAG_DISTURBED: f64 = 0.1;
+/// A gap: a step between samples longer than this many times the sensor's usual one.
+pub const GAP_FACTOR: f64 = 3.0;
+/// Sensors a board keeps (a stream naming more is refused past it: bounded memory).
+pub const MAX_SENSORS: usize = 256;
+/// Samples a capture keeps per sensor (60 s at 1 kHz): bounded memory whatever the stream does.
+pub const MAX_CAPTURE_SAMPLES: usize = 60_000;
+/// Standard gravity, m/s².
+const G: f64 = 9.80665;
+
+/// One sensor's live state.
+#[derive(Debug, Clone)]
+struct Sensor {
+    id: String,
+    last_s: f64,
+    samples: u64,
+    /// The usual step between samples (low-passed), seconds.
+    step_s: Option<f64>,
+    gaps: u64,
+    gyr: Option<Vector3<f64>>,
+    acc: Option<Vector3<f64>>,
+    mag: Option<Vector3<f64>>,
+    q: Option<UnitQuaternion<f64>>,
+    /// The turn rate, low-passed, rad/s.
+    activity: f64,
+    /// The field's norm, low-passed slowly (its usual value).
+    mag_norm: Option<f64>,
+}
+
+impl Sensor {
+    fn new(id: &str, t_s: f64) -> Sensor {
+        Sensor {
+            id: id.to_string(),
+            last_s: t_s,
+            samples: 0,
+            step_s: None,
+            gaps: 0,
+            gyr: None,
+            acc: None,
+            mag: None,
+            q: None,
+            activity: 0.0,
+            mag_norm: None,
+        }
+    }
+
+    fn push(&mut self, t_s: f64, value: StreamValue) {
+        let dt = t_s - self.last_s;
+        let mut rate = None;
+        if self.samples > 0 && dt > 0.0 {
+            match self.step_s {
+                Some(step) if dt > GAP_FACTOR * step => self.gaps += 1,
+                Some(step) => self.step_s = Some(step + 0.05 * (dt - step)),
+                None => self.step_s = Some(dt),
+            }
+        }
+        match value {
+            StreamValue::Raw { imu, mag } => {
+                rate = Some(imu.gyro_rad_s.norm());
+                self.gyr = Some(imu.gyro_rad_s);
+                self.acc = Some(imu.accel_m_s2);
+                if let Some(m) = mag {
+                    let n = m.norm();
+                    self.mag_norm = Some(self.mag_norm.map_or(n, |u| u + 0.01 * (n - u)));
+                }
+                self.mag = mag;
+            }
+            value => {
+                if let Some(q) = value.orientation() {
+                    if let Some(prev) = self.q
+                        && dt > 0.0
+                    {
+                        rate = Some(prev.angle_to(&q) / dt);
+                    }
+                    self.q = Some(q);
+                }
+            }
+        }
+        if let Some(rate) = rate {
+            let step = if self.samples == 0 || dt <= 0.0 {
+                1.0
+            } else {
+                (dt / ACTIVITY_TAU_S).min(1.0)
+            };
+            self.activity += step * (rate - self.activity);
+        }
+        self.samples += 1;
+        self.last_s = self.last_s.max(t_s);
+    }
+}
+
+/// What a capture is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CaptureKind {
+    /// Hold every sensor still: each one's gyro bias.
+    GyroBias,
+    /// Hold the calibration pose: every sensor still, each one's gravity.
+    Pose,
+    /// From the pose, bow forward and come back: the pelvis sensor's forward axis.
+    Bow,
+}
+
+/// A capture under way: from `start_s` (stream time) for `seconds`, each sensor's raw samples.
+#[derive(Debug, Clone)]
+struct Capture {
+    kind: CaptureKind,
+    start_s: f64,
+    seconds: f64,
+    samples: HashMap<usize, (Vec<f64>, Vec<ImuSample>)>,
+}
+
+/// One sensor's result of a gyro-bias capture.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BiasResult {
+    pub sensor: String,
+    /// `Err`: why this sensor has none (it moved, too few samples).
+    pub bias: Result<GyroBias, String>,
+}
+
+/// The pose capture's result: each sensor's mean specific force (its up, sensor frame).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PoseResult {
+    pub start_s: f64,
+    pub seconds: f64,
+    /// Sensors that moved during the hold (turned faster than 2 °/s SD), by id.
+    pub moved: Vec<String>,
+    #[serde(skip)]
+    up: HashMap<String, Vector3<f64>>,
+}
+
+/// The bow's result: the forward axis found for the sensor on the pelvis.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BowResult {
+    pub sensor: String,
+    /// The sensor axis nearest the body's forward (`+x` … `-z`), as the mapping's `forward`.
+    pub forward: String,
+    /// The angle between that axis and the forward found, degrees.
+    pub off_axis_deg: f64,
+    /// How deep the bow was, degrees.
+    pub bow_deg: f64,
+}
+
+/// A command from the page.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Command {
+    /// Put `sensor` on `bone` (a bone driven by another sensor is given to this one).
+    Assign {
+        sensor: String,
+        bone: String,
+    },
+    Unassign {
+        sensor: String,
+    },
+    /// Start a capture of `seconds` after `countdown_s`.
+    Capture {
+        kind: CaptureKind,
+        seconds: f64,
+        #[serde(default)]
+        countdown_s: f64,
+    },
+    /// The subject's height, metres.
+    Height {
+        m: f64,
+    },
+    /// The rig pose held during calibration (`rest` or one of the rig's named poses).
+    Pose {
+        name: String,
+    },
+    /// Write the files.
+    Save,
+}
+
+/// A joint of the character the page draws: its name, parent and place in the rig's rest pose
+/// (metres, rig world Y up).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FigureJoint {
+    pub name: String,
+    pub parent: Option<usize>,
+    pub position_m: [f64; 3],
+    /// Where the bone ends when the joint has no child (its End Site), metres.
+    pub end_m: Option<[f64; 3]>,
+}
+
+impl FigureJoint {
+    /// The rig's joints at rest.
+    pub fn of(rig: &crate::rig::Rig) -> Vec<FigureJoint> {
+        let unit = rig.units().metres_per_unit();
+        let at = rig.rest_positions();
+        rig.joints()
+            .iter()
+            .zip(&at)
+            .map(|(j, p)| FigureJoint {
+                name: j.name.clone(),
+                parent: j.parent,
+                position_m: (p * unit).into(),
+                end_m: j.end_site.map(|e| ((p + e) * unit).into()),
+            })
+            .collect()
+    }
+}
+
+/// The board: every sensor, the assignments, the calibrations.
+#[derive(Debug, Clone)]
+pub struct Board {
+    figure: Vec<FigureJoint>,
+    bones: Vec<String>,
+    poses: Vec<String>,
+    sensors: Vec<Sensor>,
+    index: HashMap<String, usize>,
+    /// Sensor id → bone.
+    assigned: BTreeMap<String, String>,
+    now_s: f64,
+    capture: Option<Capture>,
+    bias: Vec<BiasResult>,
+    pose: Option<PoseResult>,
+    bow: Option<Result<BowResult, String>>,
+    pose_name: String,
+    height_m: Option<f64>,
+    /// Sensors past [`MAX_SENSORS`], refused.
+    refused: u64,
+    /// The last command's error or news, for the page.
+    pub message: Option<String>,
+}
+
+/// Bow deeper than this, degrees, for the forward to count.
+pub const MIN_BOW_DEG: f64 = 15.0;
+
+impl Board {
+    /// A board for a rig drawn as `figure` (its joints, whose names are the bones) with the
+    /// named poses `poses`.
+    pub fn new(figure: Vec<FigureJoint>, poses: Vec<String>) -> Board {
+        Board {
+            bones: figure.iter().map(|j| j.name.clone()).collect(),
+            figure,
+            poses,
+            sensors: Vec::new(),
+            index: HashMap::new(),
+            assigned: BTreeMap::new(),
+            now_s: f64::NEG_INFINITY,
+            capture: None,
+            bias: Vec::new(),
+            pose: None,
+            bow: None,
+            pose_name: "rest".into(),
+            height_m: None,
+            refused: 0,
+            message: None,
+        }
+    }
+
+    /// One sample of sensor `id` at `t_s` (stream time).
+    pub fn sample(&mut self, id: &str, t_s: f64, value: StreamValue) {
+        if !t_s.is_finite() {
+            return;
+        }
+        let k = match self.index.get(id) {
+            Some(&k) => k,
+            None if self.sensors.len() < MAX_SENSORS => {
+                self.sensors.push(Sensor::new(id, t_s));
+                self.index.insert(id.to_string(), self.sensors.len() - 1);
+                self.sensors.len() - 1
+            }
+            None => {
+                self.refused += 1;
+                return;
+            }
+        };
+        self.sensors[k].push(t_s, value);
+        self.now_s = self.now_s.max(t_s);
+        if let Some(c) = &mut self.capture
+            && t_s >= c.start_s
+            && t_s <= c.start_s + c.seconds
+            && let StreamValue::Raw { imu, .. } = value
+        {
+            let (times, values) = c.samples.entry(k).or_default();
+            if values.len() < MAX_CAPTURE_SAMPLES && times.last().is_none_or(|l| t_s > *l) {
+                times.push(t_s);
+                values.push(imu);
+            }
+        }
+        if self
+            .capture
+            .as_ref()
+            .is_some_and(|c| self.now_s > c.start_s + c.seconds)
+        {
+            let c = self.capture.take().expect("a capture");
+            self.finish(c);
+        }
+    }
+
+    /// The sensor that is lit: the fastest turning above [`LIT_DPS`].
+    pub fn lit(&self) -> Option<&str> {
+        self.sensors
+            .iter()
+            .filter(|s| s.activity.to_degrees() > LIT_DPS)
+            .max_by(|a, b| a.activity.total_cmp(&b.activity))
+            .map(|s| s.id.as_str())
+    }
+
+    /// Carries out a command from the page.
+    pub fn command(&mut self, command: Command) -> Result<(), String> {
+        match command {
+            Command::Assign { sensor, bone } => {
+                if !self.index.contains_key(&sensor) {
+                    return Err(format!("no sensor `{sensor}` in the stream"));
+                }
+                if !self.bones.contains(&bone) {
+                    return Err(format!("the rig has no bone `{bone}`"));
+                }
+                self.assigned.retain(|_, b| *b != bone);
+                self.assigned.insert(sensor, bone);
+            }
+            Command::Unassign { sensor } => {
+                self.assigned.remove(&sensor);
+            }
+            Command::Capture {
+                kind,
+                seconds,
+                countdown_s,
+            } => {
+                if !(seconds.is_finite() && (0.5..=60.0).contains(&seconds)) {
+                    return Err("a capture lasts 0.5 to 60 s".into());
+                }
+                if !(countdown_s.is_finite() && (0.0..=30.0).contains(&countdown_s)) {
+                    return Err("a countdown is 0 to 30 s".into());
+                }
+                if !self.now_s.is_finite() {
+                    return Err("no samples yet".into());
+                }
+                if kind == CaptureKind::Bow && self.pose.is_none() {
+                    return Err("hold the pose first: the bow is measured from it".into());
+                }
+                self.capture = Some(Capture {
+                    kind,
+                    start_s: self.now_s + countdown_s,
+                    seconds,
+                    samples: HashMap::new(),
+                });
+            }
+            Command::Height { m } => {
+                if !(m.is_finite() && (0.5..=2.6).contains(&m)) {
+                    return Err(format!("a height of {m} m? expected 0.5 to 2.6 m"));
+                }
+                self.height_m = Some(m);
+            }
+            Command::Pose { name } => {
+                if name != "rest" && !self.poses.contains(&name) {
+                    return Err(format!(
+                        "the rig has no pose `{name}` (it has rest{})",
+                        self.poses
+                            .iter()
+                            .map(|p| format!(", {p}"))
+                            .collect::<String>()
+                    ));
+                }
+                self.pose_name = name;
+            }
+            Command::Save => return Err("save is the session's, not the board's".into()),
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self, c: Capture) {
+        match c.kind {
+            CaptureKind::GyroBias => {
+                self.bias = self
+                    .sensors
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, s)| s.gyr.is_some())
+                    .map(|(k, s)| BiasResult {
+                        sensor: s.id.clone(),
+                        bias: match c.samples.get(&k) {
+                            Some((t, v)) if !t.is_empty() => Track::new(t.clone(), v.clone())
+                                .map_err(|e| e.to_string())
+                                .and_then(|track| {
+                                    gyro_bias(
+                                        &s.id,
+                                        &track,
+                                        &BiasWindow::Given {
+                                            start_s: c.start_s,
+                                            end_s: c.start_s + c.seconds,
+                                        },
+                                    )
+                                    .map_err(|e| e.to_string())
+                                }),
+                            _ => Err("no samples during the capture".into()),
+                        },
+                    })
+                    .collect();
+            }
+            CaptureKind::Pose => {
+                let mut moved = Vec::new();
+                let mut up = HashMap::new();
+                for (k, s) in self.sensors.iter().enumerate() {
+                    let Some((_, v)) = c.samples.get(&k) else {
+                        continue;
+                    };
+                    let n = v.len() as f64;
+                    let mean_gyr = v.iter().map(|x| x.gyro_rad_s).sum::<Vector3<f64>>() / n;
+                    let spread = (v
+                        .iter()
+                        .map(|x| (x.gyro_rad_s - mean_gyr).norm_squared())
+                        .sum::<f64>()
+                        / n)
+                        .sqrt()
+                        .to_degrees();
+                    if spread > 2.0 {
+                        moved.push(s.id.clone());
+                    }
+                    let a = v.iter().map(|x| x.accel_m_s2).sum::<Vector3<f64>>() / n;
+                    if let Some(a) = a.try_normalize(1e-9) {
+                        up.insert(s.id.clone(), a);
+                    }
+                }
+                self.pose = Some(PoseResult {
+                    start_s: c.start_s,
+                    seconds: c.seconds,
+                    moved,
+                    up,
+                });
+                self.bow = None;
+            }
+            CaptureKind::Bow => self.bow = Some(self.bow_result(&c)),
+        }
+    }
+
+    /// The forward axis of the sensor on the pelvis (the rig's first bone), from the bow.
+    ///
+    /// With `u₀` the sensor's up in the pose (its mean specific force, sensor frame) and `u₁` its
+    /// up at the bow's deepest, the sensor turned about the body's right-left axis: `r = u₀ × u₁`
+    /// (normalised) is the body's right in the sensor frame (a forward bow tips gravity toward
+    /// the sensor's back), and forward is `f = u₀ × r`.
+    fn bow_result(&self, c: &Capture) -> Result<BowResult, String> {
+        let pose = self.pose.as_ref().ok_or("no pose held")?;
+        let root = self.bones.first().ok_or("the rig has no bones")?;
+        let sensor = self
+            .assigned
+            .iter()
+            .find(|(_, b)| *b == root)
+            .map(|(s, _)| s.clone())
+            .ok_or_else(|| format!("no sensor on `{root}` (the pelvis): put one there first"))?;
+        let u0 = *pose
+            .up
+            .get(&sensor)
+            .ok_or_else(|| format!("`{sensor}` had no readings in the pose"))?;
+        let k = self.index[&sensor];
+        let (_, values) = c
+            .samples
+            .get(&k)
+            .ok_or_else(|| format!("`{sensor}` had no readings during the bow"))?;
+        // The deepest: the specific force (low-passed over 5 samples) furthest from u₀.
+        let mut deepest: Option<(f64, Vector3<f64>)> = None;
+        for w in values.windows(5) {
+            let a = w.iter().map(|x| x.accel_m_s2).sum::<Vector3<f64>>() / 5.0;
+            let Some(u) = a.try_normalize(1e-9) else {
+                continue;
+            };
+            let angle = u0.angle(&u);
+            if deepest.is_none_or(|(d, _)| angle > d) {
+                deepest = Some((angle, u));
+            }
+        }
+        let (angle, u1) = deepest.ok_or("too few readings during the bow")?;
+        let bow_deg = angle.to_degrees();
+        if bow_deg < MIN_BOW_DEG {
+            return Err(format!(
+                "the pelvis turned {bow_deg:.0}°: bow deeper (at least {MIN_BOW_DEG:.0}°)"
+            ));
+        }
+        let right = u0.cross(&u1).normalize();
+        let forward = u0.cross(&right).normalize();
+        let (axis, off) = nearest_axis(&forward);
+        Ok(BowResult {
+            sensor,
+            forward: axis,
+            off_axis_deg: off.to_degrees(),
+            bow_deg,
+        })
+    }
+
+    /// The state for the page, as JSON.
+    pub fn snapshot(&self) -> Snapshot<'_> {
+        let now = self.now_s;
+        Snapshot {
+            now_s: now.is_finite().then_some(now),
+            lit: self.lit(),
+            figure: &self.figure,
+            poses: &self.poses,
+            pose: &self.pose_name,
+            sensors: self
+                .sensors
+                .iter()
+                .map(|s| {
+                    let v = |x: Option<Vector3<f64>>| x.map(<[f64; 3]>::from);
+                    let unit = |x: Option<Vector3<f64>>| {
+                        x.and_then(|x| x.try_normalize(1e-12)).map(<[f64; 3]>::from)
+                    };
+                    let acc_norm = s.acc.map(|a| a.norm());
+                    let mag_norm = s.mag.map(|m| m.norm());
+                    SensorView {
+                        id: &s.id,
+                        bone: self.assigned.get(&s.id).map(String::as_str),
+                        rate_hz: s.step_s.map(|d| 1.0 / d),
+                        samples: s.samples,
+                        gaps: s.gaps,
+                        silent_s: (now - s.last_s).max(0.0),
+                        turn_dps: s.activity.to_degrees(),
+                        gyr_dps: s.gyr.map(|g| <[f64; 3]>::from(g.map(f64::to_degrees))),
+                        gyr_norm_dps: s.gyr.map(|g| g.norm().to_degrees()),
+                        acc: v(s.acc),
+                        acc_norm,
+                        acc_unit: unit(s.acc),
+                        mag: v(s.mag),
+                        mag_norm,
+                        mag_unit: unit(s.mag),
+                        q: s.q.map(|q| [q.w, q.i, q.j, q.k]),
+                        accelerating: acc_norm.is_some_and(|n| (n / G - 1.0).abs() > ACC_DISTURBED),
+                        magnetic_disturbance: match (mag_norm, s.mag_norm) {
+                            (Some(n), Some(u)) if u > 0.0 => (n / u - 1.0).abs() > MAG_DISTURBED,
+                            _ => false,
+                        },
+                    }
+                })
+                .collect(),
+            capture: self.capture.as_ref().map(|c| CaptureView {
+                kind: c.kind,
+                starts_in_s: (c.start_s - now).max(0.0),
+                left_s: (c.start_s + c.seconds - now.max(c.start_s)).max(0.0),
+            }),
+            bias: &self.bias,
+            pose_held: self.pose.as_ref(),
+            bow: self.bow.as_ref().map(|b| match b {
+                Ok(b) => BowView::Found(b),
+                Err(e) => BowView::Failed { error: e },
+            }),
+            height_m: self.height_m,
+            refused_sensors: self.refused,
+            message: self.message.as_deref(),
+        }
+    }
+
+    /// Sensor id → bone, as assigned.
+    pub fn assigned(&self) -> &BTreeMap<String, String> {
+        &self.assigned
+    }
+
+    pub fn height_m(&self) -> Option<f64> {
+        self.height_m
+    }
+
+    pub fn pose_name(&self) -> &str {
+        &self.pose_name
+    }
+
+    /// The biases found, by sensor.
+    pub fn biases(&self) -> impl Iterator<Item = (&str, &GyroBias)> {
+        self.bias
+            .iter()
+            .filter_map(|b| b.bias.as_ref().ok().map(|g| (b.sensor.as_str(), g)))
+    }
+
+    /// The forward found by the bow: (sensor, axis).
+    pub fn forward(&self) -> Option<(&str, &str)> {
+        match &self.bow {
+            Some(Ok(b)) => Some((&b.sensor, &b.forward)),
+            _ => None,
+        }
+    }
+
+    /// The pose held, if any.
+    pub fn pose_held(&self) -> Option<&PoseResult> {
+        self.pose.as_ref()
+    }
+}
+
+/// The signed axis nearest `v` (unit), and the angle to it, radians.
+fn nearest_axis(v: &Vector3<f64>) -> (String, f64) {
+    let (k, c) = (0..3)
+        .map(|k| (k, v[k]))
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .expect("three axes");
+    let name = format!("{}{}", if c < 0.0 { '-' } else { '+' }, ['x', 'y', 'z'][k]);
+    (name, c.abs().clamp(-1.0, 1.0).acos())
+}
+
+/// The page's view of the board (JSON).
+#[derive(Debug, Serialize)]
+pub struct Snapshot<'a> {
+    pub now_s: Option<f64>,
+    pub lit: Option<&'a str>,
+    pub figure: &'a [FigureJoint],
+    pub poses: &'a [String],
+    pub pose: &'a str,
+    pub sensors: Vec<SensorView<'a>>,
+    pub capture: Option<CaptureView>,
+    pub bias: &'a [BiasResult],
+    pub pose_held: Option<&'a PoseResult>,
+    pub bow: Option<BowView<'a>>,
+    pub height_m: Option<f64>,
+    pub refused_sensors: u64,
+    pub message: Option<&'a str>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct SensorView<'a> {
+    pub id: &'a str,
+    pub bone: Option<&'a str>,
+    pub rate_hz: Option<f64>,
+    pub samples: u64,
+    pub gaps: u64,
+    pub silent_s: f64,
+    /// The turn rate, low-passed, °/s.
+    pub turn_dps: f64,
+    pub gyr_dps: Option<[f64; 3]>,
+    pub gyr_norm_dps: Option<f64>,
+    pub acc: Option<[f64; 3]>,
+    pub acc_norm: Option<f64>,
+    pub acc_unit: Option<[f64; 3]>,
+    pub mag: Option<[f64; 3]>,
+    pub mag_norm: Option<f64>,
+    pub mag_unit: Option<[f64; 3]>,
+    /// `[w, x, y, z]`, `q_world_sensor`, for sources that send orientations.
+    pub q: Option<[f64; 4]>,
+    pub accelerating: bool,
+    pub magnetic_disturbance: bool,
+}
+
+#[derive(Debug, Serialize)]
+pub struct CaptureView {
+    pub kind: CaptureKind,
+    pub starts_in_s: f64,
+    pub left_s: f64,
+}
+
+#[derive(Debug, Serialize)]
+#[serde(untagged)]
+pub enum BowView<'a> {
+    Found(&'a BowResult),
+    Failed { error: &'a str },
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    fn raw(gyr: Vector3<f64>, acc: Vector3<f64>) -> StreamValue {
+        StreamValue::Raw {
+            imu: ImuSample {
+                gyro_rad_s: gyr,
+                accel_m_s2: acc,
+            },
+            mag: Some(Vector3::new(20.0, 0.0, -40.0)),
+        }
+    }
+
+    pub(crate) fn joints(names: &[&str]) -> Vec<FigureJoint> {
+        names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| FigureJoint {
+                name: n.to_string(),
+                parent: i.checked_sub(1),
+                position_m: [0.0, i as f64 * 0.1, 0.0],
+                end_m: None,
+            })
+            .collect()
+    }
+
+    fn board() -> Board {
+        Board::new(joints(&["Hips", "Spine", "LeftArm"]), vec!["tpose".into()])
+    }
+
+    #[test]
+    fn the_sensor_that_turns_lights_up_and_the_still_ones_do_not() {
+        let mut b = board();
+        let still = raw(Vector3::new(0.001, 0.0, 0.0), Vector3::new(0.0, 0.0, G));
+        // 100 Hz: s1 still, s2 turns at 90 °/s from t = 1 s.
+        for i in 0..200 {
+            let t = i as f64 / 100.0;
+            b.sample("s1", t, still);
+            let w = if t >= 1.0 { 90f64.to_radians() } else { 0.0 };
+            b.sample(
+                "s2",
+                t,
+                raw(Vector3::new(0.0, 0.0, w), Vector3::new(0.0, 0.0, G)),
+            );
+            if (t - 0.99).abs() < 1e-9 {
+                assert_eq!(b.lit(), None);
+            }
+            // Low-passed over 0.1 s: 30 °/s of 90 is passed after 0.1·ln(3/2) ≈ 0.04 s.
+            if (t - 1.06).abs() < 1e-9 {
+                assert_eq!(b.lit(), Some("s2"));
+            }
+        }
+        let snap = b.snapshot();
+        assert_eq!(snap.sensors.len(), 2);
+        assert!((snap.sensors[0].rate_hz.unwrap() - 100.0).abs() < 1e-6);
+        assert_eq!(snap.sensors[0].acc_norm, Some(G));
+        assert_eq!(snap.sensors[0].acc_unit, Some([0.0, 0.0, 1.0]));
+    }
+
+    #[test]
+    fn a_gap_is_counted() {
+        let mut b = board();
+        let still = raw(Vector3::zeros(), Vector3::new(0.0, 0.0, G));
+        for t in [0.0, 0.01, 0.02, 0.03, 0.2, 0.21] {
+            b.sample("s", t, still);
+        }
+        assert_eq!(b.snapshot().sensors[0].gaps, 1);
+    }
+
+    #[test]
+    fn a_bone_has_one_sensor_and_unknown_names_are_refused() {
+        let mut b = board();
+        let still = raw(Vector3::zeros(), Vector3::new(0.0, 0.0, G));
+        b.sample("a", 0.0, still);
+        b.sample("b", 0.0, still);
+        let assign = |s: &str, bone: &str| Command::Assign {
+            sensor: s.into(),
+            bone: bone.into(),
+        };
+        b.command(assign("a", "Hips")).unwrap();
+        b.command(assign("b", "Hips")).unwrap();
+        assert_eq!(b.assigned().len(), 1);
+        assert_eq!(b.assigned()["b"], "Hips");
+        assert!(b.command(assign("c", "Hips")).is_err());
+        assert!(b.command(assign("a", "Tail")).is_err());
+        assert!(b.command(Command::Height { m: f64::NAN }).is_err());
+        assert!(
+            b.command(Command::Pose {
+                name: "apose".into()
+            })
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn the_gyro_bias_capture_is_each_sensors_mean_and_a_moving_one_is_refused() {
+        let mut b = board();
+        let bias = Vector3::new(0.5f64, -0.25, 1.0).map(f64::to_radians);
+        let g = Vector3::new(0.0, 0.0, G);
+        b.sample("still", 0.0, raw(bias, g));
+        b.sample("moving", 0.0, raw(Vector3::zeros(), g));
+        b.command(Command::Capture {
+            kind: CaptureKind::GyroBias,
+            seconds: 2.0,
+            countdown_s: 1.0,
+        })
+        .unwrap();
+        for i in 1..=400 {
+            let t = i as f64 / 100.0;
+            // ± 0.2 °/s alternating: the mean is the bias to rounding.
+            let noise = Vector3::repeat(if i % 2 == 0 { 0.2f64 } else { -0.2 }.to_radians());
+            b.sample("still", t, raw(bias + noise, g));
+            let w = 40f64.to_radians() * (t * 3.0).sin();
+            b.sample("moving", t, raw(Vector3::new(w, 0.0, 0.0), g));
+        }
+        let found: Vec<_> = b.biases().collect();
+        assert_eq!(found.len(), 1);
+        assert_eq!(found[0].0, "still");
+        for k in 0..3 {
+            assert!((found[0].1.bias_rad_s[k] - bias[k]).abs() < 0.01f64.to_radians());
+        }
+        // 1 s countdown, 2 s: samples from t = 1 to 3 s.
+        assert_eq!(found[0].1.window_s, [1.0, 3.0]);
+        let snap = b.snapshot();
+        assert!(snap.capture.is_none());
+        assert!(
+            snap.bias
+                .iter()
+                .any(|r| r.sensor == "moving" && r.bias.is_err())
+        );
+    }
+
+    #[test]
+    fn the_bow_gives_the_pelvis_sensors_forward_axis() {
+        // The pelvis sensor is mounted with its -y axis forward and its +z up: in the sensor
+        // frame the body's forward is -y. A forward bow of 30° tips gravity toward the
+        // sensor's back (+y): specific force (0, sin 30°, cos 30°)·g.
+        let mut b = board();
+        let up = Vector3::new(0.0, 0.0, G);
+        b.sample("p", 0.0, raw(Vector3::zeros(), up));
+        b.command(Command::Assign {
+            sensor: "p".into(),
+            bone: "Hips".into(),
+        })
+        .unwrap();
+        assert!(
+            b.command(Command::Capture {
+                kind: CaptureKind::Bow,
+                seconds: 2.0,
+                countdown_s: 0.0
+            })
+            .is_err()
+        );
+        b.command(Command::Capture {
+            kind: CaptureKind::Pose,
+            seconds: 1.0,
+            countdown_s: 0.0,
+        })
+        .unwrap();
+        let mut t = 0.0;
+        for _ in 0..120 {
+            t += 0.01;
+            b.sample("p", t, raw(Vector3::zeros(), up));
+        }
+        assert!(b.pose_held().unwrap().moved.is_empty());
+        b.command(Command::Capture {
+            kind: CaptureKind::Bow,
+            seconds: 2.0,
+            countdown_s: 0.0,
+        })
+        .unwrap();
+        for i in 0..250 {
+            t += 0.01;
+            let angle = 30f64.to_radians() * (std::f64::consts::PI * i as f64 / 200.0).sin();
+            let a = Vector3::new(0.0, angle.sin(), angle.cos()) * G;
+            b.sample("p", t, raw(Vector3::zeros(), a));
+        }
+        assert_eq!(b.forward(), Some(("p", "-y")));
+        let Some(BowView::Found(found)) = b.snapshot().bow else {
+            panic!("no bow");
+        };
+        assert!((found.bow_deg - 30.0).abs() < 0.5, "{}", found.bow_deg);
+        assert!(found.off_axis_deg < 1e-6);
+    }
+}
