@@ -50,9 +50,16 @@ pub fn run(args: SetupArgs) -> anyhow::Result<ExitCode> {
     let builtin = imubake::rig::file::BUILTIN
         .iter()
         .any(|(n, _)| *n == rig_name);
+    // The rig's named poses (a BVH rig's frames, `frame:N`, are left out of the page's list).
+    let poses = rig
+        .pose_names()
+        .into_iter()
+        .filter(|p| !p.starts_with("frame:"))
+        .collect();
     let setup = Arc::new(Setup::new(
-        Board::new(FigureJoint::of(rig), rig.pose_names()),
+        Board::new(FigureJoint::of(rig), poses),
         args.out.clone(),
+        rig.clone(),
         rig_name,
         builtin,
         args.sources.iter().map(|s| s.to_string()).collect(),

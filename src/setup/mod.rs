@@ -3,12 +3,14 @@
 //! assigned, the calibrations taken from the stream); the viewer's server serves the setup page
 //! and a `/setup` WebSocket over which the page gets the board ten times a second and sends its
 //! commands ([`board::Command`]); **Save** writes the mapping, the subject and the sensor
-//! calibration into one folder, each read back by the loader `convert` and `live` use.
+//! calibration into one folder, each first read by the parser of the loader `convert` and `live`
+//! use (nothing a later command would refuse is written).
 
 pub mod board;
 
 use crate::intrinsics::{SensorCalibration, SensorIntrinsics};
-use crate::mapping::load_mapping;
+use crate::mapping::parse_mapping;
+use crate::rig::Rig;
 use crate::rig::subject::Subject;
 use crate::take::StreamValue;
 use board::{Board, Command};
@@ -26,9 +28,11 @@ pub const CALIBRATION_FILE: &str = "sensor_calibration.yaml";
 pub struct Setup {
     board: Mutex<Board>,
     out: PathBuf,
+    /// The rig the bones are of: a subject is checked against it before it is saved.
+    rig: Rig,
     /// The rig as given (`--rig`): a built-in name goes into the mapping, any value into the
     /// printed command.
-    rig: String,
+    rig_arg: String,
     rig_is_builtin: bool,
     /// The sources as given (`--source`), for the printed command.
     sources: Vec<String>,
@@ -43,10 +47,12 @@ pub struct Saved {
 }
 
 impl Setup {
+    /// `rig_arg`: the rig as given on the command line (`rig`'s name or file).
     pub fn new(
         board: Board,
         out: PathBuf,
-        rig: String,
+        rig: Rig,
+        rig_arg: String,
         rig_is_builtin: bool,
         sources: Vec<String>,
     ) -> Setup {
@@ -54,6 +60,7 @@ impl Setup {
             board: Mutex::new(board),
             out,
             rig,
+            rig_arg,
             rig_is_builtin,
             sources,
         }
@@ -99,24 +106,37 @@ impl Setup {
         };
     }
 
-    /// Writes the mapping, the subject (when a height was given) and the sensor calibration
-    /// (when a bias was found) into the folder, atomically, and reads each back with its loader.
+    /// Writes the mapping, the subject (when a height or a segment was given) and the sensor
+    /// calibration (when a bias or a magnetometer fit was found) into the folder, atomically.
+    /// Each text is first read by the parser its loader uses (the subject also applied to the rig
+    /// in the pose held), so a file a later command would refuse is not written at all.
     pub fn save(&self) -> Result<Saved, String> {
-        let (mapping, subject, calibration) = {
+        let (mapping, subject, calibration, pose) = {
             let board = self.board();
-            files_of(&board, self.rig_is_builtin.then_some(self.rig.as_str()))?
+            let files = files_of(&board, self.rig_is_builtin.then_some(self.rig_arg.as_str()))?;
+            (files.0, files.1, files.2, board.pose_name().to_string())
         };
+        let path = |name: &str| self.out.join(name);
+        parse_mapping(&mapping, &path(MAPPING_FILE)).map_err(|e| e.to_string())?;
+        if let Some(subject) = &subject {
+            let standing = self.rig.pose(&pose).map(|p| p.local);
+            Subject::parse(subject, &path(SUBJECT_FILE))
+                .and_then(|s| s.apply(&self.rig, standing.as_deref(), &path(SUBJECT_FILE)))
+                .map_err(|e| e.to_string())?;
+        }
+        if let Some(calibration) = &calibration {
+            SensorCalibration::parse(calibration)
+                .map_err(|e| format!("{}: {e}", path(CALIBRATION_FILE).display()))?;
+        }
         std::fs::create_dir_all(&self.out).map_err(|e| format!("{}: {e}", self.out.display()))?;
-        let mut files = Vec::new();
         let write = |name: &str, text: &str| -> Result<PathBuf, String> {
-            let path = self.out.join(name);
+            let path = path(name);
             crate::write::write_atomic(&path, |w| w.write_all(text.as_bytes()))
                 .map_err(|e| format!("{}: {e}", path.display()))?;
             Ok(path)
         };
+        let word = |p: &Path| shell_word(&p.display().to_string());
         let mapping_path = write(MAPPING_FILE, &mapping)?;
-        load_mapping(&mapping_path).map_err(|e| e.to_string())?;
-        files.push(mapping_path.clone());
         let mut command = format!(
             "imubake live {} --rig {} --mapping {}",
             self.sources
@@ -124,28 +144,21 @@ impl Setup {
                 .map(|s| format!("--source {}", shell_word(s)))
                 .collect::<Vec<_>>()
                 .join(" "),
-            shell_word(&self.rig),
-            shell_word(&mapping_path.display().to_string()),
+            shell_word(&self.rig_arg),
+            word(&mapping_path),
         );
+        let mut files = vec![mapping_path];
         if let Some(subject) = subject {
             let path = write(SUBJECT_FILE, &subject)?;
-            Subject::load(&path).map_err(|e| e.to_string())?;
-            command += &format!(" --subject {}", shell_word(&path.display().to_string()));
+            command += &format!(" --subject {}", word(&path));
             files.push(path);
         }
         if let Some(calibration) = calibration {
             let path = write(CALIBRATION_FILE, &calibration)?;
-            SensorCalibration::load(&path).map_err(|e| e.to_string())?;
-            command += &format!(
-                " --sensor-calibration {}",
-                shell_word(&path.display().to_string())
-            );
+            command += &format!(" --sensor-calibration {}", word(&path));
             files.push(path);
         }
-        command += &format!(
-            " --record {}",
-            shell_word(&self.out.join("takes").display().to_string())
-        );
+        command += &format!(" --record {}", word(&self.out.join("takes")));
         Ok(Saved { files, command })
     }
 
@@ -200,13 +213,13 @@ fn files_of(
         mapping["rig"] = rig.into();
     }
     let mapping = serde_json::to_string_pretty(&mapping).expect("JSON") + "\n";
-    let subject = board.height_m().map(|h| {
-        let subject = Subject {
-            height_m: Some(h),
-            ..Default::default()
-        };
+    let subject = Subject {
+        height_m: board.height_m(),
+        segments: board.segments().clone(),
+    };
+    let subject = (subject != Subject::default()).then(|| {
         format!(
-            "# written by imubake setup\n{}",
+            "# written by imubake setup: metres\n{}",
             serde_yaml::to_string(&subject).expect("plain data")
         )
     });
@@ -224,6 +237,17 @@ fn files_of(
             },
         );
     }
+    for (sensor, fit) in board.mag_fits() {
+        calibration.sources.insert(
+            "mag".into(),
+            "imubake setup: turned through every direction in the live stream".into(),
+        );
+        calibration
+            .sensors
+            .entry(sensor.to_string())
+            .or_default()
+            .magnetometer = Some(fit.clone());
+    }
     let calibration = (!calibration.sensors.is_empty()).then(|| calibration.to_yaml());
     Ok((mapping, subject, calibration))
 }
@@ -240,6 +264,7 @@ mod tests {
         let setup = Setup::new(
             Board::new(board::tests::joints(&["Hips", "Spine"]), vec![]),
             dir.path().join("suit"),
+            crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
             "mixamo".into(),
             true,
             vec!["udp:9000".into()],
@@ -264,7 +289,7 @@ mod tests {
         }
         let saved = setup.save().unwrap();
         assert_eq!(saved.files.len(), 3);
-        let mapping = load_mapping(&saved.files[0]).unwrap();
+        let mapping = crate::mapping::load_mapping(&saved.files[0]).unwrap();
         let crate::mapping::MappingFile::Quaternion(m) = mapping else {
             panic!("not a quaternion mapping");
         };
@@ -288,6 +313,63 @@ mod tests {
             .collect();
         names.sort();
         assert_eq!(names, [MAPPING_FILE, CALIBRATION_FILE, SUBJECT_FILE]);
+    }
+
+    #[test]
+    fn a_subject_the_rig_cannot_take_is_not_saved() {
+        let dir = tempfile::tempdir().unwrap();
+        let setup = Setup::new(
+            Board::new(
+                board::FigureJoint::of(&crate::rig::builtin_rig("mixamo").unwrap().unwrap()),
+                vec![],
+            ),
+            dir.path().join("suit"),
+            crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
+            "mixamo".into(),
+            true,
+            vec!["stdin".into()],
+        );
+        setup.sample(
+            "a",
+            0.0,
+            StreamValue::Raw {
+                imu: ImuSample {
+                    gyro_rad_s: Vector3::zeros(),
+                    accel_m_s2: Vector3::new(0.0, 0.0, 9.81),
+                },
+                mag: None,
+            },
+        );
+        setup.command_json(r#"{"cmd":"assign","sensor":"a","bone":"Hips"}"#);
+        // Mixamo's thigh is about 0.4 m: 1.4 m is more than 3× it.
+        setup.command_json(r#"{"cmd":"segment","part":"left_thigh","m":1.4}"#);
+        let e = setup.save().unwrap_err();
+        assert!(e.contains("left_thigh"), "{e}");
+        // Nothing is written then, not even the mapping.
+        assert!(!dir.path().join("suit").exists());
+        setup.command_json(r#"{"cmd":"segment","part":"left_thigh","m":0.45}"#);
+        let saved = setup.save().unwrap();
+        let subject = Subject::load(&saved.files[1]).unwrap();
+        assert_eq!(subject.segments["left_thigh"], 0.45);
+        assert_eq!(subject.height_m, None);
+    }
+
+    proptest::proptest! {
+        /// Any text from the page is a command or a message on the board: never a panic.
+        #[test]
+        fn any_text_from_the_page_is_answered(text in ".{0,200}") {
+            let setup = Setup::new(
+                Board::new(board::tests::joints(&["Hips"]), vec![]),
+                std::env::temp_dir().join("imubake-setup-never-written"),
+                crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
+                "mixamo".into(),
+                true,
+                vec![],
+            );
+            setup.command_json(&text);
+            let snapshot: serde_json::Value = serde_json::from_str(&setup.snapshot_json()).unwrap();
+            proptest::prop_assert!(snapshot["message"].as_str().is_some_and(|m| m.starts_with("error")));
+        }
     }
 
     #[test]

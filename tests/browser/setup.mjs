@@ -3,7 +3,8 @@
 // replayed stream of tests/python/setup_stream.py, as a user would: for each slot of the stream
 // it waits for a sensor to light up, clicks its row and then the bone the truth says moves in
 // that slot (it is never told which sensor that is); it runs the gyro-bias capture, holds the
-// pose, bows, enters a height and saves. Prints JSON on stdout.
+// pose, bows, enters a segment, runs the magnetometer capture, enters a height and saves. Prints
+// JSON on stdout.
 //
 //   node tests/browser/setup.mjs URL TRUTH.json SHOT.png
 //
@@ -79,6 +80,13 @@ try {
   await until(truth.bow_phase_s[0] + 0.2);
   await page.click("#bow");
   await board(() => window.imubakeSetup.state.bow !== null, "the bow");
+  await page.selectOption("#segment-part", "left_thigh");
+  await page.fill("#segment-m", "0.45");
+  await page.click("#set-segment");
+  await board(() => window.imubakeSetup.state.segments.left_thigh === 0.45, "the segment");
+  await until(truth.mag_phase_s[0] + 0.1);
+  await page.click("#mag");
+  await board(() => window.imubakeSetup.state.mag.length > 0, "the magnetometers", 30);
   await page.fill("#height", "1.72");
   await page.click("#set-height");
   await board(() => window.imubakeSetup.state.height_m !== null, "the height");

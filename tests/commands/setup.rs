@@ -2,7 +2,8 @@
 //! `tests/browser/setup.mjs`), against a replayed raw stream of 16 simulated sensors that move
 //! one at a time (`tests/python/setup_stream.py`, numpy and scipy): the page lights each moving
 //! sensor, the driver puts it on the bone the simulation says moves then (it is never told the
-//! sensor), runs the gyro-bias capture, holds the pose, bows and saves. The saved files are
+//! sensor), runs the gyro-bias and magnetometer captures, holds the pose, bows, enters a height
+//! and a segment and saves. The saved files are
 //! checked against the simulation's truth, then drive `live --record` and `convert`.
 
 use crate::common;
@@ -104,8 +105,23 @@ fn a_suit_is_set_up_in_the_browser_and_its_files_convert_a_take() {
     }
     println!("gyro bias: worst axis {worst:.4} °/s off the simulated");
     assert!(worst <= 0.05, "{worst} °/s");
+    // Each magnetometer's hard iron, from the tumble.
+    let mut worst = 0.0f64;
+    for (id, s) in &calibration.sensors {
+        let fit = s
+            .magnetometer
+            .as_ref()
+            .unwrap_or_else(|| panic!("{id}: no fit"));
+        let simulated = &sensors[id]["hard_iron"];
+        for (k, h) in fit.hard_iron.iter().enumerate() {
+            worst = worst.max((h - simulated[k].as_f64().unwrap()).abs());
+        }
+    }
+    println!("hard iron: worst axis {worst:.3} µT off the simulated (field 44.7 µT)");
+    assert!(worst <= 0.5, "{worst} µT");
     let subject = Subject::load(&out.join("subject.yaml")).unwrap();
     assert_eq!(subject.height_m, Some(1.72));
+    assert_eq!(subject.segments["left_thigh"], 0.45);
 
     // The command the page printed records a take (the stream replayed 10× faster, VMC off);
     // convert reads it with the saved files.

@@ -15,7 +15,7 @@ const LAYERS: [&[&str]; 11] = [
     &["mapping", "anim"],
     &["pipeline", "analysis", "retarget"],
     &["write"],
-    &["convert", "simulate"],
+    &["convert", "simulate", "setup"],
     &["config", "ledger", "view"],
     &["batch", "live"],
     &["watch"],

@@ -2,8 +2,8 @@
 
 Written with numpy and scipy's Rotation, apart from imubake's own simulator. Each sensor sits on a
 bone of the mixamo rig in a random orientation (the pelvis's: its -y axis the body's forward, +z
-up), with its own constant gyro bias (0.5 °/s SD per axis) and white noise (gyro 0.1 °/s, specific
-force 0.02 m/s², field 0.1 µT, per axis). World ENU; gravity's specific force +z, the field
+up), with its own constant gyro bias (0.5 °/s SD per axis), its own magnetometer hard iron (10 µT
+SD per axis) and white noise (gyro 0.1 °/s, specific force 0.02 m/s², field 0.1 µT, per axis). World ENU; gravity's specific force +z, the field
 (0, 20, -40) µT. The timeline (seconds):
 
 - 0 to 3: every sensor still;
@@ -12,11 +12,14 @@ force 0.02 m/s², field 0.1 µT, per axis). World ENU; gravity's specific force 
 - 27 to 33: still (the gyro bias);
 - 33 to 39: still (the pose);
 - 39 to 45: the pelvis bows 30° forward and back between 41.5 and 43.5 (the heading);
-- 45 to 47: still.
+- 45 to 47: still;
+- 47 to 62: every sensor tumbles (150 °/s about an axis that wanders through the sensor's
+  frame) for the magnetometers;
+- 62 to 63: still.
 
     python setup_stream.py OUT.csv TRUTH.json [SEED]
 
-TRUTH.json: each sensor's bone and bias (rad/s), the order they move in and when, the pelvis
+TRUTH.json: each sensor's bone, bias (rad/s) and hard iron (µT), the order they move in and when, the pelvis
 sensor and its forward axis, and the phases' times.
 """
 
@@ -37,7 +40,8 @@ BIAS_PHASE = (27.0, 33.0)
 POSE_PHASE = (33.0, 39.0)
 BOW_PHASE = (39.0, 45.0)
 BOW = (41.5, 43.5, 30.0)
-END = 47.0
+MAG_PHASE = (47.0, 62.0)
+END = 63.0
 
 
 def main():
@@ -49,6 +53,7 @@ def main():
     pelvis = ids[0]
     order = list(rng.permutation(ids))
     bias = {s: np.radians(rng.normal(0.0, 0.5, 3)) for s in ids}
+    hard_iron = {s: rng.normal(0.0, 10.0, 3) for s in ids}
     # q_world_sensor at rest; the pelvis's sensor x, y, z = world -x, -y, +z (180° about z):
     # its -y is the body's forward (north).
     start = {s: Rotation.random(random_state=rng.integers(1 << 31)) for s in ids}
@@ -68,6 +73,12 @@ def main():
         rate = np.zeros((n, 3))
         inside = (times >= t0) & (times < t0 + MOVE)
         rate[inside] = np.outer(np.radians(200.0) * np.sin(2 * np.pi * (times[inside] - t0) / MOVE), axes[s])
+        # The tumble: 150 °/s about an axis that wanders (three incommensurate rates).
+        inside = (times >= MAG_PHASE[0]) & (times < MAG_PHASE[1])
+        tau = times[inside] - MAG_PHASE[0]
+        phase = rng.uniform(0, 2 * np.pi)
+        wander = np.stack([np.sin(0.9 * tau + phase), np.cos(0.55 * tau + phase), np.sin(0.31 * tau) + 0.3], axis=1)
+        rate[inside] = np.radians(150.0) * wander / np.linalg.norm(wander, axis=1, keepdims=True)
         # The bow (pelvis only): a turn about the world's −x (the body's left, so the trunk
         # tips forward), 30° · (1 − cos)/2 up and back.
         world_rate = np.zeros((n, 3))
@@ -89,7 +100,7 @@ def main():
         # The gyro reads the body-frame rate: the sensor's own plus the world's turned in.
         gyro = rate + orientation.inv().apply(world_rate) + bias[s] + rng.normal(0, np.radians(0.1), (n, 3))
         acc = orientation.inv().apply(G) + rng.normal(0, 0.02, (n, 3))
-        mag = orientation.inv().apply(FIELD) + rng.normal(0, 0.1, (n, 3))
+        mag = orientation.inv().apply(FIELD) + hard_iron[s] + rng.normal(0, 0.1, (n, 3))
         for i in range(n):
             rows.append((times[i], s, gyro[i], acc[i], mag[i]))
     rows.sort(key=lambda r: (r[0], r[1]))
@@ -99,13 +110,15 @@ def main():
         for t, s, g, a, m in rows:
             f.write(f"{t:.2f},{s}," + ",".join(f"{v:.6f}" for v in (*g, *a, *m)) + "\n")
     truth = {
-        "sensors": {s: {"bone": bones[s], "bias_rad_s": bias[s].tolist()} for s in ids},
+        "sensors": {s: {"bone": bones[s], "bias_rad_s": bias[s].tolist(), "hard_iron": hard_iron[s].tolist()}
+                    for s in ids},
         "moves": sorted(moves, key=lambda m: m["start_s"]),
         "pelvis": pelvis,
         "forward": "-y",
         "bias_phase_s": BIAS_PHASE,
         "pose_phase_s": POSE_PHASE,
         "bow_phase_s": BOW_PHASE,
+        "mag_phase_s": MAG_PHASE,
         "end_s": END,
     }
     with open(truth_path, "w") as f:

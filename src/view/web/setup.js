@@ -109,7 +109,7 @@ function drawSensors(state) {
     if (!row) {
       row = body.insertRow();
       row.dataset.sensor = s.id;
-      for (let i = 0; i < 9; i++) row.insertCell();
+      for (let i = 0; i < 10; i++) row.insertCell();
       row.addEventListener('click', () => select(s.id));
     }
     rows.delete(s.id);
@@ -125,7 +125,12 @@ function drawSensors(state) {
       fixed(s.turn_dps, 0),
       s.gyr_dps ? `${vec(s.gyr_dps)} |${fixed(s.gyr_norm_dps)}|` : s.q ? `q ${vec(s.q, 3)}` : '–',
       s.acc ? `${vec(s.acc, 2)} |${fixed(s.acc_norm, 2)}|<small>${vec(s.acc_unit, 3)}</small>` : '–',
-      s.mag ? `${vec(s.mag, 1)} |${fixed(s.mag_norm, 1)}|<small>${vec(s.mag_unit, 3)}</small>` : '–',
+      s.mag
+        ? `${vec(s.mag, 1)} |${fixed(s.mag_norm, 1)}|<small>${vec(s.mag_unit, 3)}${s.mag_coverage_pct === null ? '' : ` · ${fixed(s.mag_coverage_pct, 0)} % covered`}</small>`
+        : '–',
+      s.fused
+        ? `tilt ${fixed(s.fused_tilt_deg)}° heading ${fixed(s.fused_heading_deg)}°<small>${vec(s.fused, 3)}</small>`
+        : esc(s.fusion_error ?? '–'),
       `<span class="flag">${esc(flags.join(', '))}</span>`,
     ];
     cells.forEach((html, i) => {
@@ -154,7 +159,12 @@ function drawCalibration(state) {
   const box = $('capture');
   box.hidden = !c;
   if (c) {
-    const what = { gyro_bias: 'hold every sensor still', pose: 'hold the pose', bow: 'bow forward and come back' }[c.kind];
+    const what = {
+      gyro_bias: 'hold every sensor still',
+      magnetometer: 'turn every sensor through all directions',
+      pose: 'hold the pose',
+      bow: 'bow forward and come back',
+    }[c.kind];
     box.textContent = c.starts_in_s > 0 ? `${what} in ${c.starts_in_s.toFixed(1)} s` : `${what}: ${c.left_s.toFixed(1)} s`;
   }
   const bias = $('bias-result');
@@ -165,6 +175,16 @@ function drawCalibration(state) {
         : `<tr class="error"><td>${esc(b.sensor)}</td><td colspan="2">${esc(b.bias.Err)}</td></tr>`,
     )
     .join('');
+  $('mag-result').innerHTML = state.mag
+    .map((m) =>
+      m.fit.Ok
+        ? `<tr><td>${esc(m.sensor)}</td><td>covered ${fixed(m.fit.Ok.coverage_pct, 0)} %</td><td>norm spread ${fixed(m.fit.Ok.residual_before_pct, 1)} → ${fixed(m.fit.Ok.residual_after_pct, 1)} %</td></tr>`
+        : `<tr class="error"><td>${esc(m.sensor)}</td><td colspan="2">${esc(m.fit.Err)}</td></tr>`,
+    )
+    .join('');
+  $('segments-now').textContent = Object.entries(state.segments)
+    .map(([k, v]) => `${k} ${v} m`)
+    .join(' · ');
   const held = state.pose_held;
   $('pose-result').textContent = held
     ? held.moved.length
@@ -179,7 +199,7 @@ function drawCalibration(state) {
     : '';
   $('height-now').textContent = state.height_m ? `${state.height_m} m` : '';
   const pose = $('pose');
-  const names = ['rest', ...state.poses];
+  const names = state.poses.includes('rest') ? state.poses : ['rest', ...state.poses];
   if (pose.options.length !== names.length) {
     pose.replaceChildren(...names.map((n) => new Option(n, n)));
   }
@@ -221,6 +241,11 @@ function connect() {
 $('bias').addEventListener('click', () => send({ cmd: 'capture', kind: 'gyro_bias', seconds: 3, countdown_s: 0 }));
 $('hold').addEventListener('click', () => send({ cmd: 'capture', kind: 'pose', seconds: 2, countdown_s: 3 }));
 $('bow').addEventListener('click', () => send({ cmd: 'capture', kind: 'bow', seconds: 4, countdown_s: 2 }));
+$('mag').addEventListener('click', () => send({ cmd: 'capture', kind: 'magnetometer', seconds: 15, countdown_s: 0 }));
+$('set-segment').addEventListener('click', () => {
+  const m = $('segment-m').value;
+  send({ cmd: 'segment', part: $('segment-part').value, m: m === '' ? null : Number(m) });
+});
 $('pose').addEventListener('change', (e) => send({ cmd: 'pose', name: e.target.value }));
 $('set-height').addEventListener('click', () => send({ cmd: 'height', m: Number($('height').value) }));
 $('save').addEventListener('click', () => send({ cmd: 'save' }));
