@@ -160,6 +160,9 @@ pub enum CaptureKind {
     GyroBias,
     /// Hold the calibration pose: every sensor still, each one's gravity.
     Pose,
+    /// Then hold a second pose (the mapping's `calibration.second`): the turn of each bone
+    /// between the two gives the heading of sensors without a magnetometer.
+    SecondPose,
     /// From the pose, bow forward and come back: the pelvis sensor's forward axis.
     Bow,
     /// Turn every sensor through all directions: each magnetometer's hard and soft iron.
@@ -257,6 +260,10 @@ pub enum Command {
     Pose {
         name: String,
     },
+    /// The rig pose held second (`null`: none).
+    SecondPose {
+        name: Option<String>,
+    },
     /// Write the files.
     Save,
 }
@@ -304,8 +311,13 @@ pub struct Board {
     bias: Vec<BiasResult>,
     mag: Vec<MagResult>,
     pose: Option<PoseResult>,
+    second: Option<PoseResult>,
     bow: Option<Result<BowResult, String>>,
     pose_name: String,
+    second_name: Option<String>,
+    /// The pelvis sensor's fused heading when the pose was held, radians (the follow camera's
+    /// reference).
+    pelvis_heading_at_pose: Option<f64>,
     height_m: Option<f64>,
     /// Body part → length, metres.
     segments: BTreeMap<String, f64>,
@@ -345,8 +357,11 @@ impl Board {
             bias: Vec::new(),
             mag: Vec::new(),
             pose: None,
+            second: None,
             bow: None,
             pose_name: "rest".into(),
+            second_name: None,
+            pelvis_heading_at_pose: None,
             height_m: None,
             segments: BTreeMap::new(),
             refused: 0,
@@ -444,6 +459,14 @@ impl Board {
                 if kind == CaptureKind::Bow && self.pose.is_none() {
                     return Err("hold the pose first: the bow is measured from it".into());
                 }
+                if kind == CaptureKind::SecondPose {
+                    if self.pose.is_none() {
+                        return Err("hold the first pose first".into());
+                    }
+                    if self.second_name.is_none() {
+                        return Err("choose the second pose first".into());
+                    }
+                }
                 self.capture = Some(Capture {
                     kind,
                     start_s: self.now_s + countdown_s,
@@ -481,20 +504,55 @@ impl Board {
                 self.height_m = Some(m);
             }
             Command::Pose { name } => {
-                if name != "rest" && !self.poses.contains(&name) {
-                    return Err(format!(
-                        "the rig has no pose `{name}` (it has rest{})",
-                        self.poses
-                            .iter()
-                            .map(|p| format!(", {p}"))
-                            .collect::<String>()
-                    ));
+                self.check_pose(&name)?;
+                if self.second_name.as_ref() == Some(&name) {
+                    return Err(format!("`{name}` is already the second pose"));
                 }
                 self.pose_name = name;
+            }
+            Command::SecondPose { name } => {
+                if let Some(name) = &name {
+                    self.check_pose(name)?;
+                    if *name == self.pose_name {
+                        return Err(format!("`{name}` is already the first pose"));
+                    }
+                }
+                self.second_name = name;
+                self.second = None;
             }
             Command::Save => return Err("save is the session's, not the board's".into()),
         }
         Ok(())
+    }
+
+    fn check_pose(&self, name: &str) -> Result<(), String> {
+        if name != "rest" && !self.poses.iter().any(|p| p == name) {
+            return Err(format!(
+                "the rig has no pose `{name}` (it has rest{})",
+                self.poses
+                    .iter()
+                    .filter(|p| *p != "rest")
+                    .map(|p| format!(", {p}"))
+                    .collect::<String>()
+            ));
+        }
+        Ok(())
+    }
+
+    /// The sensor on the rig's first bone (the pelvis).
+    fn pelvis_sensor(&self) -> Option<&str> {
+        let root = self.bones.first()?;
+        self.assigned
+            .iter()
+            .find(|(_, b)| *b == root)
+            .map(|(s, _)| s.as_str())
+    }
+
+    /// The fused heading of `sensor`'s x axis, radians from north toward east.
+    fn heading(&self, sensor: &str) -> Option<f64> {
+        let q = self.sensors[*self.index.get(sensor)?].fused?;
+        let x = q * Vector3::x();
+        Some(x.x.atan2(x.y))
     }
 
     fn finish(&mut self, c: Capture) {
@@ -528,7 +586,7 @@ impl Board {
                     })
                     .collect();
             }
-            CaptureKind::Pose => {
+            CaptureKind::Pose | CaptureKind::SecondPose => {
                 let mut moved = Vec::new();
                 let mut up = HashMap::new();
                 for (k, s) in self.sensors.iter().enumerate() {
@@ -552,13 +610,22 @@ impl Board {
                         up.insert(s.id.clone(), a);
                     }
                 }
-                self.pose = Some(PoseResult {
+                let held = PoseResult {
                     start_s: c.start_s,
                     seconds: c.seconds,
                     moved,
                     up,
-                });
-                self.bow = None;
+                };
+                if c.kind == CaptureKind::SecondPose {
+                    self.second = Some(held);
+                } else {
+                    self.pose = Some(held);
+                    // The bow and the second pose are measured from this one.
+                    self.bow = None;
+                    self.second = None;
+                    self.pelvis_heading_at_pose =
+                        self.pelvis_sensor().and_then(|s| self.heading(s));
+                }
             }
             CaptureKind::Bow => self.bow = Some(self.bow_result(&c)),
             CaptureKind::Magnetometer => {
@@ -591,10 +658,8 @@ impl Board {
         let pose = self.pose.as_ref().ok_or("no pose held")?;
         let root = self.bones.first().ok_or("the rig has no bones")?;
         let sensor = self
-            .assigned
-            .iter()
-            .find(|(_, b)| *b == root)
-            .map(|(s, _)| s.clone())
+            .pelvis_sensor()
+            .map(str::to_string)
             .ok_or_else(|| format!("no sensor on `{root}` (the pelvis): put one there first"))?;
         let u0 = *pose
             .up
@@ -714,6 +779,15 @@ impl Board {
             bias: &self.bias,
             mag: &self.mag,
             pose_held: self.pose.as_ref(),
+            second_pose: self.second_name.as_deref(),
+            second_held: self.second.as_ref(),
+            pelvis_turn_deg: match (self.pelvis_heading_at_pose, self.pelvis_sensor()) {
+                (Some(at_pose), Some(s)) => self.heading(s).map(|h| {
+                    let d = (h - at_pose).to_degrees();
+                    d - 360.0 * (d / 360.0).round()
+                }),
+                _ => None,
+            },
             bow: self.bow.as_ref().map(|b| match b {
                 Ok(b) => BowView::Found(b),
                 Err(e) => BowView::Failed { error: e },
@@ -769,6 +843,11 @@ impl Board {
     pub fn pose_held(&self) -> Option<&PoseResult> {
         self.pose.as_ref()
     }
+
+    /// The second pose's name and hold, when both are there.
+    pub fn second_held(&self) -> Option<(&str, &PoseResult)> {
+        Some((self.second_name.as_deref()?, self.second.as_ref()?))
+    }
 }
 
 /// How much of the sphere of directions a magnetometer capture has reached so far, % (as the fit
@@ -812,6 +891,13 @@ pub struct Snapshot<'a> {
     pub bias: &'a [BiasResult],
     pub mag: &'a [MagResult],
     pub pose_held: Option<&'a PoseResult>,
+    /// The second pose chosen, and its hold.
+    pub second_pose: Option<&'a str>,
+    pub second_held: Option<&'a PoseResult>,
+    /// How far the pelvis sensor has turned about the vertical since the pose, degrees (toward
+    /// east positive; `None` before the pose or without a fused pelvis sensor): the follow
+    /// camera turns with it.
+    pub pelvis_turn_deg: Option<f64>,
     pub bow: Option<BowView<'a>>,
     pub height_m: Option<f64>,
     pub segments: &'a BTreeMap<String, f64>,
@@ -893,7 +979,10 @@ pub(crate) mod tests {
     }
 
     fn board() -> Board {
-        Board::new(joints(&["Hips", "Spine", "LeftArm"]), vec!["tpose".into()])
+        Board::new(
+            joints(&["Hips", "Spine", "LeftArm"]),
+            vec!["rest".into(), "tpose".into()],
+        )
     }
 
     #[test]
@@ -923,6 +1012,29 @@ pub(crate) mod tests {
         assert!((snap.sensors[0].rate_hz.unwrap() - 100.0).abs() < 1e-6);
         assert_eq!(snap.sensors[0].acc_norm, Some(G));
         assert_eq!(snap.sensors[0].acc_unit, Some([0.0, 0.0, 1.0]));
+    }
+
+    #[test]
+    fn a_sensor_that_sends_orientations_lights_up_by_their_turn() {
+        // Orientations at 100 Hz: `q` turns at 60 °/s about y from t = 1 s, `r` stays; the
+        // angle between consecutive quaternions over their step is the turn rate.
+        let mut b = board();
+        for i in 0..150 {
+            let t = i as f64 / 100.0;
+            let angle = (t - 1.0).max(0.0) * 60f64.to_radians();
+            let turned = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), angle);
+            b.sample("q", t, StreamValue::Quaternion(turned));
+            b.sample("r", t, StreamValue::Quaternion(UnitQuaternion::identity()));
+        }
+        assert_eq!(b.lit(), Some("q"));
+        let snap = b.snapshot();
+        assert!(
+            (snap.sensors[0].turn_dps - 60.0).abs() < 0.5,
+            "{}",
+            snap.sensors[0].turn_dps
+        );
+        assert_eq!(snap.sensors[1].turn_dps, 0.0);
+        assert!(snap.sensors[0].q.is_some() && snap.sensors[0].fused.is_none());
     }
 
     #[test]
@@ -1093,6 +1205,49 @@ pub(crate) mod tests {
             "{ws}"
         );
         assert!(fit.coverage_pct > 95.0);
+    }
+
+    #[test]
+    fn the_follow_camera_turns_with_the_pelvis_since_the_pose() {
+        // The pelvis sensor lies flat (z up), its x north. After the pose it turns clockwise
+        // seen from above by 90° (−90° about z, 1 s at −90 °/s): its x then points east, a
+        // heading of +90° from north toward east.
+        let mut b = board();
+        let (g, m) = (Vector3::new(0.0, 0.0, G), Vector3::new(0.0, 20.0, -40.0));
+        let reading = |q: UnitQuaternion<f64>, w: f64| StreamValue::Raw {
+            imu: ImuSample {
+                gyro_rad_s: Vector3::new(0.0, 0.0, w),
+                accel_m_s2: q.inverse() * g,
+            },
+            mag: Some(q.inverse() * m),
+        };
+        let mut t = 0.0;
+        b.sample("p", t, reading(UnitQuaternion::identity(), 0.0));
+        b.command(Command::Assign {
+            sensor: "p".into(),
+            bone: "Hips".into(),
+        })
+        .unwrap();
+        b.command(Command::Capture {
+            kind: CaptureKind::Pose,
+            seconds: 1.0,
+            countdown_s: 2.0,
+        })
+        .unwrap();
+        for _ in 0..400 {
+            t += 0.01;
+            b.sample("p", t, reading(UnitQuaternion::identity(), 0.0));
+        }
+        assert!(b.snapshot().pelvis_turn_deg.unwrap().abs() < 0.5);
+        let rate = -90f64.to_radians();
+        for i in 1..=200 {
+            t += 0.01;
+            let angle = rate * (i.min(100) as f64 * 0.01);
+            let q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), angle);
+            b.sample("p", t, reading(q, if i <= 100 { rate } else { 0.0 }));
+        }
+        let turn = b.snapshot().pelvis_turn_deg.unwrap();
+        assert!((turn - 90.0).abs() < 1.0, "{turn}");
     }
 
     #[test]

@@ -209,6 +209,15 @@ fn files_of(
         "calibration": {"pose": board.pose_name(), "start_s": 0.0, "duration_s": duration_s},
         "sensors": sensors,
     });
+    // The second pose as it was held after the first (a take repeats that timing).
+    if let (Some(first), Some((name, second))) = (board.pose_held(), board.second_held()) {
+        mapping["calibration"]["second"] = serde_json::json!({
+            "pose": name,
+            "start_s": second.start_s - first.start_s,
+            "duration_s": second.seconds,
+        });
+        mapping["comment"] = "written by imubake setup: a take recorded with it starts with the calibration pose, then the second pose in the same timing".into();
+    }
     if let Some(rig) = rig {
         mapping["rig"] = rig.into();
     }
@@ -352,6 +361,76 @@ mod tests {
         let subject = Subject::load(&saved.files[1]).unwrap();
         assert_eq!(subject.segments["left_thigh"], 0.45);
         assert_eq!(subject.height_m, None);
+    }
+
+    #[test]
+    fn a_second_pose_is_saved_in_the_timing_it_was_held() {
+        let dir = tempfile::tempdir().unwrap();
+        let setup = Setup::new(
+            Board::new(
+                board::tests::joints(&["Hips", "Spine"]),
+                vec!["rest".into(), "tpose".into()],
+            ),
+            dir.path().join("suit"),
+            crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
+            "mixamo".into(),
+            true,
+            vec![],
+        );
+        let still = StreamValue::Raw {
+            imu: ImuSample {
+                gyro_rad_s: Vector3::zeros(),
+                accel_m_s2: Vector3::new(0.0, 0.0, 9.81),
+            },
+            mag: None,
+        };
+        let snapshot =
+            |s: &Setup| -> serde_json::Value { serde_json::from_str(&s.snapshot_json()).unwrap() };
+        for i in 0..=1000 {
+            let t = i as f64 / 100.0;
+            setup.sample("a", t, still);
+            match i {
+                0 => {
+                    setup.command_json(r#"{"cmd":"assign","sensor":"a","bone":"Hips"}"#);
+                    setup.command_json(r#"{"cmd":"capture","kind":"second_pose","seconds":1.5}"#);
+                    assert!(
+                        snapshot(&setup)["message"]
+                            .as_str()
+                            .unwrap()
+                            .contains("first")
+                    );
+                    setup.command_json(r#"{"cmd":"second_pose","name":"rest"}"#);
+                    assert!(
+                        snapshot(&setup)["message"]
+                            .as_str()
+                            .unwrap()
+                            .contains("already")
+                    );
+                    setup.command_json(r#"{"cmd":"second_pose","name":"tpose"}"#);
+                    // Held from 1 to 3 s.
+                    setup.command_json(
+                        r#"{"cmd":"capture","kind":"pose","seconds":2,"countdown_s":1}"#,
+                    );
+                }
+                // Held from 4.5 to 6 s: 3.5 s after the first began.
+                400 => setup.command_json(
+                    r#"{"cmd":"capture","kind":"second_pose","seconds":1.5,"countdown_s":0.5}"#,
+                ),
+                _ => {}
+            }
+        }
+        let saved = setup.save().unwrap();
+        let crate::mapping::MappingFile::Quaternion(m) =
+            crate::mapping::load_mapping(&saved.files[0]).unwrap()
+        else {
+            panic!("not a quaternion mapping");
+        };
+        let window = m.calibration.unwrap();
+        assert_eq!((window.start_s, window.duration_s), (0.0, 2.0));
+        let second = window.second.unwrap();
+        assert_eq!(second.pose, crate::mapping::PoseRef::Named("tpose".into()));
+        assert!((second.start_s - 3.5).abs() < 1e-9, "{}", second.start_s);
+        assert_eq!(second.duration_s, 1.5);
     }
 
     proptest::proptest! {

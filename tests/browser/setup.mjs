@@ -94,7 +94,7 @@ try {
   await board(() => (window.imubakeSetup.state.message ?? "").startsWith("saved"), "the save", 10);
   out.message = await page.evaluate(() => document.getElementById("message").textContent);
   out.state = await page.evaluate(() => window.imubakeSetup.state);
-  for (const camera of ["side", "top", "front"]) await page.click(`#cameras button[data-camera="${camera}"]`);
+  for (const camera of ["side", "top", "follow", "front"]) await page.click(`#cameras button[data-camera="${camera}"]`);
   await page.screenshot({ path: shot });
   out.errors = await page.evaluate(() => window.imubakeSetup.errors);
 } catch (e) {

@@ -29,18 +29,28 @@ const esc = (t) =>
 const fixed = (v, d = 1) => (v === null || v === undefined ? '–' : Number(v).toFixed(d));
 const vec = (v, d = 1) => (v ? v.map((x) => fixed(x, d)).join(' ') : '–');
 
-// The figure's 2-D view of a point [x, y, z] (metres, Y up) for the camera.
+// How far the follow camera has turned (the pelvis sensor's turn since the pose), radians.
+let followTurn = 0;
+
+// The figure's 2-D view of a point [x, y, z] (metres, Y up) for the camera. Follow looks from the
+// front as the subject turns: the camera goes round the vertical with the pelvis (a turn toward
+// east seen from above is clockwise, a turn of −θ about Y).
 function project(p) {
   const [x, y, z] = p;
   if (camera === 'side') return [-z, -y];
   if (camera === 'top') return [x, z];
+  if (camera === 'follow') {
+    const [c, s] = [Math.cos(followTurn), Math.sin(followTurn)];
+    return [c * x + s * z, -y];
+  }
   return [x, -y];
 }
 
 function drawFigure(state) {
   const svg = $('figure');
   const figure = state.figure;
-  const key = camera + JSON.stringify(figure.map((j) => j.name));
+  followTurn = camera === 'follow' ? ((state.pelvis_turn_deg ?? 0) * Math.PI) / 180 : 0;
+  const key = camera + Math.round(followTurn * 180) + JSON.stringify(figure.map((j) => j.name));
   const assigned = new Map(state.sensors.filter((s) => s.bone).map((s) => [s.bone, s.id]));
   const litBone = state.sensors.find((s) => s.id === state.lit)?.bone;
   if (key !== figureKey) {
@@ -163,6 +173,7 @@ function drawCalibration(state) {
       gyro_bias: 'hold every sensor still',
       magnetometer: 'turn every sensor through all directions',
       pose: 'hold the pose',
+      second_pose: 'hold the second pose',
       bow: 'bow forward and come back',
     }[c.kind];
     box.textContent = c.starts_in_s > 0 ? `${what} in ${c.starts_in_s.toFixed(1)} s` : `${what}: ${c.left_s.toFixed(1)} s`;
@@ -191,6 +202,15 @@ function drawCalibration(state) {
       ? `moved during the pose: ${held.moved.join(', ')} — hold it again`
       : `held ${held.seconds} s from t = ${held.start_s.toFixed(2)} s, every sensor still`
     : '';
+  $('second-result').textContent = state.second_held
+    ? `held ${state.second_held.seconds} s, ${(state.second_held.start_s - (held?.start_s ?? 0)).toFixed(2)} s after the first began${state.second_held.moved.length ? `; moved: ${state.second_held.moved.join(', ')}` : ''} — start each take with both poses in this timing`
+    : '';
+  const names = state.poses.includes('rest') ? state.poses : ['rest', ...state.poses];
+  const second = $('second-pose');
+  if (second.options.length !== names.length + 1) {
+    second.replaceChildren(new Option('none', ''), ...names.map((n) => new Option(n, n)));
+  }
+  if (document.activeElement !== second) second.value = state.second_pose ?? '';
   const bow = state.bow;
   $('bow-result').textContent = bow
     ? bow.error
@@ -199,7 +219,6 @@ function drawCalibration(state) {
     : '';
   $('height-now').textContent = state.height_m ? `${state.height_m} m` : '';
   const pose = $('pose');
-  const names = state.poses.includes('rest') ? state.poses : ['rest', ...state.poses];
   if (pose.options.length !== names.length) {
     pose.replaceChildren(...names.map((n) => new Option(n, n)));
   }
@@ -246,6 +265,8 @@ $('set-segment').addEventListener('click', () => {
   const m = $('segment-m').value;
   send({ cmd: 'segment', part: $('segment-part').value, m: m === '' ? null : Number(m) });
 });
+$('hold-second').addEventListener('click', () => send({ cmd: 'capture', kind: 'second_pose', seconds: 2, countdown_s: 2 }));
+$('second-pose').addEventListener('change', (e) => send({ cmd: 'second_pose', name: e.target.value || null }));
 $('pose').addEventListener('change', (e) => send({ cmd: 'pose', name: e.target.value }));
 $('set-height').addEventListener('click', () => send({ cmd: 'height', m: Number($('height').value) }));
 $('save').addEventListener('click', () => send({ cmd: 'save' }));
