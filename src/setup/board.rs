@@ -550,9 +550,7 @@ impl Board {
 
     /// The fused heading of `sensor`'s x axis, radians from north toward east.
     fn heading(&self, sensor: &str) -> Option<f64> {
-        let q = self.sensors[*self.index.get(sensor)?].fused?;
-        let x = q * Vector3::x();
-        Some(x.x.atan2(x.y))
+        self.sensors[*self.index.get(sensor)?].fused.map(heading_of)
     }
 
     fn finish(&mut self, c: Capture) {
@@ -741,10 +739,7 @@ impl Board {
                         fused_tilt_deg: s
                             .fused
                             .map(|q| (q * Vector3::z()).z.clamp(-1.0, 1.0).acos().to_degrees()),
-                        fused_heading_deg: s.fused.map(|q| {
-                            let x = q * Vector3::x();
-                            x.x.atan2(x.y).to_degrees()
-                        }),
+                        fused_heading_deg: s.fused.map(|q| heading_of(q).to_degrees()),
                         fusion_error: s.fusion_error.as_deref(),
                         mag_coverage_pct: self.capture.as_ref().and_then(|c| {
                             let kept = c.samples.get(&self.index[&s.id])?;
@@ -866,6 +861,12 @@ fn live_coverage(mag: &[Vector3<f64>]) -> f64 {
             .step_by(step)
             .filter_map(|m| (m - mid).try_normalize(1e-12)),
     )
+}
+
+/// The heading of the x axis of `q_enu_sensor`, radians from north toward east.
+fn heading_of(q: UnitQuaternion<f64>) -> f64 {
+    let x = q * Vector3::x();
+    x.x.atan2(x.y)
 }
 
 /// The signed axis nearest `v` (unit), and the angle to it, radians.
