@@ -4,7 +4,8 @@
 //! through the same code a file takes in causal mode: the readers' line parsers and cleaning
 //! rules ([`crate::read::stream::LineStream`]) and the pipeline's incremental cores
 //! ([`crate::pipeline::stream::PoseStream`]). Each frame goes out as a VMC bundle ([`vmc`]);
-//! everything received is recorded as a take ([`record`]).
+//! everything received is recorded as a take ([`record`]). `imubake setup` runs the same session
+//! with a board ([`crate::setup`]) that sees every sample, and no mapping yet.
 //!
 //! Clock: a line keeps its own timestamp when one source sends it (a replayed file, a single
 //! serial port); with several sources, whose devices' clocks differ, each data line is restamped

@@ -21,7 +21,6 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// The built-in rigs: name and file text.
 /// The built-in rigs: name, rig file text.
 pub const BUILTIN: [(&str, &str); 2] = [
     ("mixamo", include_str!("../../rigs/mixamo.yaml")),
