@@ -98,8 +98,7 @@ impl Sensor {
                 rate = Some(imu.gyro_rad_s.norm());
                 self.gyr = Some(imu.gyro_rad_s);
                 self.acc = Some(imu.accel_m_s2);
-                if let Some(m) = mag {
-                    let n = m.norm();
+                if let Some(n) = mag.map(|m| m.norm()).filter(|n| n.is_finite()) {
                     self.mag_norm = Some(self.mag_norm.map_or(n, |u| u + 0.01 * (n - u)));
                 }
                 self.mag = mag;
@@ -116,7 +115,9 @@ impl Sensor {
                 }
             }
         }
-        if let Some(rate) = rate {
+        // A reading that is not a number (the stream's cleaning drops them; a board does not
+        // count on it) leaves the low-passed values as they were.
+        if let Some(rate) = rate.filter(|r| r.is_finite()) {
             let step = if self.samples == 0 || dt <= 0.0 {
                 1.0
             } else {
@@ -131,7 +132,13 @@ impl Sensor {
     /// The reading through the sensor's online filter (readings whose time does not rise are
     /// left out of it).
     fn fuse(&mut self, t_s: f64, imu: ImuSample, mag: Option<Vector3<f64>>) {
-        if self.fusion_error.is_some() || (self.samples > 0 && t_s <= self.last_s) {
+        let finite = |v: &Vector3<f64>| v.iter().all(|x| x.is_finite());
+        if self.fusion_error.is_some()
+            || (self.samples > 0 && t_s <= self.last_s)
+            || !finite(&imu.gyro_rad_s)
+            || !finite(&imu.accel_m_s2)
+            || mag.as_ref().is_some_and(|m| !finite(m))
+        {
             return;
         }
         let fuser = self
@@ -183,9 +190,17 @@ struct Capture {
 /// One sensor's readings in a capture.
 #[derive(Debug, Clone, Default)]
 struct CaptureSamples {
+    /// The raw readings' times and readings (a sensor that sends raw readings).
     times: Vec<f64>,
     imu: Vec<ImuSample>,
     mag: Vec<Vector3<f64>>,
+    /// Each sample's up in the sensor frame: the specific force's direction, or `q⁻¹·z` from an
+    /// orientation.
+    up: Vec<Vector3<f64>>,
+    /// From orientations: the first, and the largest angle from it (how much the sensor moved).
+    first_q: Option<UnitQuaternion<f64>>,
+    turned: f64,
+    last_s: Option<f64>,
 }
 
 /// One sensor's result of a gyro-bias capture.
@@ -204,12 +219,14 @@ pub struct MagResult {
     pub fit: Result<MagCalibration, String>,
 }
 
-/// The pose capture's result: each sensor's mean specific force (its up, sensor frame).
+/// The pose capture's result: each sensor's up in its own frame (the mean direction of its
+/// specific force, or of `q⁻¹·z` from its orientations).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PoseResult {
     pub start_s: f64,
     pub seconds: f64,
-    /// Sensors that moved during the hold (turned faster than 2 °/s SD), by id.
+    /// Sensors that moved during the hold (raw: a gyro spread above 2 °/s SD; orientations: more
+    /// than 2° from the first), by id.
     pub moved: Vec<String>,
     #[serde(skip)]
     up: HashMap<String, Vector3<f64>>,
@@ -391,18 +408,29 @@ impl Board {
         if let Some(c) = &mut self.capture
             && t_s >= c.start_s
             && t_s <= c.start_s + c.seconds
-            && let StreamValue::Raw { imu, mag } = value
             && c.total < MAX_CAPTURE_TOTAL
         {
             let kept = c.samples.entry(k).or_default();
-            if kept.times.len() < MAX_CAPTURE_SAMPLES && kept.times.last().is_none_or(|l| t_s > *l)
-            {
-                kept.times.push(t_s);
-                kept.imu.push(imu);
-                if c.kind == CaptureKind::Magnetometer
-                    && let Some(m) = mag
-                {
-                    kept.mag.push(m);
+            if kept.up.len() < MAX_CAPTURE_SAMPLES && kept.last_s.is_none_or(|l| t_s > l) {
+                kept.last_s = Some(t_s);
+                match value {
+                    StreamValue::Raw { imu, mag } => {
+                        kept.times.push(t_s);
+                        kept.imu.push(imu);
+                        kept.up.extend(imu.accel_m_s2.try_normalize(1e-9));
+                        if c.kind == CaptureKind::Magnetometer
+                            && let Some(m) = mag
+                        {
+                            kept.mag.push(m);
+                        }
+                    }
+                    value => {
+                        if let Some(q) = value.orientation() {
+                            kept.up.push(q.inverse() * Vector3::z());
+                            let first = *kept.first_q.get_or_insert(q);
+                            kept.turned = kept.turned.max(first.angle_to(&q));
+                        }
+                    }
                 }
                 c.total += 1;
             }
@@ -588,24 +616,30 @@ impl Board {
                 let mut moved = Vec::new();
                 let mut up = HashMap::new();
                 for (k, s) in self.sensors.iter().enumerate() {
-                    let Some(CaptureSamples { imu: v, .. }) = c.samples.get(&k) else {
+                    let Some(kept) = c.samples.get(&k) else {
                         continue;
                     };
-                    let n = v.len() as f64;
-                    let mean_gyr = v.iter().map(|x| x.gyro_rad_s).sum::<Vector3<f64>>() / n;
-                    let spread = (v
-                        .iter()
-                        .map(|x| (x.gyro_rad_s - mean_gyr).norm_squared())
-                        .sum::<f64>()
-                        / n)
-                        .sqrt()
-                        .to_degrees();
-                    if spread > 2.0 {
+                    // Moved: raw readings turning with a spread above 2 °/s; orientations
+                    // turning more than 2° from the first.
+                    let v = &kept.imu;
+                    let moved_here = if v.is_empty() {
+                        kept.turned.to_degrees() > 2.0
+                    } else {
+                        let n = v.len() as f64;
+                        let mean = v.iter().map(|x| x.gyro_rad_s).sum::<Vector3<f64>>() / n;
+                        let spread = v
+                            .iter()
+                            .map(|x| (x.gyro_rad_s - mean).norm_squared())
+                            .sum::<f64>()
+                            / n;
+                        spread.sqrt().to_degrees() > 2.0
+                    };
+                    if moved_here {
                         moved.push(s.id.clone());
                     }
-                    let a = v.iter().map(|x| x.accel_m_s2).sum::<Vector3<f64>>() / n;
-                    if let Some(a) = a.try_normalize(1e-9) {
-                        up.insert(s.id.clone(), a);
+                    let mean_up = kept.up.iter().sum::<Vector3<f64>>();
+                    if let Some(u) = mean_up.try_normalize(1e-9) {
+                        up.insert(s.id.clone(), u);
                     }
                 }
                 let held = PoseResult {
@@ -648,8 +682,9 @@ impl Board {
 
     /// The forward axis of the sensor on the pelvis (the rig's first bone), from the bow.
     ///
-    /// With `u₀` the sensor's up in the pose (its mean specific force, sensor frame) and `u₁` its
-    /// up at the bow's deepest, the sensor turned about the body's right-left axis: `r = u₀ × u₁`
+    /// With `u₀` the sensor's up in the pose (the mean direction of its specific force, or of
+    /// `q⁻¹·z` for a sensor that sends orientations; sensor frame) and `u₁` its up at the bow's
+    /// deepest, the sensor turned about the body's right-left axis: `r = u₀ × u₁`
     /// (normalised) is the body's right in the sensor frame (a forward bow tips gravity toward
     /// the sensor's back), and forward is `f = u₀ × r`.
     fn bow_result(&self, c: &Capture) -> Result<BowResult, String> {
@@ -664,16 +699,15 @@ impl Board {
             .get(&sensor)
             .ok_or_else(|| format!("`{sensor}` had no readings in the pose"))?;
         let k = self.index[&sensor];
-        let values = &c
+        let ups = &c
             .samples
             .get(&k)
             .ok_or_else(|| format!("`{sensor}` had no readings during the bow"))?
-            .imu;
-        // The deepest: the specific force (low-passed over 5 samples) furthest from u₀.
+            .up;
+        // The deepest: the up (averaged over 5 samples) furthest from u₀.
         let mut deepest: Option<(f64, Vector3<f64>)> = None;
-        for w in values.windows(5) {
-            let a = w.iter().map(|x| x.accel_m_s2).sum::<Vector3<f64>>() / 5.0;
-            let Some(u) = a.try_normalize(1e-9) else {
+        for w in ups.windows(5) {
+            let Some(u) = w.iter().sum::<Vector3<f64>>().try_normalize(1e-9) else {
                 continue;
             };
             let angle = u0.angle(&u);
@@ -1039,6 +1073,46 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn a_suit_that_sends_orientations_bows_to_the_same_forward() {
+        // The pelvis sensor of the raw test, sending `q_enu_sensor` instead: 180° about z (its
+        // −y the body's forward, north), then a forward bow of 30°: a turn about the world's −x
+        // (the trunk tips north), taken before the mount.
+        let mut b = board();
+        let q0 = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI);
+        b.sample("p", 0.0, StreamValue::Quaternion(q0));
+        b.command(Command::Assign {
+            sensor: "p".into(),
+            bone: "Hips".into(),
+        })
+        .unwrap();
+        b.command(Command::Capture {
+            kind: CaptureKind::Pose,
+            seconds: 1.0,
+            countdown_s: 0.0,
+        })
+        .unwrap();
+        let mut t = 0.0;
+        for _ in 0..120 {
+            t += 0.01;
+            b.sample("p", t, StreamValue::Quaternion(q0));
+        }
+        assert!(b.pose_held().unwrap().moved.is_empty());
+        b.command(Command::Capture {
+            kind: CaptureKind::Bow,
+            seconds: 2.0,
+            countdown_s: 0.0,
+        })
+        .unwrap();
+        for i in 0..250 {
+            t += 0.01;
+            let angle = 30f64.to_radians() * (std::f64::consts::PI * i as f64 / 200.0).sin();
+            let bow = UnitQuaternion::from_axis_angle(&-Vector3::x_axis(), angle);
+            b.sample("p", t, StreamValue::Quaternion(bow * q0));
+        }
+        assert_eq!(b.forward(), Some(("p", "-y")));
+    }
+
+    #[test]
     fn a_gap_is_counted() {
         let mut b = board();
         let still = raw(Vector3::zeros(), Vector3::new(0.0, 0.0, G));
@@ -1299,6 +1373,16 @@ pub(crate) mod tests {
                 let snapshot = serde_json::to_string(&b.snapshot()).unwrap();
                 proptest::prop_assert!(snapshot.len() < 1 << 20);
             }
+            // Whatever came before, a sensor that turns at 90 °/s for 0.5 s of its own time
+            // lights up (no value it was fed stays in its low-passed turn rate).
+            for i in 1..=50 {
+                let t = 2e3 + i as f64 / 100.0;
+                b.sample("s0", t, raw(Vector3::new(90f64.to_radians(), 0.0, 0.0), Vector3::new(0.0, 0.0, G)));
+                for k in 1..6 {
+                    b.sample(&format!("s{k}"), t, raw(Vector3::zeros(), Vector3::new(0.0, 0.0, G)));
+                }
+            }
+            proptest::prop_assert_eq!(b.lit(), Some("s0"));
         }
     }
 
