@@ -243,6 +243,8 @@ struct Running {
     lines: LineStream,
     /// `None`: a setup session without a mapping (samples go to the board only).
     poses: Option<PoseStream>,
+    /// The sensors' world (`--world`, else the mapping's, else the format's).
+    world: crate::world::World,
     /// LineStream sensor index → PoseStream index (`None`: not mapped).
     index: Vec<Option<Option<usize>>>,
     /// Sensors whose raw readings could not be fused (left out).
@@ -761,27 +763,26 @@ fn start_running(
     )>,
     settings: &LiveSettings,
 ) -> Result<Running, LiveError> {
+    let world = settings
+        .plan
+        .read_options()
+        .world
+        .or(stream.and_then(|(mapping, _, _)| mapping.world))
+        .unwrap_or(lines.world());
     let poses = match stream {
-        Some((mapping, mapping_file, options)) => {
-            let world = settings
-                .plan
-                .read_options()
-                .world
-                .or(mapping.world)
-                .unwrap_or(lines.world());
-            Some(PoseStream::from_mapping(
-                rig,
-                mapping,
-                mapping_file,
-                world,
-                options,
-            )?)
-        }
+        Some((mapping, mapping_file, options)) => Some(PoseStream::from_mapping(
+            rig,
+            mapping,
+            mapping_file,
+            world,
+            options,
+        )?),
         None => None,
     };
     Ok(Running {
         lines,
         poses,
+        world,
         index: Vec::new(),
         refused: Vec::new(),
         notices: Vec::new(),
@@ -807,7 +808,7 @@ fn feed(
     for s in samples.drain(..) {
         let k = s.sensor.index();
         if let Some(setup) = setup {
-            setup.sample(&ids[k], s.t_s, s.value);
+            setup.sample(&ids[k], s.t_s, s.value, run.world);
         }
         let Some(poses) = &mut run.poses else {
             continue;

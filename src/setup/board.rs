@@ -5,7 +5,8 @@
 //! (stream time, seconds), no threads; [`super::Setup`] shares it with the page.
 //!
 //! Units: gyro rad/s in, °/s shown; specific force m/s²; the field in the log's unit (µT by the
-//! conventions); quaternions `[w, x, y, z]`, `q_world_sensor`.
+//! conventions); quaternions `[w, x, y, z]`, `q_enu_sensor` (a source's own world is turned to
+//! ENU before the board: [`super::Setup::sample`]).
 
 use crate::fusion::stream::StreamFuser;
 use crate::intrinsics::gyro_bias::{BiasWindow, GyroBias, gyro_bias};
@@ -958,7 +959,7 @@ pub struct SensorView<'a> {
     pub mag: Option<[f64; 3]>,
     pub mag_norm: Option<f64>,
     pub mag_unit: Option<[f64; 3]>,
-    /// `[w, x, y, z]`, `q_world_sensor`, for sources that send orientations.
+    /// `[w, x, y, z]`, `q_enu_sensor`, for sources that send orientations.
     pub q: Option<[f64; 4]>,
     /// Raw readings fused (online VQF): `[w, x, y, z]`, `q_enu_sensor`; the angle of the
     /// sensor's z from up and the heading of its x (from north toward east), degrees.

@@ -13,6 +13,7 @@ use crate::mapping::parse_mapping;
 use crate::rig::Rig;
 use crate::rig::subject::Subject;
 use crate::take::StreamValue;
+use crate::world::World;
 use board::{Board, Command};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -70,8 +71,16 @@ impl Setup {
         self.board.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// One sample from the session.
-    pub fn sample(&self, id: &str, t_s: f64, value: StreamValue) {
+    /// One sample from the session; an orientation `q_world_sensor` in the source's `world` goes
+    /// to the board as `q_enu_sensor` (raw readings are in the sensor's own frame).
+    pub fn sample(&self, id: &str, t_s: f64, value: StreamValue, world: World) {
+        let value = match value.orientation() {
+            Some(q) if world != World::Enu => {
+                let enu_from_world = World::Enu.to_rig().inverse() * world.to_rig();
+                StreamValue::Quaternion(enu_from_world * q)
+            }
+            _ => value,
+        };
         self.board().sample(id, t_s, value);
     }
 
@@ -289,7 +298,7 @@ mod tests {
                 },
                 mag: None,
             };
-            setup.sample("s 1", i as f64 / 100.0, value);
+            setup.sample("s 1", i as f64 / 100.0, value, World::Enu);
             if i == 0 {
                 setup.command_json(r#"{"cmd":"assign","sensor":"s 1","bone":"Spine"}"#);
                 setup.command_json(r#"{"cmd":"capture","kind":"gyro_bias","seconds":2}"#);
@@ -348,6 +357,7 @@ mod tests {
                 },
                 mag: None,
             },
+            World::Enu,
         );
         setup.command_json(r#"{"cmd":"assign","sensor":"a","bone":"Hips"}"#);
         // Mixamo's thigh is about 0.4 m: 1.4 m is more than 3× it.
@@ -390,7 +400,7 @@ mod tests {
         };
         for i in 0..=1000 {
             let t = i as f64 / 100.0;
-            setup.sample("a", t, still);
+            setup.sample("a", t, still, World::Enu);
             match i {
                 0 => {
                     setup.command_json(r#"{"cmd":"assign","sensor":"a","bone":"Hips"}"#);
@@ -441,6 +451,54 @@ mod tests {
             let snapshot: serde_json::Value = serde_json::from_str(&setup.snapshot_json()).unwrap();
             proptest::prop_assert!(snapshot["message"].as_str().is_some_and(|m| m.starts_with("error")));
         }
+    }
+
+    #[test]
+    fn a_suit_in_ned_bows_to_the_forward_it_has_in_enu() {
+        // board.rs's quaternion bow (the pelvis sensor 180° about up, a 30° forward bow), sent
+        // as `q_ned_sensor`: the board turns it to ENU, so the forward is the same −y.
+        let setup = Setup::new(
+            Board::new(board::tests::joints(&["Hips"]), vec![]),
+            std::env::temp_dir().join("imubake-setup-never-written"),
+            crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
+            "mixamo".into(),
+            true,
+            vec![],
+        );
+        let ned_from_enu = World::Ned.to_rig().inverse() * World::Enu.to_rig();
+        let q0 =
+            nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI);
+        let send = |t: f64, q_enu: nalgebra::UnitQuaternion<f64>| {
+            setup.sample(
+                "p",
+                t,
+                StreamValue::Quaternion(ned_from_enu * q_enu),
+                World::Ned,
+            );
+        };
+        send(0.0, q0);
+        setup.command_json(r#"{"cmd":"assign","sensor":"p","bone":"Hips"}"#);
+        setup.command_json(r#"{"cmd":"capture","kind":"pose","seconds":1}"#);
+        let mut t = 0.0;
+        for _ in 0..120 {
+            t += 0.01;
+            send(t, q0);
+        }
+        setup.command_json(r#"{"cmd":"capture","kind":"bow","seconds":2}"#);
+        for i in 0..250 {
+            t += 0.01;
+            let angle = 30f64.to_radians() * (std::f64::consts::PI * i as f64 / 200.0).sin();
+            let bow = nalgebra::UnitQuaternion::from_axis_angle(&-Vector3::x_axis(), angle);
+            send(t, bow * q0);
+        }
+        let snapshot: serde_json::Value = serde_json::from_str(&setup.snapshot_json()).unwrap();
+        assert_eq!(snapshot["bow"]["forward"], "-y", "{}", snapshot["bow"]);
+        // Shown as q_enu_sensor.
+        let q = &snapshot["sensors"][0]["q"];
+        assert!(
+            (q[0].as_f64().unwrap().abs() - q0.w.abs()).abs() < 1e-9,
+            "{q}"
+        );
     }
 
     #[test]
