@@ -33,15 +33,14 @@ fn main() {
 
 /// The setup page: a board on the session's samples, served, with a WebSocket client reading it.
 fn setup_page(stop: &Arc<AtomicBool>) -> (Arc<imubake::setup::Setup>, Arc<AtomicU64>) {
-    use imubake::setup::board::{Board, FigureJoint};
+    use imubake::setup::board::Board;
     use imubake::view::{ServeOptions, Server, ViewTake};
     let rig = imubake::rig::builtin_rig("mixamo").unwrap().unwrap();
     let setup = Arc::new(imubake::setup::Setup::new(
-        Board::new(FigureJoint::of(&rig), Vec::new()),
+        Board::of_rig(&rig),
         std::env::temp_dir().join("imubake-bench-setup"),
         rig.clone(),
         "mixamo".into(),
-        true,
         Vec::new(),
     ));
     let server = Server::bind(

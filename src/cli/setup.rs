@@ -5,7 +5,7 @@ use clap::Args;
 use imubake::live::source::{Allow, SourceSpec};
 use imubake::live::{Clock, LiveSettings, Report};
 use imubake::setup::Setup;
-use imubake::setup::board::{Board, FigureJoint};
+use imubake::setup::board::Board;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -47,21 +47,11 @@ pub fn run(args: SetupArgs) -> anyhow::Result<ExitCode> {
     let plan = Arc::new(imubake::config::plan(flags, None)?);
     let rig = plan.rig();
     let rig_name = args.rig.clone().unwrap_or_else(|| "mixamo".into());
-    let builtin = imubake::rig::file::BUILTIN
-        .iter()
-        .any(|(n, _)| *n == rig_name);
-    // The rig's named poses (a BVH rig's frames, `frame:N`, are left out of the page's list).
-    let poses = rig
-        .pose_names()
-        .into_iter()
-        .filter(|p| !p.starts_with("frame:"))
-        .collect();
     let setup = Arc::new(Setup::new(
-        Board::new(FigureJoint::of(rig), poses),
+        Board::of_rig(rig),
         args.out.clone(),
         rig.clone(),
         rig_name,
-        builtin,
         args.sources.iter().map(|s| s.to_string()).collect(),
     ));
     let stop = super::stop_on_signals()?;

@@ -360,6 +360,17 @@ impl std::fmt::Debug for Board {
 pub const MIN_BOW_DEG: f64 = 15.0;
 
 impl Board {
+    /// A board for `rig`: its joints drawn at rest, its named poses (a BVH rig's frames,
+    /// `frame:N`, left out of the page's list).
+    pub fn of_rig(rig: &crate::rig::Rig) -> Board {
+        let poses = rig
+            .pose_names()
+            .into_iter()
+            .filter(|p| !p.starts_with("frame:"))
+            .collect();
+        Board::new(FigureJoint::of(rig), poses)
+    }
+
     /// A board for a rig drawn as `figure` (its joints, whose names are the bones) with the
     /// named poses `poses`.
     pub fn new(figure: Vec<FigureJoint>, poses: Vec<String>) -> Board {
@@ -1014,6 +1025,48 @@ pub(crate) mod tests {
             .collect()
     }
 
+    /// A step of the bow tests: a command, or sensor `p`'s sample at `t` bowed `bow_rad`.
+    pub(crate) enum BowStep {
+        Command(Command),
+        Sample { t: f64, bow_rad: f64 },
+    }
+
+    /// The bow tests' protocol at 100 Hz: sensor `p` on `Hips` at t = 0, the pose held still for
+    /// 1 s (1.2 s of samples), then a forward bow of 30°·sin(π·i/200) over sample i of 250 (down
+    /// and back up over 2 s, the deepest at 1 s) inside a 2 s capture.
+    pub(crate) fn pose_then_bow() -> Vec<BowStep> {
+        let capture = |kind, seconds| {
+            BowStep::Command(Command::Capture {
+                kind,
+                seconds,
+                countdown_s: 0.0,
+            })
+        };
+        let mut steps = vec![
+            BowStep::Sample {
+                t: 0.0,
+                bow_rad: 0.0,
+            },
+            BowStep::Command(Command::Assign {
+                sensor: "p".into(),
+                bone: "Hips".into(),
+            }),
+            capture(CaptureKind::Pose, 1.0),
+        ];
+        let mut t = 0.0;
+        for _ in 0..120 {
+            t += 0.01;
+            steps.push(BowStep::Sample { t, bow_rad: 0.0 });
+        }
+        steps.push(capture(CaptureKind::Bow, 2.0));
+        for i in 0..250 {
+            t += 0.01;
+            let bow_rad = 30f64.to_radians() * (std::f64::consts::PI * i as f64 / 200.0).sin();
+            steps.push(BowStep::Sample { t, bow_rad });
+        }
+        steps
+    }
+
     fn board() -> Board {
         Board::new(
             joints(&["Hips", "Spine", "LeftArm"]),
@@ -1080,36 +1133,16 @@ pub(crate) mod tests {
         // (the trunk tips north), taken before the mount.
         let mut b = board();
         let q0 = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI);
-        b.sample("p", 0.0, StreamValue::Quaternion(q0));
-        b.command(Command::Assign {
-            sensor: "p".into(),
-            bone: "Hips".into(),
-        })
-        .unwrap();
-        b.command(Command::Capture {
-            kind: CaptureKind::Pose,
-            seconds: 1.0,
-            countdown_s: 0.0,
-        })
-        .unwrap();
-        let mut t = 0.0;
-        for _ in 0..120 {
-            t += 0.01;
-            b.sample("p", t, StreamValue::Quaternion(q0));
+        for step in pose_then_bow() {
+            match step {
+                BowStep::Command(c) => b.command(c).unwrap(),
+                BowStep::Sample { t, bow_rad } => {
+                    let bow = UnitQuaternion::from_axis_angle(&-Vector3::x_axis(), bow_rad);
+                    b.sample("p", t, StreamValue::Quaternion(bow * q0));
+                }
+            }
         }
         assert!(b.pose_held().unwrap().moved.is_empty());
-        b.command(Command::Capture {
-            kind: CaptureKind::Bow,
-            seconds: 2.0,
-            countdown_s: 0.0,
-        })
-        .unwrap();
-        for i in 0..250 {
-            t += 0.01;
-            let angle = 30f64.to_radians() * (std::f64::consts::PI * i as f64 / 200.0).sin();
-            let bow = UnitQuaternion::from_axis_angle(&-Vector3::x_axis(), angle);
-            b.sample("p", t, StreamValue::Quaternion(bow * q0));
-        }
         assert_eq!(b.forward(), Some(("p", "-y")));
     }
 
@@ -1395,43 +1428,23 @@ pub(crate) mod tests {
         let mut b = board();
         let up = Vector3::new(0.0, 0.0, G);
         b.sample("p", 0.0, raw(Vector3::zeros(), up));
-        b.command(Command::Assign {
-            sensor: "p".into(),
-            bone: "Hips".into(),
-        })
-        .unwrap();
-        assert!(
-            b.command(Command::Capture {
-                kind: CaptureKind::Bow,
-                seconds: 2.0,
-                countdown_s: 0.0
-            })
-            .is_err()
-        );
-        b.command(Command::Capture {
-            kind: CaptureKind::Pose,
-            seconds: 1.0,
-            countdown_s: 0.0,
-        })
-        .unwrap();
-        let mut t = 0.0;
-        for _ in 0..120 {
-            t += 0.01;
-            b.sample("p", t, raw(Vector3::zeros(), up));
-        }
-        assert!(b.pose_held().unwrap().moved.is_empty());
-        b.command(Command::Capture {
+        // Not before the pose: the bow is measured from it.
+        let bow = Command::Capture {
             kind: CaptureKind::Bow,
             seconds: 2.0,
             countdown_s: 0.0,
-        })
-        .unwrap();
-        for i in 0..250 {
-            t += 0.01;
-            let angle = 30f64.to_radians() * (std::f64::consts::PI * i as f64 / 200.0).sin();
-            let a = Vector3::new(0.0, angle.sin(), angle.cos()) * G;
-            b.sample("p", t, raw(Vector3::zeros(), a));
+        };
+        assert!(b.command(bow).unwrap_err().contains("pose first"));
+        for step in pose_then_bow() {
+            match step {
+                BowStep::Command(c) => b.command(c).unwrap(),
+                BowStep::Sample { t, bow_rad } => {
+                    let a = Vector3::new(0.0, bow_rad.sin(), bow_rad.cos()) * G;
+                    b.sample("p", t, raw(Vector3::zeros(), a));
+                }
+            }
         }
+        assert!(b.pose_held().unwrap().moved.is_empty());
         assert_eq!(b.forward(), Some(("p", "-y")));
         let Some(BowView::Found(found)) = b.snapshot().bow else {
             panic!("no bow");

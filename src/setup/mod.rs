@@ -34,7 +34,6 @@ pub struct Setup {
     /// The rig as given (`--rig`): a built-in name goes into the mapping, any value into the
     /// printed command.
     rig_arg: String,
-    rig_is_builtin: bool,
     /// The sources as given (`--source`), for the printed command.
     sources: Vec<String>,
 }
@@ -54,7 +53,6 @@ impl Setup {
         out: PathBuf,
         rig: Rig,
         rig_arg: String,
-        rig_is_builtin: bool,
         sources: Vec<String>,
     ) -> Setup {
         Setup {
@@ -62,7 +60,6 @@ impl Setup {
             out,
             rig,
             rig_arg,
-            rig_is_builtin,
             sources,
         }
     }
@@ -92,9 +89,16 @@ impl Setup {
 
     /// A command from the page (JSON text); its outcome is the board's `message`.
     pub fn command_json(&self, text: &str) {
-        let outcome = match serde_json::from_str::<Command>(text) {
-            Err(e) => Err(format!("not a command: {e}")),
-            Ok(Command::Save) => self.save().map(|s| {
+        match serde_json::from_str::<Command>(text) {
+            Ok(command) => self.command(command),
+            Err(e) => self.board().message = Some(format!("error: not a command: {e}")),
+        }
+    }
+
+    /// A command; its outcome is the board's `message`.
+    pub fn command(&self, command: Command) {
+        let outcome = match command {
+            Command::Save => self.save().map(|s| {
                 format!(
                     "saved {}; record takes with:\n{}",
                     s.files
@@ -105,7 +109,7 @@ impl Setup {
                     s.command
                 )
             }),
-            Ok(c) => self.board().command(c).map(|()| String::new()),
+            c => self.board().command(c).map(|()| String::new()),
         };
         let mut board = self.board();
         board.message = match outcome {
@@ -122,7 +126,10 @@ impl Setup {
     pub fn save(&self) -> Result<Saved, String> {
         let (mapping, subject, calibration, pose) = {
             let board = self.board();
-            let files = files_of(&board, self.rig_is_builtin.then_some(self.rig_arg.as_str()))?;
+            let builtin = crate::rig::file::BUILTIN
+                .iter()
+                .any(|(name, _)| *name == self.rig_arg);
+            let files = files_of(&board, builtin.then_some(self.rig_arg.as_str()))?;
             (files.0, files.1, files.2, board.pose_name().to_string())
         };
         let path = |name: &str| self.out.join(name);
@@ -274,17 +281,20 @@ fn files_of(
 mod tests {
     use super::*;
     use crate::take::ImuSample;
+
+    /// A setup on the built-in mixamo rig (`--rig mixamo`), the page drawing `board`.
+    fn on_mixamo(board: Board, out: PathBuf, sources: Vec<String>) -> Setup {
+        let rig = crate::rig::builtin_rig("mixamo").unwrap().unwrap();
+        Setup::new(board, out, rig, "mixamo".into(), sources)
+    }
     use nalgebra::Vector3;
 
     #[test]
     fn save_writes_files_the_loaders_read_back() {
         let dir = tempfile::tempdir().unwrap();
-        let setup = Setup::new(
+        let setup = on_mixamo(
             Board::new(board::tests::joints(&["Hips", "Spine"]), vec![]),
             dir.path().join("suit"),
-            crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
-            "mixamo".into(),
-            true,
             vec!["udp:9000".into()],
         );
         setup.command_json(r#"{"cmd":"save"}"#);
@@ -336,15 +346,9 @@ mod tests {
     #[test]
     fn a_subject_the_rig_cannot_take_is_not_saved() {
         let dir = tempfile::tempdir().unwrap();
-        let setup = Setup::new(
-            Board::new(
-                board::FigureJoint::of(&crate::rig::builtin_rig("mixamo").unwrap().unwrap()),
-                vec![],
-            ),
+        let setup = on_mixamo(
+            Board::of_rig(&crate::rig::builtin_rig("mixamo").unwrap().unwrap()),
             dir.path().join("suit"),
-            crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
-            "mixamo".into(),
-            true,
             vec!["stdin".into()],
         );
         setup.sample(
@@ -376,15 +380,12 @@ mod tests {
     #[test]
     fn a_second_pose_is_saved_in_the_timing_it_was_held() {
         let dir = tempfile::tempdir().unwrap();
-        let setup = Setup::new(
+        let setup = on_mixamo(
             Board::new(
                 board::tests::joints(&["Hips", "Spine"]),
                 vec!["rest".into(), "tpose".into()],
             ),
             dir.path().join("suit"),
-            crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
-            "mixamo".into(),
-            true,
             vec![],
         );
         let still = StreamValue::Raw {
@@ -439,14 +440,7 @@ mod tests {
         /// Any text from the page is a command or a message on the board: never a panic.
         #[test]
         fn any_text_from_the_page_is_answered(text in ".{0,200}") {
-            let setup = Setup::new(
-                Board::new(board::tests::joints(&["Hips"]), vec![]),
-                std::env::temp_dir().join("imubake-setup-never-written"),
-                crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
-                "mixamo".into(),
-                true,
-                vec![],
-            );
+            let setup = on_mixamo(Board::new(board::tests::joints(&["Hips"]), vec![]), std::env::temp_dir().join("imubake-setup-never-written"), vec![]);
             setup.command_json(&text);
             let snapshot: serde_json::Value = serde_json::from_str(&setup.snapshot_json()).unwrap();
             proptest::prop_assert!(snapshot["message"].as_str().is_some_and(|m| m.starts_with("error")));
@@ -457,39 +451,24 @@ mod tests {
     fn a_suit_in_ned_bows_to_the_forward_it_has_in_enu() {
         // board.rs's quaternion bow (the pelvis sensor 180° about up, a 30° forward bow), sent
         // as `q_ned_sensor`: the board turns it to ENU, so the forward is the same −y.
-        let setup = Setup::new(
+        let setup = on_mixamo(
             Board::new(board::tests::joints(&["Hips"]), vec![]),
             std::env::temp_dir().join("imubake-setup-never-written"),
-            crate::rig::builtin_rig("mixamo").unwrap().unwrap(),
-            "mixamo".into(),
-            true,
             vec![],
         );
         let ned_from_enu = World::Ned.to_rig().inverse() * World::Enu.to_rig();
         let q0 =
             nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI);
-        let send = |t: f64, q_enu: nalgebra::UnitQuaternion<f64>| {
-            setup.sample(
-                "p",
-                t,
-                StreamValue::Quaternion(ned_from_enu * q_enu),
-                World::Ned,
-            );
-        };
-        send(0.0, q0);
-        setup.command_json(r#"{"cmd":"assign","sensor":"p","bone":"Hips"}"#);
-        setup.command_json(r#"{"cmd":"capture","kind":"pose","seconds":1}"#);
-        let mut t = 0.0;
-        for _ in 0..120 {
-            t += 0.01;
-            send(t, q0);
-        }
-        setup.command_json(r#"{"cmd":"capture","kind":"bow","seconds":2}"#);
-        for i in 0..250 {
-            t += 0.01;
-            let angle = 30f64.to_radians() * (std::f64::consts::PI * i as f64 / 200.0).sin();
-            let bow = nalgebra::UnitQuaternion::from_axis_angle(&-Vector3::x_axis(), angle);
-            send(t, bow * q0);
+        for step in board::tests::pose_then_bow() {
+            match step {
+                board::tests::BowStep::Command(c) => setup.command(c),
+                board::tests::BowStep::Sample { t, bow_rad } => {
+                    let bow =
+                        nalgebra::UnitQuaternion::from_axis_angle(&-Vector3::x_axis(), bow_rad);
+                    let q = StreamValue::Quaternion(ned_from_enu * bow * q0);
+                    setup.sample("p", t, q, World::Ned);
+                }
+            }
         }
         let snapshot: serde_json::Value = serde_json::from_str(&setup.snapshot_json()).unwrap();
         assert_eq!(snapshot["bow"]["forward"], "-y", "{}", snapshot["bow"]);
