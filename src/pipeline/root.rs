@@ -20,6 +20,9 @@
 //!   backwards, sideways), how fast it rises relative to the hips (a foot pushing off rises
 //!   first), how fast it goes down over the ground (a foot on its way down has not landed: a
 //!   step down) — and blend smoothly between alike feet (double support), so a switch never jumps.
+//!   A whole take decides the weights over all its frames instead ([`support`]: the foot whose
+//!   stillness implies the steadiest hips, a Viterbi path), since those scores read the hips'
+//!   recent velocity, which follows whichever foot they chose, and so can lock onto a sliding one.
 //!   Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3 samples), which
 //!   seldom holds on real walks. A foot's points are its joints, their end sites and a heel
 //!   (a skeleton has none: below the ankle at the sole's height, [`HEEL_BACK`] of the foot
@@ -42,6 +45,8 @@
 //! point to its highest), since rigs come in metres or in any BVH unit. The stage is an
 //! incremental core ([`RootCore`]): a frame's local rotations in, its root position and foot
 //! contacts out, for a whole take and a stream alike.
+
+pub mod support;
 
 use crate::rig::Rig;
 use crate::rig::anatomy::{Anatomy, Limb, Side};
@@ -136,6 +141,9 @@ pub const PLANT_SPEED_H_S: f64 = 0.3;
 /// (the ground-truth rule of issue 49 sees the source's rolling foot move: a real sole rolls,
 /// ours pivots on a point). About 7 rad/s for a foot 0.15 h long.
 pub const PLANT_ROLL_H_S: f64 = 1.0;
+/// A whole take's decoded support passes from one foot to the other over this many frames on
+/// each side of the switch ([`support::left_weights`]).
+pub const SUPPORT_BLEND_FRAMES: usize = 1;
 /// Contacts and airborne stretches shorter than this many frames are not reported.
 pub const MIN_FRAMES: usize = 3;
 
@@ -463,7 +471,7 @@ impl RootCore {
                     &mut self.now,
                 );
                 let now = std::mem::take(&mut self.now);
-                let frame = self.step_feet(body_low, [&now[0], &now[1]]);
+                let frame = self.step_feet(body_low, [&now[0], &now[1]], None);
                 self.now = now;
                 frame
             }
@@ -480,8 +488,14 @@ impl RootCore {
     }
 
     /// Feet mode's next frame from what [`measure_feet`] found of the pose: the lowest point's
-    /// height and each foot's points, relative to the hips.
-    fn step_feet(&mut self, body_low: f64, now: [&[Vector3<f64>]; 2]) -> RootFrame {
+    /// height and each foot's points, relative to the hips; the left foot's share of the weight
+    /// if a whole take's support path ([`support`]) decided it, else this frame's scores do.
+    fn step_feet(
+        &mut self,
+        body_low: f64,
+        now: [&[Vector3<f64>]; 2],
+        left_weight: Option<f64>,
+    ) -> RootFrame {
         let h = self.height;
         let low = [lowest(now[0]), lowest(now[1])];
         let tips = self
@@ -536,7 +550,7 @@ impl RootCore {
                 + relative.y.max(0.0) / (RISE_H_S * h)
                 + (-(relative.y + hips.y)).max(0.0) / (DESCENT_H_S * h)
         };
-        let w_left = smooth(score(1) - score(0));
+        let w_left = left_weight.unwrap_or_else(|| smooth(score(1) - score(0)));
         let weights = [w_left, 1.0 - w_left];
         let before = state.hips;
         let was_airborne = state.airborne;
@@ -800,9 +814,15 @@ pub fn root_positions(
         .into_par_iter()
         .map(|start| measure_frames(&core, local, start..(start + block).min(frames)))
         .collect();
+    let left_weights = (core.mode() == RootMode::Feet).then(|| {
+        let cues = support_cues(&measured, core.dt, core.height);
+        let path = support::decode(&cues, core.dt, GRAVITY_H_S2);
+        support::left_weights(&path, SUPPORT_BLEND_FRAMES)
+    });
     let mut all: Vec<RootFrame> = Vec::with_capacity(frames);
     for m in &measured {
         for (i, &low) in m.low.iter().enumerate() {
+            let left_weight = left_weights.as_ref().map(|w| w[all.len()]);
             let f = match &m.feet {
                 None => core.step_ground(low),
                 Some(FeetPoints {
@@ -814,6 +834,7 @@ pub fn root_positions(
                         &left[i * per_foot[0]..(i + 1) * per_foot[0]],
                         &right[i * per_foot[1]..(i + 1) * per_foot[1]],
                     ],
+                    left_weight,
                 ),
             };
             // A flight found late: the frames since it started were in the air, on its path.
@@ -831,6 +852,35 @@ pub fn root_positions(
     }
     let contacts = (core.mode() == RootMode::Feet).then(|| Contacts::from_frames(&all));
     (all.iter().map(|f| f.position).collect(), contacts)
+}
+
+/// What each frame of a whole take says about which foot carries the body ([`support`]), from
+/// the feet's points relative to the hips: the hips' velocity each foot's pivot (its lowest point
+/// a frame before, as [`RootCore::push`] pivots) implies, and its height above the other's, both
+/// in standing heights `height`.
+fn support_cues(measured: &[Measured], dt: f64, height: f64) -> Vec<support::SupportCues> {
+    let mut cues = Vec::new();
+    let mut previous: Option<[&[Vector3<f64>]; 2]> = None;
+    for m in measured {
+        let Some(FeetPoints { points, per_foot }) = &m.feet else {
+            continue;
+        };
+        for i in 0..m.low.len() {
+            let now = [0, 1].map(|f| &points[f][i * per_foot[f]..(i + 1) * per_foot[f]]);
+            let low = now.map(|p| lowest(p).1);
+            let above = [0, 1].map(|f| (low[f] - low[0].min(low[1])) / height);
+            let implied = match previous {
+                None => [Vector3::zeros(); 2],
+                Some(before) => [0, 1].map(|f| {
+                    let k = lowest(before[f]).0;
+                    -(now[f][k] - before[f][k]) / (dt * height)
+                }),
+            };
+            cues.push(support::SupportCues { implied, above });
+            previous = Some(now);
+        }
+    }
+    cues
 }
 
 /// A block of frames as [`measure_feet`] (feet mode) or [`pose_relative_to_hips`] (ground mode)
