@@ -343,6 +343,17 @@ fn lowest(points: &[Vector3<f64>]) -> (usize, f64) {
         .unwrap_or((0, 0.0))
 }
 
+/// How a foot's pivot — its point that was lowest in `before` — moved to `now` (both the foot's
+/// points relative to the hips, a frame apart): a planted foot holds it still, so the hips moved
+/// by minus this.
+fn pivot_moved(before: &[Vector3<f64>], now: &[Vector3<f64>]) -> Vector3<f64> {
+    let k = lowest(before).0;
+    match (now.get(k), before.get(k)) {
+        (Some(n), Some(b)) => n - b,
+        _ => Vector3::zeros(),
+    }
+}
+
 /// How fast a foot rolls, × its units / s: its toes' tip (`before`, `after`: relative to the foot
 /// joint, a frame `dt` apart) turning about the joint in the foot's upright plane — a heel rising
 /// at push-off, a sole coming down after a heel strike change the tip's height and its horizontal
@@ -528,13 +539,7 @@ impl RootCore {
             };
         };
         state.revised.clear();
-        // How each foot's previously lowest point (`pivot`) moved relative to the hips.
-        let pivot = [0, 1].map(|f| lowest(&state.previous[f]).0);
-        let mut moved = [Vector3::zeros(); 2];
-        for f in 0..2 {
-            let k = pivot[f];
-            moved[f] = now[f].get(k).copied().unwrap_or_default() - state.previous[f][k];
-        }
+        let moved = [0, 1].map(|f| pivot_moved(&state.previous[f], now[f]));
         // Contact weights: the foot that is lower, slower over the ground and not rising
         // relative to the hips carries the body; when the two are alike both share it (double
         // support), smoothly. Its speed over the ground is its speed relative to the hips plus
@@ -855,8 +860,8 @@ pub fn root_positions(
 }
 
 /// What each frame of a whole take says about which foot carries the body ([`support`]), from
-/// the feet's points relative to the hips: the hips' velocity each foot's pivot (its lowest point
-/// a frame before, as [`RootCore::push`] pivots) implies, and its height above the other's, both
+/// the feet's points relative to the hips: the hips' velocity each foot's pivot ([`pivot_moved`],
+/// as [`RootCore::push`] moves the hips) implies, and its height above the other's, both
 /// in standing heights `height`.
 fn support_cues(measured: &[Measured], dt: f64, height: f64) -> Vec<support::SupportCues> {
     let mut cues = Vec::new();
@@ -871,10 +876,7 @@ fn support_cues(measured: &[Measured], dt: f64, height: f64) -> Vec<support::Sup
             let above = [0, 1].map(|f| (low[f] - low[0].min(low[1])) / height);
             let implied = match previous {
                 None => [Vector3::zeros(); 2],
-                Some(before) => [0, 1].map(|f| {
-                    let k = lowest(before[f]).0;
-                    -(now[f][k] - before[f][k]) / (dt * height)
-                }),
+                Some(before) => [0, 1].map(|f| -pivot_moved(before[f], now[f]) / (dt * height)),
             };
             cues.push(support::SupportCues { implied, above });
             previous = Some(now);
