@@ -388,6 +388,7 @@ pub fn run(
         &local,
         options.fps.frame_time_s(),
         &vec![nalgebra::UnitQuaternion::identity(); rig.len()],
+        &[None, None],
     );
     let mut animation = Animation::new(rig, options.fps, local, animated, roots)?;
     if let Some(c) = &contacts {

@@ -142,6 +142,7 @@ fn run_on(
     }
     let (file, w) = (mapping_file.display().to_string(), &mut Vec::new());
     let (times, policy) = (TakeTimes::of(input.take()), options.heading_policy(mapping));
+    let feet_readings = feet_readings(input.take(), rig, mapping, mapping_file);
     let (world, sources, window) = stage(debug_span!("sources"), || {
         sources_and_window(input, rig, mapping, mapping_file, options, w)
     })?;
@@ -160,7 +161,11 @@ fn run_on(
         local_rotations(rig, on_grid, &grid, options, &held)
     });
     let (animation, root_mode, contacts) = stage(debug_span!("root"), || {
-        root_stage(rig, local.local, &local.animated, options, &held)
+        let frame_times_s: Vec<f64> = grid.times_s().collect();
+        let still = feet_readings.map(|r| {
+            r.map(|track| root::zupt::Shoe::default().frame_statistic(&track, &frame_times_s))
+        });
+        root_stage(rig, local.local, &local.animated, options, &held, &still)
     })?;
     Ok(Converted {
         animation,
@@ -349,6 +354,25 @@ fn local_rotations(
     }
 }
 
+/// The raw readings (gyro, specific force) of the sensors the mapping puts on the feet, `[left,
+/// right]`, for the root stage's zero-velocity cue ([`root::zupt`]); copied, since stage 1 may
+/// consume the take.
+fn feet_readings(
+    take: &Take,
+    rig: &Rig,
+    mapping: &Mapping,
+    mapping_file: &Path,
+) -> [Option<Track<crate::take::ImuSample>>; 2] {
+    let (Some(feet), Ok(resolved)) = (root::foot_joints(rig), mapping.resolve(rig, mapping_file))
+    else {
+        return [None, None];
+    };
+    feet.map(|foot| {
+        let sensor = resolved.iter().find(|s| s.bone == foot)?;
+        take.sensor(&sensor.sensor)?.inertial().cloned()
+    })
+}
+
 /// Stage 7: the root position (the mode resolved), and the animation with the feet's contacts.
 fn root_stage(
     rig: &Rig,
@@ -356,10 +380,17 @@ fn root_stage(
     animated: &[bool],
     options: &PipelineOptions,
     held: &[UnitQuaternion<f64>],
+    still: &root::FeetStill,
 ) -> Result<(Animation, RootMode, Option<root::Contacts>), PipelineError> {
     let root_mode = root::resolve(options.root, rig, animated);
-    let (roots, contacts) =
-        root::root_positions(rig, root_mode, &local, options.fps.frame_time_s(), held);
+    let (roots, contacts) = root::root_positions(
+        rig,
+        root_mode,
+        &local,
+        options.fps.frame_time_s(),
+        held,
+        still,
+    );
     let moving = relative::moving(rig, animated, options.unsensed, held);
     let mut animation = Animation::new(rig.clone(), options.fps, local, moving, roots)?
         .standing_in(rig.extent_in(held));

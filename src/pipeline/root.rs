@@ -24,7 +24,8 @@
 //!   stillness implies the steadiest hips, a Viterbi path), since those scores read the hips'
 //!   recent velocity, which follows whichever foot they chose, and so can lock onto a sliding one.
 //!   Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3 samples), which
-//!   seldom holds on real walks. A foot's points are its joints, their end sites and a heel
+//!   seldom holds on real walks. Where the take has a foot sensor's raw readings, that sensor's
+//!   own zero-velocity test ([`zupt`], SHOE) also reports the foot planted. A foot's points are its joints, their end sites and a heel
 //!   (a skeleton has none: below the ankle at the sole's height, [`HEEL_BACK`] of the foot
 //!   behind it). The body leaves the ground in two ways: the legs throw the hips up faster than
 //!   [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off), or the feet fall [`FLIGHT_H`] below
@@ -47,6 +48,7 @@
 //! contacts out, for a whole take and a stream alike.
 
 pub mod support;
+pub mod zupt;
 
 use crate::rig::Rig;
 use crate::rig::anatomy::{Anatomy, Limb, Side};
@@ -482,7 +484,7 @@ impl RootCore {
                     &mut self.now,
                 );
                 let now = std::mem::take(&mut self.now);
-                let frame = self.step_feet(body_low, [&now[0], &now[1]], None);
+                let frame = self.step_feet(body_low, [&now[0], &now[1]], None, [None; 2]);
                 self.now = now;
                 frame
             }
@@ -506,6 +508,7 @@ impl RootCore {
         body_low: f64,
         now: [&[Vector3<f64>]; 2],
         left_weight: Option<f64>,
+        still: [Option<f64>; 2],
     ) -> RootFrame {
         let h = self.height;
         let low = [lowest(now[0]), lowest(now[1])];
@@ -655,10 +658,11 @@ impl RootCore {
                 points.get(tips[f]).copied().unwrap_or_default() - points[0]
             };
             let roll = roll_speed(tip(&state.previous[f]), tip(now[f]), dt);
+            // A foot whose own sensor stands still ([`zupt`]) is planted where its surface is.
             (!state.airborne || pushing)
                 && height <= PLANT_H * h
-                && speed <= PLANT_SPEED_H_S * h
-                && roll <= PLANT_ROLL_H_S * h
+                && ((speed <= PLANT_SPEED_H_S * h && roll <= PLANT_ROLL_H_S * h)
+                    || still[f].is_some_and(|t| t <= 1.0))
         });
         for (previous, now) in state.previous.iter_mut().zip(now) {
             previous.clear();
@@ -796,15 +800,21 @@ impl Contacts {
     }
 }
 
+/// What each foot's own sensor said, frame by frame (`[left, right]`): SHOE's statistic
+/// ([`zupt`]; still at `T ≤ 1`), where the take has the foot sensor's raw readings; `None` where
+/// it has not.
+pub type FeetStill = [Option<Vec<f64>>; 2];
+
 /// Stage 7 over a whole take: the root position at every frame (rig units) from every joint's
 /// local rotations (`local[joint][frame]`), and the contacts in `feet` mode. `mode` is resolved
-/// already.
+/// already; `still`, what the feet's own sensors said (frames past its end: not still).
 pub fn root_positions(
     rig: &Rig,
     mode: RootMode,
     local: &[Vec<UnitQuaternion<f64>>],
     frame_time_s: f64,
     reference: &[UnitQuaternion<f64>],
+    still: &FeetStill,
 ) -> (Vec<Vector3<f64>>, Option<Contacts>) {
     let frames = local.first().map_or(0, Vec::len);
     let mut core = RootCore::new(rig, mode, frame_time_s, reference);
@@ -827,7 +837,12 @@ pub fn root_positions(
     let mut all: Vec<RootFrame> = Vec::with_capacity(frames);
     for m in &measured {
         for (i, &low) in m.low.iter().enumerate() {
-            let left_weight = left_weights.as_ref().map(|w| w[all.len()]);
+            let n = all.len();
+            let left_weight = left_weights.as_ref().map(|w| w[n]);
+            let still = still.each_ref().map(|s| {
+                s.as_ref()
+                    .map(|s| s.get(n).copied().unwrap_or(f64::INFINITY))
+            });
             let f = match &m.feet {
                 None => core.step_ground(low),
                 Some(FeetPoints {
@@ -840,6 +855,7 @@ pub fn root_positions(
                         &right[i * per_foot[1]..(i + 1) * per_foot[1]],
                     ],
                     left_weight,
+                    still,
                 ),
             };
             // A flight found late: the frames since it started were in the air, on its path.
@@ -1036,6 +1052,47 @@ mod tests {
         }
     }
 
+    /// The foot's own sensor standing still ([`zupt`]: `T ≤ 1`) keeps it planted where the
+    /// kinematic rule alone would not (the rolling foot of [`a_rolling_foot_is_not_planted`] at
+    /// twice [`PLANT_ROLL_H_S`]); a sensor that moves (`T` = 2), or none, leaves the rule's
+    /// answer.
+    #[test]
+    fn a_foot_whose_sensor_stands_still_is_planted() {
+        let rig = load_rig("mixamo").unwrap();
+        let foot = Anatomy::of(&rig).limb(Side::Left, Limb::Foot).unwrap();
+        let rest = vec![UnitQuaternion::identity(); rig.len()];
+        let dt = 1.0 / 60.0;
+        let probe = RootCore::new(&rig, RootMode::Feet, dt, &rest);
+        let left = probe.feet.as_ref().unwrap()[0].clone();
+        let (mut world, mut positions, mut points) = (Vec::new(), Vec::new(), Vec::new());
+        pose_relative_to_hips(&rig, &rest, &mut world, &mut positions);
+        foot_points(&rig, &left, &positions, &world, &mut points);
+        let tip = points[left.tip] - points[0];
+        let rate_rad_s = 2.0 * PLANT_ROLL_H_S * probe.standing_height() / tip.y.hypot(tip.z);
+        // Ten frames standing, then six rolling onto the heel.
+        let poses: Vec<Vec<UnitQuaternion<f64>>> = (0..16)
+            .map(|n| {
+                let mut pose = rest.clone();
+                let k = (n as usize).saturating_sub(9) as f64;
+                pose[foot] =
+                    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -rate_rad_s * dt * k);
+                pose
+            })
+            .collect();
+        let local: Vec<Vec<UnitQuaternion<f64>>> = (0..rig.len())
+            .map(|j| poses.iter().map(|p| p[j]).collect())
+            .collect();
+        for (sensor, left_contact) in [
+            (None, vec![[0, 9]]),
+            (Some(2.0), vec![[0, 9]]),
+            (Some(0.5), vec![[0, 15]]),
+        ] {
+            let still = [sensor.map(|t| vec![t; 16]), None];
+            let (_, contacts) = root_positions(&rig, RootMode::Feet, &local, dt, &rest, &still);
+            assert_eq!(contacts.unwrap().left, left_contact, "T = {sensor:?}");
+        }
+    }
+
     /// The roll is the tip's turn in the foot's upright plane: ω · arm for a pitch (by hand:
     /// a tip 0.2 ahead and 0.05 below the joint, turned 0.1 rad in 0.1 s, moves 0.1 · √0.0425
     /// in 0.1 s), nil for a swivel about the vertical however fast.
@@ -1123,7 +1180,8 @@ mod tests {
             let local: Vec<Vec<UnitQuaternion<f64>>> = (0..rig.len())
                 .map(|j| knee.iter().map(|&k| pose(k)[j]).collect())
                 .collect();
-            let (positions, contacts) = root_positions(&rig, RootMode::Feet, &local, dt, &rest);
+            let (positions, contacts) =
+                root_positions(&rig, RootMode::Feet, &local, dt, &rest, &[None, None]);
             let flights = contacts.unwrap().airborne;
             assert_eq!(flights.len(), 1, "{flights:?}");
             let [start, end] = flights[0];

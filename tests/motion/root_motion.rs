@@ -154,6 +154,19 @@ fn closed_loop_seeded(
     names: [&str; 3],
     seed: u64,
 ) -> Option<Take> {
+    closed_loop_simulated(bvh, mapping, frames, convert_args, names, seed, &[])
+}
+
+/// [`closed_loop_seeded`] with more arguments for `simulate` (`--raw`).
+fn closed_loop_simulated(
+    bvh: &Path,
+    mapping: &str,
+    frames: Option<&str>,
+    convert_args: &[&str],
+    names: [&str; 3],
+    seed: u64,
+    simulate_args: &[&str],
+) -> Option<Take> {
     let py = python()?;
     let dir = tempfile::tempdir().unwrap();
     let (capture, truth) = (dir.path().join("take.csv"), dir.path().join("truth.json"));
@@ -170,7 +183,8 @@ fn closed_loop_seeded(
         .arg("--truth")
         .arg(&truth)
         .args(["--noise-deg", "0.5", "--seed"])
-        .arg(seed.to_string());
+        .arg(seed.to_string())
+        .args(simulate_args);
     if let Some(f) = frames {
         sim.args(["--frames", f]);
     }
@@ -739,6 +753,47 @@ fn changing_ground_keeps_each_foot_on_its_own() {
             missed.push(label);
         }
     }
+    // The feet's own sensors: contacts from raw readings (`simulate --raw`: fused, and the
+    // feet's zero-velocity cue) at least as good as from orientations alone.
+    let raw_takes = [
+        (
+            "pymo_walk",
+            "bvh/pymo_walk.bvh",
+            PYMO_MAPPING,
+            None,
+            CMU_JOINTS,
+        ),
+        (
+            "cmu_01_01",
+            "bvh/cmu_01_01.bvh",
+            CMU_MAPPING,
+            Some("1:"),
+            CMU_JOINTS,
+        ),
+        (
+            "CMU 03_02 uneven",
+            "bvh/cmu_03_02_uneven_terrain.bvh",
+            "tests/fixtures/mappings/poser_16imu.json",
+            Some("60:"),
+            POSER_JOINTS,
+        ),
+    ];
+    for (label, file, mapping, frames, names) in raw_takes {
+        let bvh = shared(file).unwrap();
+        let args = ["--root", "feet"];
+        let [orientations, raw] = [&[][..], &["--raw"][..]].map(|sim| {
+            let take = closed_loop_simulated(&bvh, mapping, frames, &args, names, 3, sim).unwrap();
+            contact_scores(&take)
+        });
+        eprintln!(
+            "{label}: contacts from orientations precision {:.3} recall {:.3}, from raw readings \
+             {:.3} {:.3}",
+            orientations.precision, orientations.recall, raw.precision, raw.recall
+        );
+        if raw.precision < orientations.precision || raw.recall < orientations.recall {
+            missed.push(format!("{label} (raw readings)"));
+        }
+    }
     let (cmu, pymo) = (CMU_MAPPING, PYMO_MAPPING);
     for (name, mapping, frames) in [("pymo_walk", pymo, None), ("cmu_01_01", cmu, Some("1:"))] {
         let Some(take) = closed_loop(
@@ -1195,4 +1250,71 @@ fn unsensed_spine_joints_share_the_bend() {
         interpolated <= floor_even + 0.003 && rest <= floor_rest + 0.003,
         "{interpolated:.4} h vs the floor {floor_even:.4} h; {rest:.4} h vs {floor_rest:.4} h"
     );
+}
+
+/// Issue 50's foot-mounted zero-velocity cue: SHOE's statistic (`pipeline::root::zupt`) on the
+/// feet's raw readings of a simulated walk (`simulate --raw`, the pymo walk) equals the one an
+/// independent numpy implementation written from the paper computes (tests/python/shoe.py),
+/// reading for reading; and by it a walk's feet both stand still (stance, 19–25 % of the
+/// readings at OpenShoe's thresholds) and move (swing).
+#[test]
+fn the_feet_sensors_stillness_is_shoes() {
+    let (Some(bvh), Some(py)) = (shared("bvh/pymo_walk.bvh"), python()) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("take.csv");
+    run(Command::new(imubake_bin())
+        .args(["simulate"])
+        .arg(&bvh)
+        .args(["--mapping", PYMO_MAPPING, "--rig"])
+        .arg(&bvh)
+        .arg("--output")
+        .arg(&csv)
+        .args(["--noise-deg", "0.5", "--seed", "3", "--raw"])
+        .current_dir(repo_file(".")));
+    let take = imubake::read::read_take(&csv, &imubake::read::ReadOptions::default()).unwrap();
+    let shoe = imubake::pipeline::root::zupt::Shoe::default();
+    for sensor in ["l_foot", "r_foot"] {
+        let track = take.sensor(sensor).unwrap().inertial().unwrap();
+        let ours = shoe.statistic(track.times_s(), track.values());
+        let out = Command::new(&py)
+            .arg(repo_file("tests/python/shoe.py"))
+            .arg(&csv)
+            .arg(sensor)
+            .arg(shoe.window_s.to_string())
+            .arg(shoe.accel_m_s2.to_string())
+            .arg(shoe.gyro_rad_s.to_string())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let theirs: Vec<(f64, f64)> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| {
+                let mut cells = l.split_whitespace().map(|c| c.parse::<f64>().unwrap());
+                (cells.next().unwrap(), cells.next().unwrap())
+            })
+            .collect();
+        assert_eq!(theirs.len(), ours.len(), "{sensor}");
+        // The reader starts the take's clock at its first reading: times compared from each
+        // one's first.
+        let (t0, ours0) = (theirs[0].0, track.times_s()[0]);
+        for ((t, expected), (got, time)) in theirs.iter().zip(ours.iter().zip(track.times_s())) {
+            assert!(
+                ((t - t0) - (time - ours0)).abs() < 1e-6,
+                "{sensor}: reading at {time} s vs {t} s"
+            );
+            assert!(
+                (got - expected).abs() <= 1e-9 * expected.max(1.0),
+                "{sensor} at {time} s: T {got} vs numpy's {expected}"
+            );
+        }
+        let still = ours.iter().filter(|&&t| t <= 1.0).count() as f64 / ours.len() as f64;
+        eprintln!("{sensor}: still on {:.0} % of its readings", 100.0 * still);
+        assert!((0.1..0.9).contains(&still), "{sensor}: still {still}");
+    }
 }

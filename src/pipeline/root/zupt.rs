@@ -1,0 +1,184 @@
+//! A foot's own sensor says when it stands still: the zero-velocity detector of pedestrian dead
+//! reckoning, SHOE (the stance hypothesis optimal detector, Skog, Händel, Nilsson and Rantakokko,
+//! "Zero-velocity detection — an algorithm evaluation", IEEE TBME 2010).
+//!
+//! A foot-mounted IMU on a foot that stands still measures gravity alone and no rotation. Over a
+//! window `Ω` of `W` readings around sample `k` (gyro `ω_i`, rad/s; specific force `a_i`, m/s²;
+//! sensor frame), the generalised likelihood ratio test of "still" against "moving" reduces to
+//!
+//! ```text
+//! T_k = (1/W) Σ_{i∈Ω} [ ‖a_i − g · ā / ‖ā‖‖² / σ_a² + ‖ω_i‖² / σ_ω² ],   still when T_k ≤ γ
+//! ```
+//!
+//! with `ā` the window's mean specific force and `g` = 9.80665 m/s² (its direction is the
+//! window's own: the detector needs no orientation). We state it with `γ` folded in — `A = σ_a √γ`,
+//! `Ω = σ_ω √γ` — so that still is `T_k ≤ 1` and the two scales read as what a still foot may
+//! show: a specific force off gravity by about [`Shoe::accel_m_s2`] or a rate of about
+//! [`Shoe::gyro_rad_s`] alone is at the bound. The defaults are OpenShoe's (σ_a = 0.01 m/s²,
+//! σ_ω = 0.1 °/s, γ = 3·10⁴, W = 3 at its rate): `A` ≈ 1.73 m/s², `Ω` ≈ 17.3 °/s.
+
+use crate::take::{ImuSample, Track};
+
+/// Standard gravity, m/s².
+const G_M_S2: f64 = 9.80665;
+
+/// SHOE's scales, with its threshold folded in (see the module).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shoe {
+    /// The window `Ω`, s: at least one reading, the readings within half of it on each side.
+    pub window_s: f64,
+    /// `A = σ_a √γ`, m/s².
+    pub accel_m_s2: f64,
+    /// `Ω = σ_ω √γ`, rad/s.
+    pub gyro_rad_s: f64,
+}
+
+impl Default for Shoe {
+    fn default() -> Shoe {
+        let root_gamma = 3.0e4_f64.sqrt();
+        Shoe {
+            window_s: 0.03,
+            accel_m_s2: 0.01 * root_gamma,
+            gyro_rad_s: (0.1_f64 * root_gamma).to_radians(),
+        }
+    }
+}
+
+impl Shoe {
+    /// `T_k` for every reading (`times_s` ascending, s, one per reading): the window is the
+    /// readings within `window_s / 2` of reading `k` (always `k` itself).
+    pub fn statistic(&self, times_s: &[f64], readings: &[ImuSample]) -> Vec<f64> {
+        let n = readings.len().min(times_s.len());
+        let half = self.window_s / 2.0;
+        let (a2, w2) = (self.accel_m_s2.powi(2), self.gyro_rad_s.powi(2));
+        let (mut lo, mut hi) = (0, 0);
+        (0..n)
+            .map(|k| {
+                while times_s[lo] < times_s[k] - half {
+                    lo += 1;
+                }
+                hi = hi.max(k);
+                while hi + 1 < n && times_s[hi + 1] <= times_s[k] + half {
+                    hi += 1;
+                }
+                let window = &readings[lo..=hi];
+                let mean = window
+                    .iter()
+                    .map(|r| r.accel_m_s2)
+                    .sum::<nalgebra::Vector3<f64>>()
+                    / window.len() as f64;
+                let up = mean.try_normalize(1e-12).unwrap_or_default() * G_M_S2;
+                window
+                    .iter()
+                    .map(|r| {
+                        (r.accel_m_s2 - up).norm_squared() / a2 + r.gyro_rad_s.norm_squared() / w2
+                    })
+                    .sum::<f64>()
+                    / window.len() as f64
+            })
+            .collect()
+    }
+
+    /// Per frame (`frame_times_s`, the take's clock), `T` of the readings within half a frame of
+    /// it (the largest), or of the nearest reading when none is that close; infinite outside the
+    /// readings' span (nothing says the foot stood still there). Still is `T ≤ 1`.
+    pub fn frame_statistic(&self, track: &Track<ImuSample>, frame_times_s: &[f64]) -> Vec<f64> {
+        let (times, readings) = (track.times_s(), track.values());
+        let still = self.statistic(times, readings);
+        let (Some(&first), Some(&last)) = (times.first(), times.last()) else {
+            return vec![f64::INFINITY; frame_times_s.len()];
+        };
+        let half = match frame_times_s {
+            [a, b, ..] => (b - a) / 2.0,
+            _ => 0.0,
+        };
+        frame_times_s
+            .iter()
+            .map(|&t| {
+                if t < first - half || t > last + half {
+                    return f64::INFINITY;
+                }
+                let lo = times.partition_point(|&s| s < t - half);
+                let hi = times.partition_point(|&s| s <= t + half);
+                if lo < hi {
+                    still[lo..hi].iter().copied().fold(0.0, f64::max)
+                } else {
+                    // The nearest reading.
+                    let k = times.partition_point(|&s| s < t).min(times.len() - 1);
+                    let k = if k > 0 && (t - times[k - 1]) < (times[k] - t) {
+                        k - 1
+                    } else {
+                        k
+                    };
+                    still[k]
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    fn reading(gyro: [f64; 3], accel: [f64; 3]) -> ImuSample {
+        ImuSample {
+            gyro_rad_s: Vector3::from(gyro),
+            accel_m_s2: Vector3::from(accel),
+        }
+    }
+
+    #[test]
+    fn the_statistic_by_hand() {
+        let shoe = Shoe {
+            window_s: 0.025,
+            accel_m_s2: 2.0,
+            gyro_rad_s: 0.5,
+        };
+        // 100 Hz: the window is the reading and its two neighbours.
+        let times = [0.0, 0.01, 0.02];
+        let readings = [
+            reading([0.0; 3], [0.0, 0.0, 9.80665]),
+            reading([0.5, 0.0, 0.0], [0.0, 0.0, 9.80665]),
+            reading([0.0; 3], [0.0, 0.0, 9.80665 + 3.0]),
+        ];
+        let t = shoe.statistic(&times, &readings);
+        // Reading 0's window: readings 0 and 1, mean specific force straight up: only the rate
+        // counts, (0.5/0.5)² over 2 readings.
+        assert!((t[0] - 0.5).abs() < 1e-12, "{}", t[0]);
+        // Reading 1's window: all three; ā points up, so g·ā/‖ā‖ = (0, 0, g): the third reading
+        // is 3 m/s² off, (3/2)² = 2.25; plus the rate's 1; over 3.
+        assert!((t[1] - (2.25 + 1.0) / 3.0).abs() < 1e-12, "{}", t[1]);
+        // Reading 2's window: readings 1 and 2, the rate's 1 and the force's 2.25, over 2.
+        assert!((t[2] - (1.0 + 2.25) / 2.0).abs() < 1e-12, "{}", t[2]);
+    }
+
+    #[test]
+    fn frames_take_the_readings_within_half_a_frame() {
+        let shoe = Shoe {
+            window_s: 0.0,
+            ..Shoe::default()
+        };
+        let standing = reading([0.0; 3], [0.0, 9.80665, 0.0]);
+        let turning = reading([0.0, 0.0, 2.0], [0.0, 9.80665, 0.0]);
+        let times: Vec<f64> = (0..10).map(|i| i as f64 * 0.01).collect();
+        let mut values = vec![standing; 10];
+        values[4] = turning;
+        let track = Track::new(times, values).unwrap();
+        // Frames 0.02 s apart: the frame at 0.04 s has reading 4 (turning) within 0.01 s; the one
+        // at 0.02 s has readings 1–3; the one at 0.5 s is past the readings.
+        let frames = [0.0, 0.02, 0.04, 0.06, 0.08, 0.5];
+        let still = |t: Vec<f64>| t.iter().map(|&t| t <= 1.0).collect::<Vec<_>>();
+        assert_eq!(
+            still(shoe.frame_statistic(&track, &frames)),
+            [true, true, false, true, true, false]
+        );
+        // The readings 0.05 s apart, frames 0.02 s apart: a frame takes its nearest reading.
+        let sparse = Track::new(vec![0.0, 0.05, 0.1], vec![standing, turning, standing]).unwrap();
+        assert_eq!(
+            still(shoe.frame_statistic(&sparse, &[0.0, 0.02, 0.045, 0.08])),
+            [true, true, false, true]
+        );
+    }
+}
