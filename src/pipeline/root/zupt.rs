@@ -154,6 +154,35 @@ mod tests {
         assert!((t[2] - (1.0 + 2.25) / 2.0).abs() < 1e-12, "{}", t[2]);
     }
 
+    proptest::proptest! {
+        /// Any readings at any increasing times, any frames: one value per frame, never
+        /// negative; and no panic.
+        #[test]
+        fn any_readings_give_one_value_per_frame(
+            steps in proptest::collection::vec(1e-4f64..0.1, 1..40),
+            values in proptest::collection::vec(-50.0f64..50.0, 240),
+            frames in proptest::collection::vec(-0.5f64..5.0, 0..30),
+            window_s in 0.0f64..0.2,
+        ) {
+            let times: Vec<f64> = steps.iter().scan(0.0, |t, d| { *t += d; Some(*t) }).collect();
+            let readings: Vec<ImuSample> = (0..times.len())
+                .map(|i| {
+                    let v = &values[6 * i..6 * i + 6];
+                    reading([v[0], v[1], v[2]], [v[3], v[4], v[5]])
+                })
+                .collect();
+            let track = Track::new(times.clone(), readings).unwrap();
+            let mut frames = frames;
+            frames.sort_by(f64::total_cmp);
+            let shoe = Shoe { window_s, ..Shoe::default() };
+            let t = shoe.frame_statistic(&track, &frames);
+            proptest::prop_assert_eq!(t.len(), frames.len());
+            for v in t {
+                proptest::prop_assert!(v >= 0.0, "{}", v);
+            }
+        }
+    }
+
     #[test]
     fn frames_take_the_readings_within_half_a_frame() {
         let shoe = Shoe {
