@@ -1255,8 +1255,9 @@ fn unsensed_spine_joints_share_the_bend() {
 /// Issue 50's foot-mounted zero-velocity cue: SHOE's statistic (`pipeline::root::zupt`) on the
 /// feet's raw readings of a simulated walk (`simulate --raw`, the pymo walk) equals the one an
 /// independent numpy implementation written from the paper computes (tests/python/shoe.py),
-/// reading for reading; and by it a walk's feet both stand still (stance, 19–25 % of the
-/// readings at OpenShoe's thresholds) and move (swing).
+/// reading for reading; and by it the take's feet both stand still (19–25 % of the readings at
+/// OpenShoe's scales — the standing before the walk: the source's feet creep and roll through
+/// the walk's stances) and move.
 #[test]
 fn the_feet_sensors_stillness_is_shoes() {
     let (Some(bvh), Some(py)) = (shared("bvh/pymo_walk.bvh"), python()) else {
