@@ -142,7 +142,7 @@ fn run_on(
     }
     let (file, w) = (mapping_file.display().to_string(), &mut Vec::new());
     let (times, policy) = (TakeTimes::of(input.take()), options.heading_policy(mapping));
-    let feet_readings = feet_readings(input.take(), rig, mapping, mapping_file);
+    let feet_stillness = feet_stillness(input.take(), rig, mapping, mapping_file);
     let (world, sources, window) = stage(debug_span!("sources"), || {
         sources_and_window(input, rig, mapping, mapping_file, options, w)
     })?;
@@ -162,9 +162,8 @@ fn run_on(
     });
     let (animation, root_mode, contacts) = stage(debug_span!("root"), || {
         let frame_times_s: Vec<f64> = grid.times_s().collect();
-        let still = feet_readings.map(|r| {
-            r.map(|track| root::zupt::Shoe::default().frame_statistic(&track, &frame_times_s))
-        });
+        let still = feet_stillness
+            .map(|r| r.map(|(times, t)| root::zupt::on_frames(&times, &t, &frame_times_s)));
         root_stage(rig, local.local, &local.animated, options, &held, &still)
     })?;
     Ok(Converted {
@@ -354,22 +353,24 @@ fn local_rotations(
     }
 }
 
-/// The raw readings (gyro, specific force) of the sensors the mapping puts on the feet, `[left,
-/// right]`, for the root stage's zero-velocity cue ([`root::zupt`]); copied, since stage 1 may
-/// consume the take.
-fn feet_readings(
+/// The root stage's zero-velocity cue ([`root::zupt`]) from the raw readings (gyro, specific
+/// force) of the sensors the mapping puts on the feet, `[left, right]`: each reading's time and
+/// SHOE's statistic, taken before stage 1, which may consume the take.
+fn feet_stillness(
     take: &Take,
     rig: &Rig,
     mapping: &Mapping,
     mapping_file: &Path,
-) -> [Option<Track<crate::take::ImuSample>>; 2] {
+) -> [Option<(Vec<f64>, Vec<f64>)>; 2] {
     let (Some(feet), Ok(resolved)) = (root::foot_joints(rig), mapping.resolve(rig, mapping_file))
     else {
         return [None, None];
     };
     feet.map(|foot| {
         let sensor = resolved.iter().find(|s| s.bone == foot)?;
-        take.sensor(&sensor.sensor)?.inertial().cloned()
+        let readings = take.sensor(&sensor.sensor)?.inertial()?;
+        let t = root::zupt::Shoe::default().statistic(readings.times_s(), readings.values());
+        Some((readings.times_s().to_vec(), t))
     })
 }
 

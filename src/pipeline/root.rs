@@ -25,10 +25,11 @@
 //!   recent velocity, which follows whichever foot they chose, and so can lock onto a sliding one.
 //!   Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3 samples), which
 //!   seldom holds on real walks. Where the take has a foot sensor's raw readings, that sensor's
-//!   own zero-velocity test ([`zupt`], SHOE) also reports the foot planted. A foot's points are its joints, their end sites and a heel
-//!   (a skeleton has none: below the ankle at the sole's height, [`HEEL_BACK`] of the foot
-//!   behind it). The body leaves the ground in two ways: the legs throw the hips up faster than
-//!   [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off), or the feet fall [`FLIGHT_H`] below
+//!   own zero-velocity test ([`zupt`], SHOE) also reports the foot planted. A foot's points are
+//!   its joints, their end sites and a heel (a skeleton has none: below the ankle at the sole's
+//!   height, [`HEEL_BACK`] of the foot behind it). The body leaves the ground in two ways: the
+//!   legs throw the hips up faster than [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off),
+//!   or the feet fall [`FLIGHT_H`] below
 //!   the ballistic path the hips would have taken from the last frame the feet held them (the
 //!   ground only pushes: a body cannot be pulled down faster than gravity, so feet that would
 //!   pull it have left the ground — a run's flight, which rises too little for the first way).

@@ -2,12 +2,12 @@
 //! reckoning, SHOE (the stance hypothesis optimal detector, Skog, Händel, Nilsson and Rantakokko,
 //! "Zero-velocity detection — an algorithm evaluation", IEEE TBME 2010).
 //!
-//! A foot-mounted IMU on a foot that stands still measures gravity alone and no rotation. Over a
-//! window `Ω` of `W` readings around sample `k` (gyro `ω_i`, rad/s; specific force `a_i`, m/s²;
+//! A foot-mounted IMU on a foot that stands still measures gravity alone and no rotation. Over
+//! the `W` readings `i ∈ K` around reading `k` (gyro `ω_i`, rad/s; specific force `a_i`, m/s²;
 //! sensor frame), the generalised likelihood ratio test of "still" against "moving" reduces to
 //!
 //! ```text
-//! T_k = (1/W) Σ_{i∈Ω} [ ‖a_i − g · ā / ‖ā‖‖² / σ_a² + ‖ω_i‖² / σ_ω² ],   still when T_k ≤ γ
+//! T_k = (1/W) Σ_{i∈K} [ ‖a_i − g · ā / ‖ā‖‖² / σ_a² + ‖ω_i‖² / σ_ω² ],   still when T_k ≤ γ
 //! ```
 //!
 //! with `ā` the window's mean specific force and `g` = 9.80665 m/s² (its direction is the
@@ -25,7 +25,7 @@ const G_M_S2: f64 = 9.80665;
 /// SHOE's scales, with its threshold folded in (see the module).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Shoe {
-    /// The window `Ω`, s: at least one reading, the readings within half of it on each side.
+    /// The window `K`, s: the readings within half of it on each side (at least the reading).
     pub window_s: f64,
     /// `A = σ_a √γ`, m/s².
     pub accel_m_s2: f64,
@@ -79,42 +79,49 @@ impl Shoe {
             .collect()
     }
 
-    /// Per frame (`frame_times_s`, the take's clock), `T` of the readings within half a frame of
-    /// it (the largest), or of the nearest reading when none is that close; infinite outside the
-    /// readings' span (nothing says the foot stood still there). Still is `T ≤ 1`.
+    /// [`Self::statistic`] of a track, on the frames at `frame_times_s` ([`on_frames`]).
     pub fn frame_statistic(&self, track: &Track<ImuSample>, frame_times_s: &[f64]) -> Vec<f64> {
-        let (times, readings) = (track.times_s(), track.values());
-        let still = self.statistic(times, readings);
-        let (Some(&first), Some(&last)) = (times.first(), times.last()) else {
-            return vec![f64::INFINITY; frame_times_s.len()];
-        };
-        let half = match frame_times_s {
-            [a, b, ..] => (b - a) / 2.0,
-            _ => 0.0,
-        };
-        frame_times_s
-            .iter()
-            .map(|&t| {
-                if t < first - half || t > last + half {
-                    return f64::INFINITY;
-                }
-                let lo = times.partition_point(|&s| s < t - half);
-                let hi = times.partition_point(|&s| s <= t + half);
-                if lo < hi {
-                    still[lo..hi].iter().copied().fold(0.0, f64::max)
-                } else {
-                    // The nearest reading.
-                    let k = times.partition_point(|&s| s < t).min(times.len() - 1);
-                    let k = if k > 0 && (t - times[k - 1]) < (times[k] - t) {
-                        k - 1
-                    } else {
-                        k
-                    };
-                    still[k]
-                }
-            })
-            .collect()
+        let times = track.times_s();
+        on_frames(times, &self.statistic(times, track.values()), frame_times_s)
     }
+}
+
+/// Per frame (`frame_times_s`, the readings' clock, evenly spaced), the statistic `t` of the
+/// readings (at `times_s`) within half a frame of it — the largest — or of the nearest reading
+/// when none is that close; infinite outside the readings' span (nothing says the foot stood
+/// still there). Still is `T ≤ 1`.
+pub fn on_frames(times_s: &[f64], t: &[f64], frame_times_s: &[f64]) -> Vec<f64> {
+    let n = times_s.len().min(t.len());
+    let (times, t) = (&times_s[..n], &t[..n]);
+    let (Some(&first), Some(&last)) = (times.first(), times.last()) else {
+        return vec![f64::INFINITY; frame_times_s.len()];
+    };
+    let half = match frame_times_s {
+        [a, b, ..] => (b - a) / 2.0,
+        _ => 0.0,
+    };
+    frame_times_s
+        .iter()
+        .map(|&frame| {
+            if frame < first - half || frame > last + half {
+                return f64::INFINITY;
+            }
+            let lo = times.partition_point(|&s| s < frame - half);
+            let hi = times.partition_point(|&s| s <= frame + half);
+            if lo < hi {
+                t[lo..hi].iter().copied().fold(0.0, f64::max)
+            } else {
+                // The nearest reading.
+                let k = times.partition_point(|&s| s < frame).min(n - 1);
+                let k = if k > 0 && (frame - times[k - 1]) < (times[k] - frame) {
+                    k - 1
+                } else {
+                    k
+                };
+                t[k]
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
