@@ -1012,6 +1012,19 @@ mod tests {
         }
     }
 
+    /// The rate (rad/s) at which the left foot of `rig` standing in `rest`, pitched about x (it
+    /// points along z), rolls at [`PLANT_ROLL_H_S`]: its toes' tip moves at ω · its distance from
+    /// the x axis through the foot joint.
+    fn roll_limit_rad_s(rig: &Rig, rest: &[UnitQuaternion<f64>], dt: f64) -> f64 {
+        let probe = RootCore::new(rig, RootMode::Feet, dt, rest);
+        let left = probe.feet.as_ref().unwrap()[0].clone();
+        let (mut world, mut positions, mut points) = (Vec::new(), Vec::new(), Vec::new());
+        pose_relative_to_hips(rig, rest, &mut world, &mut positions);
+        foot_points(rig, &left, &positions, &world, &mut points);
+        let tip = points[left.tip] - points[0];
+        PLANT_ROLL_H_S * probe.standing_height() / tip.y.hypot(tip.z)
+    }
+
     /// A foot rolling on the point it pivots on — its toes' tip turning about its joint in the
     /// foot's upright plane at twice [`PLANT_ROLL_H_S`] — is not reported planted, though that
     /// point holds still; rolling at half of it, it is.
@@ -1021,17 +1034,8 @@ mod tests {
         let foot = Anatomy::of(&rig).limb(Side::Left, Limb::Foot).unwrap();
         let rest = vec![UnitQuaternion::identity(); rig.len()];
         let dt = 1.0 / 60.0;
-        // The toes' tip about the foot joint in the standing pose, rig units.
-        let probe = RootCore::new(&rig, RootMode::Feet, dt, &rest);
-        let left = probe.feet.as_ref().unwrap()[0].clone();
-        let (mut world, mut positions, mut points) = (Vec::new(), Vec::new(), Vec::new());
-        pose_relative_to_hips(&rig, &rest, &mut world, &mut positions);
-        foot_points(&rig, &left, &positions, &world, &mut points);
-        let tip = points[left.tip] - points[0];
-        // Turning about x (the foot points along z), the tip moves at ω · its distance from x.
-        let limit = PLANT_ROLL_H_S * probe.standing_height();
-        let arm = tip.y.hypot(tip.z);
-        for (rate_rad_s, planted) in [(0.5 * limit / arm, true), (2.0 * limit / arm, false)] {
+        let limit = roll_limit_rad_s(&rig, &rest, dt);
+        for (rate_rad_s, planted) in [(0.5 * limit, true), (2.0 * limit, false)] {
             let mut core = RootCore::new(&rig, RootMode::Feet, dt, &rest);
             for _ in 0..10 {
                 assert!(core.push(&rest).contact[0]);
@@ -1063,13 +1067,7 @@ mod tests {
         let foot = Anatomy::of(&rig).limb(Side::Left, Limb::Foot).unwrap();
         let rest = vec![UnitQuaternion::identity(); rig.len()];
         let dt = 1.0 / 60.0;
-        let probe = RootCore::new(&rig, RootMode::Feet, dt, &rest);
-        let left = probe.feet.as_ref().unwrap()[0].clone();
-        let (mut world, mut positions, mut points) = (Vec::new(), Vec::new(), Vec::new());
-        pose_relative_to_hips(&rig, &rest, &mut world, &mut positions);
-        foot_points(&rig, &left, &positions, &world, &mut points);
-        let tip = points[left.tip] - points[0];
-        let rate_rad_s = 2.0 * PLANT_ROLL_H_S * probe.standing_height() / tip.y.hypot(tip.z);
+        let rate_rad_s = 2.0 * roll_limit_rad_s(&rig, &rest, dt);
         // Ten frames standing, then six rolling onto the heel.
         let poses: Vec<Vec<UnitQuaternion<f64>>> = (0..16)
             .map(|n| {

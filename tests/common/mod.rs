@@ -249,7 +249,7 @@ pub fn gltf_validate<P: AsRef<Path>>(files: &[P], modules: &Path) -> Vec<serde_j
 }
 
 /// Runs `py script args...`; its stdout. Panics with stdout and stderr when it fails.
-fn run_python(py: &Path, script: &str, args: &mut dyn Iterator<Item = &OsStr>) -> String {
+pub fn run_python(py: &Path, script: &str, args: &mut dyn Iterator<Item = &OsStr>) -> String {
     let out = Command::new(py)
         .arg(repo_file(script))
         .args(args)

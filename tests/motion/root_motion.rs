@@ -1279,21 +1279,19 @@ fn the_feet_sensors_stillness_is_shoes() {
     for sensor in ["l_foot", "r_foot"] {
         let track = take.sensor(sensor).unwrap().inertial().unwrap();
         let ours = shoe.statistic(track.times_s(), track.values());
-        let out = Command::new(&py)
-            .arg(repo_file("tests/python/shoe.py"))
-            .arg(&csv)
-            .arg(sensor)
-            .arg(shoe.window_s.to_string())
-            .arg(shoe.accel_m_s2.to_string())
-            .arg(shoe.gyro_rad_s.to_string())
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let args = [
+            csv.clone().into_os_string(),
+            sensor.into(),
+            shoe.window_s.to_string().into(),
+            shoe.accel_m_s2.to_string().into(),
+            shoe.gyro_rad_s.to_string().into(),
+        ];
+        let stdout = common::run_python(
+            &py,
+            "tests/python/shoe.py",
+            &mut args.iter().map(|a| a.as_os_str()),
         );
-        let theirs: Vec<(f64, f64)> = String::from_utf8_lossy(&out.stdout)
+        let theirs: Vec<(f64, f64)> = stdout
             .lines()
             .map(|l| {
                 let mut cells = l.split_whitespace().map(|c| c.parse::<f64>().unwrap());
