@@ -142,9 +142,10 @@ fn run_on(
     }
     let (file, w) = (mapping_file.display().to_string(), &mut Vec::new());
     let (times, policy) = (TakeTimes::of(input.take()), options.heading_policy(mapping));
-    let feet_stillness = feet_stillness(input.take(), rig, mapping, mapping_file);
+    let resolved = mapping.resolve(rig, mapping_file)?;
+    let feet_stillness = feet_stillness(input.take(), rig, &resolved, options.root);
     let (world, sources, window) = stage(debug_span!("sources"), || {
-        sources_and_window(input, rig, mapping, mapping_file, options, w)
+        sources_and_window(input, rig, mapping, resolved, options, w)
     })?;
     let (calibration, later) = stage(debug_span!("calibrate"), || {
         calibrations(rig, &sources, window.as_ref(), times, policy, &file, w)
@@ -354,16 +355,17 @@ fn local_rotations(
 }
 
 /// The root stage's zero-velocity cue ([`root::zupt`]) from the raw readings (gyro, specific
-/// force) of the sensors the mapping puts on the feet, `[left, right]`: each reading's time and
-/// SHOE's statistic, taken before stage 1, which may consume the take.
+/// force) of the sensors the mapping puts on the feet (`resolved`), `[left, right]`: each
+/// reading's time and SHOE's statistic, taken before stage 1, which may consume the take. None in
+/// the root modes that have no contacts.
 fn feet_stillness(
     take: &Take,
     rig: &Rig,
-    mapping: &Mapping,
-    mapping_file: &Path,
+    resolved: &[ResolvedSensor],
+    mode: RootMode,
 ) -> [Option<(Vec<f64>, Vec<f64>)>; 2] {
-    let (Some(feet), Ok(resolved)) = (root::foot_joints(rig), mapping.resolve(rig, mapping_file))
-    else {
+    let feet = root::foot_joints(rig).filter(|_| matches!(mode, RootMode::Feet | RootMode::Auto));
+    let Some(feet) = feet else {
         return [None, None];
     };
     feet.map(|foot| {
@@ -402,12 +404,12 @@ fn root_stage(
 }
 
 /// Stage 1 for both modes: the devices' world (the settings', else the mapping's, else the
-/// take's), the mapped sensors' tracks, and the calibration window.
+/// take's), the mapped sensors' (`resolved`) tracks, and the calibration window.
 fn sources_and_window(
     input: TakeInput,
     rig: &Rig,
     mapping: &Mapping,
-    mapping_file: &Path,
+    resolved: Vec<ResolvedSensor>,
     options: &PipelineOptions,
     warnings: &mut Vec<String>,
 ) -> Result<(World, Sources, Option<CalibrationWindow>), PipelineError> {
@@ -415,7 +417,6 @@ fn sources_and_window(
         .world
         .or(mapping.world)
         .unwrap_or(input.take().source().world);
-    let resolved = mapping.resolve(rig, mapping_file)?;
     let sources = sources::orientations(input, rig, mapping, resolved, world, options, warnings)?;
     let window = calibrate::window(mapping, &sources.sensors, warnings);
     Ok((world, sources, window))
@@ -437,7 +438,7 @@ fn run_causal(
         TakeInput::Borrowed(take),
         rig,
         mapping,
-        mapping_file,
+        mapping.resolve(rig, mapping_file)?,
         options,
         &mut warnings,
     )?;

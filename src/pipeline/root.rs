@@ -29,10 +29,10 @@
 //!   its joints, their end sites and a heel (a skeleton has none: below the ankle at the sole's
 //!   height, [`HEEL_BACK`] of the foot behind it). The body leaves the ground in two ways: the
 //!   legs throw the hips up faster than [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off),
-//!   or the feet fall [`FLIGHT_H`] below
-//!   the ballistic path the hips would have taken from the last frame the feet held them (the
-//!   ground only pushes: a body cannot be pulled down faster than gravity, so feet that would
-//!   pull it have left the ground — a run's flight, which rises too little for the first way).
+//!   or the feet fall [`FLIGHT_H`] below the ballistic path the hips would have taken from the
+//!   last frame the feet held them (the ground only pushes: a body cannot be pulled down faster
+//!   than gravity, so feet that would pull it have left the ground — a run's flight, which rises
+//!   too little for the first way).
 //!   Airborne, the hips keep the horizontal velocity of their last stance (its mean over up to
 //!   [`STANCE_S`]) and follow gravity. While they still rise the legs may be
 //!   unfolding under the push-off: a foot at its surface then carries them higher and faster
@@ -846,18 +846,7 @@ pub fn root_positions(
             });
             let f = match &m.feet {
                 None => core.step_ground(low),
-                Some(FeetPoints {
-                    points: [left, right],
-                    per_foot,
-                }) => core.step_feet(
-                    low,
-                    [
-                        &left[i * per_foot[0]..(i + 1) * per_foot[0]],
-                        &right[i * per_foot[1]..(i + 1) * per_foot[1]],
-                    ],
-                    left_weight,
-                    still,
-                ),
+                Some(feet) => core.step_feet(low, feet.frame(i), left_weight, still),
             };
             // A flight found late: the frames since it started were in the air, on its path.
             let revised = core.revised();
@@ -884,11 +873,11 @@ fn support_cues(measured: &[Measured], dt: f64, height: f64) -> Vec<support::Sup
     let mut cues = Vec::new();
     let mut previous: Option<[&[Vector3<f64>]; 2]> = None;
     for m in measured {
-        let Some(FeetPoints { points, per_foot }) = &m.feet else {
+        let Some(feet) = &m.feet else {
             continue;
         };
         for i in 0..m.low.len() {
-            let now = [0, 1].map(|f| &points[f][i * per_foot[f]..(i + 1) * per_foot[f]]);
+            let now = feet.frame(i);
             let low = now.map(|p| lowest(p).1);
             let above = [0, 1].map(|f| (low[f] - low[0].min(low[1])) / height);
             let implied = match previous {
@@ -914,6 +903,13 @@ struct Measured {
 struct FeetPoints {
     points: [Vec<Vector3<f64>>; 2],
     per_foot: [usize; 2],
+}
+
+impl FeetPoints {
+    /// Frame `i`'s points of each foot (of the frames measured together).
+    fn frame(&self, i: usize) -> [&[Vector3<f64>]; 2] {
+        [0, 1].map(|f| &self.points[f][i * self.per_foot[f]..(i + 1) * self.per_foot[f]])
+    }
 }
 
 fn measure_frames(
