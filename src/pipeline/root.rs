@@ -221,6 +221,10 @@ pub struct RootFrame {
     /// Left, right: planted.
     pub contact: [bool; 2],
     pub airborne: bool,
+    /// Left, right: how far the point each foot pivots on moved over the ground (horizontally)
+    /// since the frame before, rig units — what a planted foot's pivot slips ([`super::foot_lock`]
+    /// takes it back).
+    pub slip: [Vector3<f64>; 2],
 }
 
 /// The root stage's incremental core.
@@ -468,6 +472,7 @@ impl RootCore {
                 position: self.rest_root,
                 contact: [false; 2],
                 airborne: false,
+                slip: [Vector3::zeros(); 2],
             },
             RootMode::Ground => {
                 let low =
@@ -498,6 +503,7 @@ impl RootCore {
             position: Vector3::new(self.rest_root.x, self.floor - low, self.rest_root.z),
             contact: [false; 2],
             airborne: false,
+            slip: [Vector3::zeros(); 2],
         }
     }
 
@@ -540,6 +546,7 @@ impl RootCore {
                 position: hips,
                 contact: planted,
                 airborne: false,
+                slip: [Vector3::zeros(); 2],
             };
         };
         state.revised.clear();
@@ -649,11 +656,14 @@ impl RootCore {
         // rolling. No hysteresis (it held contacts past the source's end, measured by
         // `every_gait_walks_without_sliding`): contacts shorter than [`MIN_FRAMES`] are dropped
         // instead, so that noise does not flicker them.
+        // The pivots' motion over the ground: the hips' step plus their motion relative to them.
+        let slip = [0, 1].map(|f| {
+            let d = state.hips - before + moved[f];
+            Vector3::new(d.x, 0.0, d.z)
+        });
         let contact = [0, 1].map(|f| {
             let height = state.hips.y + low[f].1 - state.level[f];
-            // The pivot's ground speed: the hips' step plus its motion relative to them.
-            let d = state.hips - before + moved[f];
-            let speed = Vector3::new(d.x, 0.0, d.z).norm() / dt;
+            let speed = slip[f].norm() / dt;
             // A planted foot lies still on its sole: it does not roll.
             let tip = |points: &[Vector3<f64>]| {
                 points.get(tips[f]).copied().unwrap_or_default() - points[0]
@@ -673,6 +683,7 @@ impl RootCore {
             position: state.hips,
             contact,
             airborne: state.airborne && !pushing,
+            slip,
         }
     }
 }
@@ -776,6 +787,10 @@ pub struct Contacts {
     /// Per frame: left and right planted (for the glTF's contact curves).
     #[serde(skip)]
     pub per_frame: Vec<[bool; 2]>,
+    /// Per frame: how far each foot's pivot moved over the ground since the frame before
+    /// ([`RootFrame::slip`]).
+    #[serde(skip)]
+    pub slip: Vec<[Vector3<f64>; 2]>,
 }
 
 impl Contacts {
@@ -797,6 +812,7 @@ impl Contacts {
             right,
             airborne: intervals(frames.iter().map(|f| f.airborne)),
             per_frame,
+            slip: frames.iter().map(|f| f.slip).collect(),
         }
     }
 }
@@ -856,6 +872,7 @@ pub fn root_positions(
                     position: *p,
                     contact: [false; 2],
                     airborne: true,
+                    slip: [Vector3::zeros(); 2],
                 };
             }
             all.push(f);
