@@ -13,6 +13,7 @@
 //! units: m               # BVH length unit: m or cm
 //! trim: "2.5:60"         # seconds, either side optional
 //! root: fixed
+//! foot_lock: false       # feet mode: hold each planted foot where it stands (turns the legs)
 //! input_format: sou      # skip detection
 //! skip_lines: 0
 //! skip_seconds: 0
@@ -64,6 +65,9 @@ pub struct Config {
     #[serde(default, deserialize_with = "trim")]
     pub trim: Option<Trim>,
     pub root: Option<RootMode>,
+    /// Feet mode: hold each planted foot where it stands (a flag: `--foot-lock`).
+    #[serde(default)]
+    pub foot_lock: bool,
     #[serde(default, deserialize_with = "input_format")]
     pub input_format: Option<InputFormat>,
     pub skip_lines: Option<u64>,
@@ -294,6 +298,7 @@ impl Config {
             units: self.units.or(below.units),
             trim: self.trim.or(below.trim),
             root: self.root.or(below.root),
+            foot_lock: self.foot_lock || below.foot_lock,
             input_format: self.input_format.or(below.input_format),
             skip_lines: self.skip_lines.or(below.skip_lines),
             skip_seconds: self.skip_seconds.or(below.skip_seconds),
@@ -351,6 +356,7 @@ impl Config {
         if let Some(r) = self.root {
             s.pipeline.root = r;
         }
+        s.pipeline.foot_lock = self.foot_lock;
         if let Some(smoothing) = &self.smoothing {
             s.pipeline.smoothing = smoothing.clone();
         }

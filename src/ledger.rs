@@ -217,6 +217,8 @@ struct FingerprintInput<'a> {
     bind_frame: bool,
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     in_place: bool,
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    foot_lock: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     engine: Option<&'static str>,
     unsensed: &'static str,
@@ -282,6 +284,7 @@ pub fn settings_fingerprint(plan: &Plan) -> String {
         causal: p.causal,
         bind_frame: settings.bind_frame,
         in_place: settings.in_place,
+        foot_lock: p.foot_lock,
         engine: settings.engine.map(|e| e.name()),
         unsensed: p.unsensed.label(),
         heading: p.heading.map(|h| h.label()),

@@ -85,6 +85,11 @@ pub struct SettingsArgs {
     /// legs are sensed down to the feet, ground when the thighs are, else fixed) [default: auto]
     #[arg(long, value_name = "MODE")]
     root: Option<imubake::pipeline::root::RootMode>,
+    /// Feet mode: hold each planted foot where it stands over its contact, by turning its thigh
+    /// and shank — no foot slides, at the cost of legs up to a few degrees off what their
+    /// sensors measured where the subject's feet did slip
+    #[arg(long)]
+    foot_lock: bool,
     /// Scale the rig to a subject: a YAML file with `height_m` and/or `segments: {bone: metres}`
     #[arg(long, value_name = "FILE.yaml")]
     subject: Option<PathBuf>,
@@ -196,6 +201,7 @@ impl SettingsArgs {
             fusion: self.fusion.clone(),
             sensor_calibration: self.sensor_calibration.clone(),
             root: self.root,
+            foot_lock: self.foot_lock,
             bind_frame: self.bind_frame,
             in_place: self.in_place,
             engine: self.engine,

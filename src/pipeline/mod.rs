@@ -9,7 +9,8 @@
 //! 4. [`smoothing`] at each sensor's own rate, 5. [`resample`] onto the frame grid (slerp; held
 //!    outside each sensor's range), per sensor on rayon's pool;
 //! 6. [`relative`]: local rotations `q_world_parent⁻¹ ⊗ q_world_bone`;
-//! 7. [`root`]: the root position; `--trim` cuts the frame range.
+//! 7. [`root`]: the root position; `--trim` cuts the frame range;
+//! 8. [`foot_lock`]: each planted foot held where it stands (two-bone IK on the legs).
 //!
 //! In causal mode the same stages run as the stream's incremental cores ([`stream`]). Euler
 //! angles (with the discontinuity filter) are made by the BVH writer from the animation's
@@ -18,6 +19,7 @@
 pub mod bone_world;
 pub mod calibrate;
 mod error;
+pub mod foot_lock;
 pub mod hinge_axis;
 pub mod legacy;
 mod options;
@@ -376,7 +378,8 @@ fn feet_stillness(
     })
 }
 
-/// Stage 7: the root position (the mode resolved), and the animation with the feet's contacts.
+/// Stages 7 and 8: the root position (the mode resolved), the planted feet held where they stand
+/// (`feet` mode with `--foot-lock`), and the animation with the feet's contacts.
 fn root_stage(
     rig: &Rig,
     local: Vec<Vec<UnitQuaternion<f64>>>,
@@ -394,6 +397,19 @@ fn root_stage(
         held,
         still,
     );
+    let mut local = local;
+    if let Some(c) = contacts.as_ref().filter(|_| options.foot_lock) {
+        stage(debug_span!("foot lock"), || {
+            foot_lock::lock_feet(
+                rig,
+                &mut local,
+                &roots,
+                &c.per_frame,
+                &c.slip,
+                options.fps.frame_time_s(),
+            )
+        });
+    }
     let moving = relative::moving(rig, animated, options.unsensed, held);
     let mut animation = Animation::new(rig.clone(), options.fps, local, moving, roots)?
         .standing_in(rig.extent_in(held));
@@ -466,6 +482,7 @@ fn run_causal(
             position: pose.root,
             contact: pose.contact,
             airborne: pose.airborne,
+            slip: [nalgebra::Vector3::zeros(); 2],
         });
     };
     // The sensors' samples merged in time order (ties in mapping order).

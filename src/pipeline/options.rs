@@ -56,6 +56,9 @@ pub struct PipelineOptions {
     pub fps: Fps,
     pub trim: Option<Trim>,
     pub root: RootMode,
+    /// Hold each planted foot where it stands over its contact (`--foot-lock`:
+    /// [`super::foot_lock`]; a whole take in `feet` mode).
+    pub foot_lock: bool,
     pub smoothing: Smoothing,
     /// Also produce the local rotations without smoothing (for the report).
     pub keep_unsmoothed: bool,
@@ -99,6 +102,7 @@ impl Default for PipelineOptions {
             fps: Fps::new(30, 1).expect("30 fps"),
             trim: None,
             root: RootMode::Auto,
+            foot_lock: false,
             smoothing: Smoothing::default(),
             keep_unsmoothed: false,
             force: false,

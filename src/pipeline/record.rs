@@ -18,6 +18,9 @@ pub struct PipelineRecord {
     pub fusion: Option<FusionRecord>,
     pub smoothing: Option<serde_json::Value>,
     pub root: &'static str,
+    /// The planted feet were held where they stood (`--foot-lock` in `feet` mode, a whole take:
+    /// [`crate::pipeline::foot_lock`]).
+    pub foot_lock: bool,
     /// What joints without a sensor did: `interpolate` or `rest`.
     pub unsensed: &'static str,
     pub heading: &'static str,
@@ -232,6 +235,10 @@ pub fn pipeline_record(
         fusion: None,
         smoothing: Some(serde_json::to_value(&options.smoothing).expect("serialisable")),
         root: root.label(),
+        foot_lock: options.foot_lock
+            && root == RootMode::Feet
+            && !options.causal
+            && mode == Mode::Orientations,
         unsensed: if mode == Mode::Euler {
             "rest"
         } else {
