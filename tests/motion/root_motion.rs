@@ -725,8 +725,8 @@ fn ground_scores(take: &Take) -> GroundScores {
 
 /// Issue 50's takes: CMU 03_02, a walk over uneven ground (the hips rise about 15 cm and drop
 /// about 25 cm), on its Poser-named skeleton, and the other trials of the same subject on the
-/// same ground, fetched (`CMU_MIRROR`'s 03_01, 03_03, 03_04; skipped where not fetched); and the
-/// flat pymo walk and CMU 01_01, whose stance feet must not drift. 16 simulated sensors with their
+/// same ground, fetched (`CMU_MIRROR`'s 03_01, 03_03, 03_04; skipped where not fetched), and a
+/// stair climb where `IMUBAKE_STAIRS_BVH` names it (CMU 83_30); and the flat pymo walk and CMU 01_01, whose stance feet must not drift. 16 simulated sensors with their
 /// true mounts, `--root feet`. Targets: on changing ground the hips' path within 3 %, the hips'
 /// height within 0.02 h RMS of the source's, the stance feet within 0.02 h RMS of theirs, skate
 /// ≤ 0.006 h per contact; on flat ground the stance feet's drift ≤ 0.01 h (`ground_scores`); from
@@ -764,6 +764,19 @@ fn changing_ground_keeps_each_foot_on_its_own() {
                 CMU_JOINTS,
             ));
         }
+    }
+    // A stair take: CMU 83_30 "walk forward stepping up stairs" (the CMU database, free for
+    // research and commercial use; cgspeed's BVH conversion, kept by una-dinosauria/cmu-mocap at
+    // 62ac0fb0ec43cff2bf66426928f4fa6682d4bbdc, `083/83_30.bvh`: a repository too large for
+    // `fetch`, so the file is named by IMUBAKE_STAIRS_BVH where it has been copied).
+    if let Some(stairs) = std::env::var_os("IMUBAKE_STAIRS_BVH") {
+        terrain.push((
+            "CMU 83_30 up stairs".to_string(),
+            stairs.into(),
+            "1:",
+            CMU_MAPPING,
+            CMU_JOINTS,
+        ));
     }
     for (label, bvh, frames, mapping, names) in terrain {
         let Some(take) = closed_loop_named(&bvh, mapping, Some(frames), &["--root", "feet"], names)
