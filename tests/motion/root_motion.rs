@@ -642,7 +642,7 @@ fn every_gait_walks_without_sliding() {
 /// `--foot-lock` (`pipeline/foot_lock.rs`) on CMU 01_01 (hops, turns, long stances whose feet
 /// shuffle with the legs' 0.5° of noise while the other foot carries): skate per contact by issue
 /// 49's rule (`contact_skate`) within its 0.006 h with the lock, over it without (measured
-/// 2026-12-06, seed 3: 0.0051 h locked, 0.0224 h free); the hips and the contacts are the root
+/// 2026-12-06, seed 3: 0.0050 h locked, 0.0224 h free); the hips and the contacts are the root
 /// stage's either way (identical), and the sidecar says which ran.
 #[test]
 fn foot_lock_holds_the_standing_feet() {
