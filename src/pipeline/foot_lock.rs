@@ -35,7 +35,7 @@
 //! with the segment they belong to. The price: wherever the subject's feet did slip, or a rigid
 //! sole rocks from heel to toes, the thighs and shanks turn away from what their sensors measured
 //! — on CMU 01_01 with 0.5° of noise 0.91–1.14° RMS instead of 0.42–0.43°
-//! (`closed_loop::the_foot_lock_turns_only_the_legs`), up to 3° without noise, as its source's
+//! (`closed_loop::the_foot_lock_turns_only_the_legs`), up to 3.3° without noise, as its source's
 //! feet slip up to 0.03 h over a long stance — which is why the lock is asked for
 //! (`--foot-lock`), not done by default. Only a whole take is locked: a stream, which has sent the
 //! frames before, is not.

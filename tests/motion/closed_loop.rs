@@ -375,8 +375,9 @@ fn cmu_with_noise() {
 /// source's feet slip over a stance (its hops' long stances: up to 0.03 h); every other bone,
 /// the feet included, is as without the lock. Measured 2026-12-06 (seed 14), RMS since
 /// calibration, free → locked: LeftUpLeg 0.42 → 1.11°, LeftLeg 0.42 → 1.01°, RightUpLeg 0.43 →
-/// 1.14°, RightLeg 0.42 → 0.91°; asserted below 6° (the noise-free loop turns them up to 3.2°
-/// RMS: the source's feet slip, and the lock holds them).
+/// 1.14°, RightLeg 0.42 → 0.91°; asserted below 6° (the noise-free loop, seed 13, turns the right
+/// thigh 0.14 → 3.32° and shank 0.14 → 2.27° RMS: the source's feet slip, and the lock holds
+/// them).
 #[test]
 fn the_foot_lock_turns_only_the_legs() {
     let mapping = Path::new(env!("CARGO_MANIFEST_DIR")).join(MAPPING);
