@@ -106,29 +106,6 @@ fn between(rig: &Rig, top: usize, bottom: usize) -> Option<Vec<usize>> {
     Some(chain)
 }
 
-/// World rotations and positions of every joint at one frame (forward kinematics from the root
-/// at `root`).
-fn forward(
-    rig: &Rig,
-    local: &[UnitQuaternion<f64>],
-    root: Vector3<f64>,
-) -> (Vec<UnitQuaternion<f64>>, Vec<Vector3<f64>>) {
-    let mut world = Vec::with_capacity(rig.len());
-    let mut positions = Vec::with_capacity(rig.len());
-    for (i, j) in rig.joints().iter().enumerate() {
-        let (q, p) = match j.parent {
-            Some(parent) => (
-                world[parent] * local[i],
-                positions[parent] + world[parent] * j.offset,
-            ),
-            None => (local[i], root),
-        };
-        world.push(q);
-        positions.push(p);
-    }
-    (world, positions)
-}
-
 /// Per frame, how far to move the foot (horizontally, rig units) so that the point it pivots on
 /// holds still over each contact: inside a contact the slips since its first frame taken back,
 /// `c(t) = c(t − 1) − slip(t)` from `c(s) = 0`; after it the last correction fades out linearly
@@ -270,7 +247,7 @@ pub fn lock_feet(
                     return None;
                 }
                 let pose: Vec<UnitQuaternion<f64>> = local.iter().map(|track| track[t]).collect();
-                let (mut world, positions) = forward(rig, &pose, roots[t]);
+                let (mut world, positions) = rig.world_pose(&pose, roots[t]);
                 let mut out = Vec::new();
                 for s in sides {
                     let leg = legs[s].as_ref()?;
@@ -346,11 +323,11 @@ mod tests {
         shift: Vector3<f64>,
     ) -> Shifted {
         let root = rig.joints()[0].offset;
-        let (mut world, positions) = forward(rig, local, root);
+        let (mut world, positions) = rig.world_pose(local, root);
         let before = world.clone();
         let target = positions[leg.foot] + shift;
         reach(leg, &mut world, &positions, target);
-        let (after_world, after_positions) = forward(rig, &locals_of(rig, &world), root);
+        let (after_world, after_positions) = rig.world_pose(&locals_of(rig, &world), root);
         assert!(
             after_world
                 .iter()
@@ -366,7 +343,7 @@ mod tests {
     #[test]
     fn the_ankle_reaches_its_target_and_the_foot_keeps_its_turn() {
         let (rig, leg, local) = bent_leg(25.0, 40.0, -15.0);
-        let (_, positions) = forward(&rig, &local, rig.joints()[0].offset);
+        let (_, positions) = rig.world_pose(&local, rig.joints()[0].offset);
         let a = (positions[leg.shank] - positions[leg.thigh]).norm();
         let b = (positions[leg.foot] - positions[leg.shank]).norm();
         let shift = Vector3::new(0.03, -0.01, -0.02) * (a + b);
@@ -471,7 +448,7 @@ mod tests {
         let before = local.clone();
         let fk = |local: &[Vec<UnitQuaternion<f64>>], t: usize| {
             let pose: Vec<UnitQuaternion<f64>> = local.iter().map(|track| track[t]).collect();
-            forward(&rig, &pose, roots[t])
+            rig.world_pose(&pose, roots[t])
         };
         let was: Vec<Vector3<f64>> = (0..frames).map(|t| fk(&before, t).1[leg.foot]).collect();
         let slips: Vec<[Vector3<f64>; 2]> = (0..frames)
@@ -524,7 +501,7 @@ mod tests {
             sx in -0.5f64..0.5, sy in -0.5f64..0.5, sz in -0.5f64..0.5,
         ) {
             let (rig, leg, local) = bent_leg(hip, knee, foot);
-            let (_, positions) = forward(&rig, &local, rig.joints()[0].offset);
+            let (_, positions) = rig.world_pose(&local, rig.joints()[0].offset);
             let a = (positions[leg.shank] - positions[leg.thigh]).norm();
             let b = (positions[leg.foot] - positions[leg.shank]).norm();
             let shift = Vector3::new(sx, sy, sz) * (a + b);

@@ -314,6 +314,15 @@ impl Rig {
         local: &[UnitQuaternion<f64>],
         root: Vector3<f64>,
     ) -> Vec<Vector3<f64>> {
+        self.world_pose(local, root).1
+    }
+
+    /// Joint world rotations and positions (rig units) for local rotations and a root position.
+    pub fn world_pose(
+        &self,
+        local: &[UnitQuaternion<f64>],
+        root: Vector3<f64>,
+    ) -> (Vec<UnitQuaternion<f64>>, Vec<Vector3<f64>>) {
         let world = self.world_rotations(local);
         let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(self.joints.len());
         for j in &self.joints {
@@ -323,7 +332,7 @@ impl Rig {
             };
             pos.push(p);
         }
-        pos
+        (world, pos)
     }
 
     /// Rest-pose joint positions with the root at its offset.
