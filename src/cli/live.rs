@@ -142,9 +142,6 @@ pub fn run(args: LiveArgs) -> anyhow::Result<ExitCode> {
     if convert.in_place {
         ignored.push("--in-place");
     }
-    if convert.pipeline.foot_lock {
-        ignored.push("--foot-lock");
-    }
     if convert.bind_frame {
         ignored.push("--bind-frame");
     }

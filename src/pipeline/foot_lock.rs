@@ -48,6 +48,11 @@ use rayon::prelude::*;
 
 /// After a contact its last correction fades out over this long, s.
 pub const FADE_S: f64 = 0.1;
+/// A contact's gaps this short are held through, frames: the root stage reports no contact shorter
+/// than [`super::root::MIN_FRAMES`] (noise), and a gap as short is noise too. Fading out and
+/// starting over instead let the foot move by a part of its correction at each (CMU 01_01's skate
+/// 0.0050 h per contact, 0.0035 h bridged; `foot_lock_holds_the_standing_feet`).
+pub const BRIDGE_FRAMES: usize = super::root::MIN_FRAMES - 1;
 /// The hip-to-target distance is kept this far inside the leg's reach (a fraction of the
 /// shorter segment), so the knee's angle stays away from the straight and folded singularities.
 pub const REACH: f64 = 1e-3;
@@ -110,32 +115,70 @@ fn between(rig: &Rig, top: usize, bottom: usize) -> Option<Vec<usize>> {
 /// holds still over each contact: inside a contact the slips since its first frame taken back,
 /// `c(t) = c(t − 1) − slip(t)` from `c(s) = 0`; after it the last correction fades out linearly
 /// over `fade` frames (a contact that starts before it has faded starts from what is left, so the
-/// foot does not jump). `planted` and `slip` per frame.
-fn corrections(planted: &[bool], slip: &[Vector3<f64>], fade: usize) -> Vec<Vector3<f64>> {
-    let n = planted.len().min(slip.len());
-    let mut out = vec![Vector3::zeros(); n];
-    let (mut c, mut since) = (Vector3::zeros(), None::<(usize, Vector3<f64>)>);
-    for t in 0..n {
-        if planted[t] {
+/// foot does not jump); a gap of up to `bridge` frames within a contact is held through, its
+/// slips taken back too. `planted` and `slip` per frame.
+fn corrections(
+    planted: &[bool],
+    slip: &[Vector3<f64>],
+    fade: usize,
+    bridge: usize,
+) -> Vec<Vector3<f64>> {
+    let mut foot = Correction::default();
+    planted
+        .iter()
+        .zip(slip)
+        .map(|(&planted, &slip)| foot.next(planted, slip, fade, bridge))
+        .collect()
+}
+
+/// [`corrections`] one frame at a time: each needs only the frames before it, so a stream locks
+/// its feet as it goes.
+#[derive(Debug, Clone, Copy, Default)]
+struct Correction {
+    /// The correction at the frame before (nil before the first).
+    last: Vector3<f64>,
+    /// The foot was held at the frame before (planted, or in a gap bridged).
+    held: bool,
+    /// Frames without contact bridged so far.
+    gap: usize,
+    /// After a contact: the frames since it ended and its last correction, while that fades.
+    fading: Option<(usize, Vector3<f64>)>,
+}
+
+impl Correction {
+    /// The correction at the next frame, where the foot is `planted` or not and its pivot
+    /// slipped `slip` since the frame before; a contact's gaps of up to `bridge` frames are held
+    /// through.
+    fn next(&mut self, planted: bool, slip: Vector3<f64>, fade: usize, bridge: usize) -> Vector3<f64> {
+        let c = if planted || (self.held && self.gap < bridge) {
+            self.gap = if planted { 0 } else { self.gap + 1 };
             // A contact's first frame starts from where the foot is put now (nil, or what is left
             // of the last contact's correction while it fades): its pivot stays where it landed.
-            if t > 0 && planted[t - 1] {
-                c -= slip[t];
+            let c = if self.held {
+                self.last - slip
             } else {
-                c = if t > 0 { out[t - 1] } else { Vector3::zeros() };
+                self.last
+            };
+            self.held = true;
+            self.fading = Some((0, c));
+            c
+        } else {
+            self.held = false;
+            self.gap = 0;
+            match self.fading {
+                Some((k, last)) if k < fade => {
+                    self.fading = Some((k + 1, last));
+                    last * (1.0 - (k + 1) as f64 / (fade + 1) as f64)
+                }
+                _ => {
+                    self.fading = None;
+                    Vector3::zeros()
+                }
             }
-            out[t] = c;
-            since = Some((t, c));
-        } else if let Some((end, last)) = since {
-            let k = t - end;
-            if k <= fade {
-                out[t] = last * (1.0 - k as f64 / (fade + 1) as f64);
-            } else {
-                since = None;
-            }
-        }
+        };
+        self.last = c;
+        c
     }
-    out
 }
 
 /// The rotation taking direction `from` onto `to` by the shortest arc (identity when either is
@@ -195,6 +238,74 @@ fn reach(
 /// One frame's new local rotations: (joint, rotation).
 type Changes = Vec<(usize, UnitQuaternion<f64>)>;
 
+/// A rig's legs for the lock, and the joints whose local rotations it changes on each: the legs'
+/// down to the feet (the toes' parents keep their world rotations, so theirs do not change).
+#[derive(Debug, Clone)]
+struct Legs {
+    legs: [Option<Leg>; 2],
+    changed: [Vec<usize>; 2],
+}
+
+impl Legs {
+    /// `None` when the rig's anatomy finds neither leg.
+    fn of(rig: &Rig) -> Option<Legs> {
+        let anatomy = Anatomy::of(rig);
+        let legs = Side::BOTH.map(|side| Leg::of(rig, &anatomy, side));
+        if legs.iter().all(Option::is_none) {
+            return None;
+        }
+        let changed = legs.each_ref().map(|leg| {
+            leg.as_ref().map_or_else(Vec::new, |l| {
+                let mut joints = vec![l.thigh];
+                joints.extend(&l.upper);
+                joints.push(l.shank);
+                joints.extend(&l.lower);
+                joints.push(l.foot);
+                joints
+            })
+        });
+        Some(Legs { legs, changed })
+    }
+
+    /// One frame: into `out`, the new local rotations that put each foot `shifts` (rig units)
+    /// from where the pose `local` with its root at `root` has it; nothing for a foot not moved.
+    /// `world` and `positions`: scratch for the frame's forward kinematics.
+    fn lock(
+        &self,
+        rig: &Rig,
+        (local, root): (&[UnitQuaternion<f64>], Vector3<f64>),
+        shifts: [Vector3<f64>; 2],
+        (world, positions): (&mut Vec<UnitQuaternion<f64>>, &mut Vec<Vector3<f64>>),
+        out: &mut Changes,
+    ) {
+        out.clear();
+        let moved = |s: usize| self.legs[s].is_some() && shifts[s] != Vector3::zeros();
+        if !moved(0) && !moved(1) {
+            return;
+        }
+        rig.world_pose_into(local, root, world, positions);
+        for (s, leg) in self.legs.iter().enumerate() {
+            let Some(leg) = leg.as_ref().filter(|_| moved(s)) else {
+                continue;
+            };
+            reach(leg, world, positions, positions[leg.foot] + shifts[s]);
+            // Back to local rotations: q_local = q_world_parent⁻¹ q_world.
+            out.extend(self.changed[s].iter().map(|&j| {
+                let q = match rig.joints()[j].parent {
+                    Some(p) => world[p].inverse() * world[j],
+                    None => world[j],
+                };
+                (j, q)
+            }));
+        }
+    }
+}
+
+/// The fade after a contact in frames, [`FADE_S`] at `frame_time_s`.
+fn fade_frames(frame_time_s: f64) -> usize {
+    (FADE_S / frame_time_s).round().max(0.0) as usize
+}
+
 /// Stage 8 over a whole take: `local[joint][frame]` with each planted foot held where it stands
 /// over its contact (see the module). `roots`: the root position per frame (rig units);
 /// `contacts`: per frame, left and right planted; `slips`: per frame, how far each foot's pivot
@@ -210,28 +321,14 @@ pub fn lock_feet(
     frame_time_s: f64,
 ) {
     let frames = roots.len().min(contacts.len()).min(slips.len());
-    let anatomy = Anatomy::of(rig);
-    let legs = Side::BOTH.map(|side| Leg::of(rig, &anatomy, side));
-    if frames == 0 || legs.iter().all(Option::is_none) {
+    let Some(legs) = Legs::of(rig).filter(|_| frames > 0) else {
         return;
-    }
-    let fade = (FADE_S / frame_time_s).round().max(0.0) as usize;
+    };
+    let fade = fade_frames(frame_time_s);
     let shifts = [0, 1].map(|side| {
         let planted: Vec<bool> = contacts[..frames].iter().map(|c| c[side]).collect();
         let slip: Vec<Vector3<f64>> = slips[..frames].iter().map(|s| s[side]).collect();
-        corrections(&planted, &slip, fade)
-    });
-    // The joints whose local rotations the lock changes: the legs' down to the feet (the toes'
-    // parents keep their world rotations, so theirs do not change).
-    let changed = legs.each_ref().map(|leg| {
-        leg.as_ref().map_or_else(Vec::new, |l| {
-            let mut joints = vec![l.thigh];
-            joints.extend(&l.upper);
-            joints.push(l.shank);
-            joints.extend(&l.lower);
-            joints.push(l.foot);
-            joints
-        })
+        corrections(&planted, &slip, fade, BRIDGE_FRAMES)
     });
     // In blocks of frames, each block's frames on the pool: what a block changes is held at once,
     // not a whole take's.
@@ -240,35 +337,74 @@ pub fn lock_feet(
         let block: Vec<(usize, Changes)> = (start..(start + BLOCK).min(frames))
             .into_par_iter()
             .filter_map(|t| {
-                let sides: Vec<usize> = (0..2)
-                    .filter(|&s| legs[s].is_some() && shifts[s][t] != Vector3::zeros())
-                    .collect();
-                if sides.is_empty() {
+                let shift = [shifts[0][t], shifts[1][t]];
+                if shift == [Vector3::zeros(); 2] {
                     return None;
                 }
                 let pose: Vec<UnitQuaternion<f64>> = local.iter().map(|track| track[t]).collect();
-                let (mut world, positions) = rig.world_pose(&pose, roots[t]);
-                let mut out = Vec::new();
-                for s in sides {
-                    let leg = legs[s].as_ref()?;
-                    let target = positions[leg.foot] + shifts[s][t];
-                    reach(leg, &mut world, &positions, target);
-                    // Back to local rotations: q_local = q_world_parent⁻¹ q_world.
-                    out.extend(changed[s].iter().map(|&j| {
-                        let q = match rig.joints()[j].parent {
-                            Some(p) => world[p].inverse() * world[j],
-                            None => world[j],
-                        };
-                        (j, q)
-                    }));
-                }
-                Some((t, out))
+                let mut changes = Vec::new();
+                let scratch = (&mut Vec::new(), &mut Vec::new());
+                legs.lock(rig, (&pose, roots[t]), shift, scratch, &mut changes);
+                Some((t, changes))
             })
             .collect();
         for (t, joints) in block {
             for (j, q) in joints {
                 local[j][t] = q;
             }
+        }
+    }
+}
+
+/// Stage 8 frame after frame, for a stream ([`super::stream`]): each pose's planted feet held
+/// where they stand as the poses come, by the same corrections as a whole take's (each needs
+/// only the frames before it) and the same inverse kinematics. The contacts are the root core's
+/// per frame, as the stream reports them (a whole take's leave out those shorter than
+/// [`super::root::MIN_FRAMES`], which a stream cannot know yet: a contact of one frame holds
+/// the foot one frame).
+#[derive(Debug, Clone)]
+pub struct FootLockCore {
+    legs: Legs,
+    fade: usize,
+    feet: [Correction; 2],
+    // Per-frame buffers (a stream allocates nothing per frame).
+    world: Vec<UnitQuaternion<f64>>,
+    positions: Vec<Vector3<f64>>,
+    changes: Changes,
+}
+
+impl FootLockCore {
+    /// The lock for `rig`'s legs at frames `frame_time_s` apart; `None` when the rig's anatomy
+    /// finds neither leg.
+    pub fn new(rig: &Rig, frame_time_s: f64) -> Option<FootLockCore> {
+        Some(FootLockCore {
+            legs: Legs::of(rig)?,
+            fade: fade_frames(frame_time_s),
+            feet: [Correction::default(); 2],
+            world: Vec::new(),
+            positions: Vec::new(),
+            changes: Vec::new(),
+        })
+    }
+
+    /// The next pose: its local rotations `local` (changed in place), its root `root` (rig
+    /// units), each foot `planted` or not and how far its pivot slipped over the ground since the
+    /// pose before (the root core's [`super::root::RootFrame`]).
+    pub fn push(
+        &mut self,
+        rig: &Rig,
+        local: &mut [UnitQuaternion<f64>],
+        root: Vector3<f64>,
+        planted: [bool; 2],
+        slip: [Vector3<f64>; 2],
+    ) {
+        let fade = self.fade;
+        let shifts = [0, 1].map(|f| self.feet[f].next(planted[f], slip[f], fade, BRIDGE_FRAMES));
+        let scratch = (&mut self.world, &mut self.positions);
+        self.legs
+            .lock(rig, (local, root), shifts, scratch, &mut self.changes);
+        for &(j, q) in &self.changes {
+            local[j] = q;
         }
     }
 }
@@ -387,7 +523,7 @@ mod tests {
                 )
             })
             .collect();
-        let c = corrections(&planted, &slip, 2);
+        let c = corrections(&planted, &slip, 2, 0);
         let x: Vec<f64> = c.iter().map(|v| v.x).collect();
         let expected = [
             0.0,
@@ -412,17 +548,27 @@ mod tests {
         // of fade: −7 · 3/4 at frame 8, −7 · 2/4 at 9): it starts from what is left at frame 9,
         // −7/2, and takes its slips back (−9 at frame 11).
         let again: Vec<bool> = (0..14).map(|t| (4..=7).contains(&t) || t >= 10).collect();
-        let c = corrections(&again, &slip, 3);
+        let c = corrections(&again, &slip, 3, 0);
         assert!((c[9].x + 7.0 / 2.0).abs() < 1e-12, "{}", c[9].x);
         assert!((c[10].x + 7.0 / 2.0).abs() < 1e-12, "{}", c[10].x);
         assert!((c[11].x + 7.0 / 2.0 + 9.0).abs() < 1e-12, "{}", c[11].x);
+        // The same gap of two frames bridged: one contact, its slips taken back through the gap
+        // (9 a frame: −16, −25, −34, −43 at frames 8 to 11).
+        let c = corrections(&again, &slip, 3, 2);
+        let x: Vec<f64> = c[7..12].iter().map(|v| v.x).collect();
+        assert_eq!(x, [-7.0, -16.0, -25.0, -34.0, -43.0]);
+        // Bridged by one frame only: frame 8 held (−16), frame 9 fades from it (−16 · 3/4 = −12),
+        // and the contact from frame 10 starts over from there (−12, then −21).
+        let c = corrections(&again, &slip, 3, 1);
+        let x: Vec<f64> = c[7..12].iter().map(|v| v.x).collect();
+        assert_eq!(x, [-7.0, -16.0, -12.0, -12.0, -21.0]);
     }
 
     /// A planted foot on a jittering leg, the slips its pivot would have (here the ankle's own
     /// motion: the foot keeps its turn, so every point of it moves alike): over its contact the
-    /// ankle stays where it was at the contact's first frame horizontally, at its own height; the
-    /// foot's world rotation never changes; frames beyond the fade and the other leg are
-    /// untouched.
+    /// ankle stays where it was at the contact's first frame horizontally, at its own height (and
+    /// over the [`BRIDGE_FRAMES`] after it, which could be a gap); the foot's world rotation never
+    /// changes; frames beyond the fade and the other leg are untouched.
     #[test]
     fn a_planted_foot_holds_still_through_the_legs_jitter() {
         let (rig, leg, rest) = bent_leg(10.0, 20.0, -5.0);
@@ -475,11 +621,12 @@ mod tests {
             for &j in &leg.below {
                 assert!(w1[j].angle_to(&w0[j]) < 1e-9, "frame {t}");
             }
-            if (10..30).contains(&t) {
+            // Held over the contact and the gap bridged after it (the stretch ends there).
+            if (10..30 + BRIDGE_FRAMES).contains(&t) {
                 assert!((p1[leg.foot].xz() - landed.xz()).norm() < 1e-9, "frame {t}");
                 assert!((p1[leg.foot].y - p0[leg.foot].y).abs() < 1e-9, "frame {t}");
             }
-            if t + fade < 10 || t > 29 + fade {
+            if t + fade < 10 || t > 29 + BRIDGE_FRAMES + fade {
                 assert!(
                     local.iter().zip(&before).all(|(a, b)| a[t] == b[t]),
                     "frame {t}"
@@ -489,6 +636,47 @@ mod tests {
                 leg.below.contains(&j) || j == leg.thigh || j == leg.shank || a[t] == b[t]
             }));
         }
+    }
+
+    /// A stream's lock ([`FootLockCore`], pose after pose) turns the legs exactly as a whole
+    /// take's ([`lock_feet`]) for the same contacts and slips: here both legs jitter, each foot
+    /// with contacts of its own (one with a gap of one frame, which both bridge) and slips of
+    /// 1 mm along x and 2 mm along z a frame.
+    #[test]
+    fn a_stream_locks_as_a_whole_take_does() {
+        let (rig, _, rest) = bent_leg(10.0, 20.0, -5.0);
+        let anatomy = Anatomy::of(&rig);
+        let legs = Side::BOTH.map(|side| Leg::of(&rig, &anatomy, side).unwrap());
+        let frames = 50;
+        let dt = 1.0 / 60.0;
+        let mut local: Vec<Vec<UnitQuaternion<f64>>> =
+            rest.iter().map(|&q| vec![q; frames]).collect();
+        for (k, leg) in legs.iter().enumerate() {
+            for (t, q) in local[leg.shank].iter_mut().enumerate() {
+                let angle = ((t + 7 * k) as f64 * 0.9).sin() * 2f64.to_radians();
+                *q = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), angle) * *q;
+            }
+        }
+        let roots: Vec<Vector3<f64>> = (0..frames)
+            .map(|t| rig.joints()[0].offset + Vector3::new(0.01 * t as f64, 0.0, 0.0))
+            .collect();
+        let contacts: Vec<[bool; 2]> = (0..frames)
+            .map(|t| [(5..20).contains(&t) && t != 12, (15..40).contains(&t)])
+            .collect();
+        let slips = vec![[Vector3::new(1e-3, 0.0, 2e-3); 2]; frames];
+        let mut whole = local.clone();
+        lock_feet(&rig, &mut whole, &roots, &contacts, &slips, dt);
+        let mut core = FootLockCore::new(&rig, dt).unwrap();
+        let mut changed = 0;
+        for t in 0..frames {
+            let mut pose: Vec<UnitQuaternion<f64>> = local.iter().map(|track| track[t]).collect();
+            core.push(&rig, &mut pose, roots[t], contacts[t], slips[t]);
+            for (j, q) in pose.iter().enumerate() {
+                assert!(q.angle_to(&whole[j][t]) < 1e-12, "joint {j}, frame {t}");
+                changed += usize::from(q.angle_to(&local[j][t]) > 1e-9);
+            }
+        }
+        assert!(changed > 100, "{changed} rotations changed");
     }
 
     proptest! {

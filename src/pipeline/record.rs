@@ -235,10 +235,7 @@ pub fn pipeline_record(
         fusion: None,
         smoothing: Some(serde_json::to_value(&options.smoothing).expect("serialisable")),
         root: root.label(),
-        foot_lock: options.foot_lock
-            && root == RootMode::Feet
-            && !options.causal
-            && mode == Mode::Orientations,
+        foot_lock: options.foot_lock && root == RootMode::Feet && mode == Mode::Orientations,
         unsensed: if mode == Mode::Euler {
             "rest"
         } else {

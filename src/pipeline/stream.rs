@@ -58,6 +58,8 @@ pub struct PoseStream {
     rig: Rig,
     fps: Fps,
     root: RootCore,
+    /// Stage 8 (`--foot-lock`, feet mode).
+    foot_lock: Option<super::foot_lock::FootLockCore>,
     to_rig: UnitQuaternion<f64>,
     sensors: Vec<ResolvedSensor>,
     calibration: CalibrationCore,
@@ -137,15 +139,15 @@ impl PoseStream {
         for s in &sensors {
             sensed[s.bone] = true;
         }
+        let root_mode = super::root::resolve(options.root, rig, &sensed);
+        let foot_lock = (options.foot_lock && root_mode == super::root::RootMode::Feet)
+            .then(|| super::foot_lock::FootLockCore::new(rig, options.fps.frame_time_s()))
+            .flatten();
         Ok(PoseStream {
             rig: rig.clone(),
             fps: options.fps,
-            root: RootCore::new(
-                rig,
-                super::root::resolve(options.root, rig, &sensed),
-                options.fps.frame_time_s(),
-                &held,
-            ),
+            root: RootCore::new(rig, root_mode, options.fps.frame_time_s(), &held),
+            foot_lock,
             to_rig: world.to_rig(),
             sensors,
             calibration,
@@ -579,6 +581,7 @@ impl PoseStream {
             rig,
             fps,
             root,
+            foot_lock,
             sensors,
             resampler,
             values,
@@ -597,6 +600,9 @@ impl PoseStream {
             pose.frame = n;
             pose.time_s = fps.frame_time_of(n);
             let r = root.push(&pose.local);
+            if let Some(lock) = foot_lock {
+                lock.push(rig, &mut pose.local, r.position, r.contact, r.slip);
+            }
             pose.root = r.position;
             pose.contact = r.contact;
             pose.airborne = r.airborne;

@@ -323,16 +323,29 @@ impl Rig {
         local: &[UnitQuaternion<f64>],
         root: Vector3<f64>,
     ) -> (Vec<UnitQuaternion<f64>>, Vec<Vector3<f64>>) {
-        let world = self.world_rotations(local);
-        let mut pos: Vec<Vector3<f64>> = Vec::with_capacity(self.joints.len());
-        for j in &self.joints {
-            let p = match j.parent {
-                Some(p) => pos[p] + world[p] * j.offset,
-                None => root,
+        let (mut world, mut positions) = (Vec::new(), Vec::new());
+        self.world_pose_into(local, root, &mut world, &mut positions);
+        (world, positions)
+    }
+
+    /// [`Rig::world_pose`] into buffers a caller keeps (a stream's frames allocate nothing).
+    pub fn world_pose_into(
+        &self,
+        local: &[UnitQuaternion<f64>],
+        root: Vector3<f64>,
+        world: &mut Vec<UnitQuaternion<f64>>,
+        positions: &mut Vec<Vector3<f64>>,
+    ) {
+        world.clear();
+        positions.clear();
+        for (i, j) in self.joints.iter().enumerate() {
+            let (q, p) = match j.parent {
+                Some(p) => (world[p] * local[i], positions[p] + world[p] * j.offset),
+                None => (local[i], root),
             };
-            pos.push(p);
+            world.push(q);
+            positions.push(p);
         }
-        (world, pos)
     }
 
     /// Rest-pose joint positions with the root at its offset.
