@@ -37,9 +37,9 @@
 //! — on CMU 01_01 with 0.5° of noise 0.91–1.14° RMS instead of 0.42–0.43°
 //! (`closed_loop::the_foot_lock_turns_only_the_legs`), up to 3.3° without noise, as its source's
 //! feet slip up to 0.03 h over a long stance — which is why the lock is asked for
-//! (`--foot-lock`), not done by default. Only a whole take is locked so far: the correction needs
-//! only the frames before it, so a stream could lock as it goes, but the stream's root core does
-//! not hand out its slips yet.
+//! (`--foot-lock`), not done by default. The correction needs only the frames before it, so a
+//! stream (`live`, `--causal`) locks each pose as it comes ([`FootLockCore`], from the stream's
+//! root core's contacts and slips), the same way.
 
 use crate::rig::Rig;
 use crate::rig::anatomy::{Anatomy, Limb, Side};

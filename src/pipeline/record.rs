@@ -18,7 +18,7 @@ pub struct PipelineRecord {
     pub fusion: Option<FusionRecord>,
     pub smoothing: Option<serde_json::Value>,
     pub root: &'static str,
-    /// The planted feet were held where they stood (`--foot-lock` in `feet` mode, a whole take:
+    /// The planted feet were held where they stood (`--foot-lock` in `feet` mode:
     /// [`crate::pipeline::foot_lock`]).
     pub foot_lock: bool,
     /// What joints without a sensor did: `interpolate` or `rest`.

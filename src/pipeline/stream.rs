@@ -10,7 +10,8 @@
 //!    filters, which look ahead, are refused;
 //! 5. resampling ([`FrameResampler`]): frame n once every sensor has a sample at or after its
 //!    time, or is stale (held at its last pose, and reported);
-//! 6. relative rotations ([`frame_to_local`]), 7. the root.
+//! 6. relative rotations ([`frame_to_local`]), 7. the root, 8. with `--foot-lock` each planted
+//!    foot held where it stands ([`super::foot_lock::FootLockCore`]).
 //!
 //! What looks ahead stays with whole takes: zero-phase filters. The heading from the hinges,
 //! which a whole take reads over the minute after calibration, a stream refines as the knees and

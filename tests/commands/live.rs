@@ -315,6 +315,65 @@ fn a_replayed_capture_streams_vmc_and_records_the_take() {
     );
 }
 
+/// `--foot-lock` live: the bundled walk replayed at four times its pace with the lock; every
+/// bundle's bones are the whole-take conversion's with the lock (causal, 60 fps: the same
+/// incremental cores, `FootLockCore`) to 1e-3°, and the legs are not those of the conversion
+/// without it (more than 0.5° apart somewhere, so the lock ran on the stream; less than 45°). No
+/// warning says it was ignored.
+#[test]
+fn a_live_session_locks_the_feet() {
+    let Some(py) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let capture = repo_file("samples/walk.csv");
+    let mapping = repo_file("mappings/paper000_16imu_mixamo.json");
+    let receiver = Receiver::start(&py, dir.path(), 2.0);
+    let out = run(&mut live(&[
+        "--source",
+        &format!("file:{}@4", capture.display()),
+        "--mapping",
+        mapping.to_str().unwrap(),
+        "--vmc",
+        &receiver.vmc(),
+        "--foot-lock",
+        "--json",
+    ]));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("--foot-lock"), "{stderr}");
+    let vmc = receiver.finish();
+    let bundles = vmc["bundles"].as_array().unwrap();
+    let take = |foot_lock: bool| {
+        let mut settings = ConvertSettings {
+            mapping: Some(mapping.clone()),
+            ..Default::default()
+        };
+        settings.pipeline.fps = "60".parse().unwrap();
+        settings.pipeline.causal = true;
+        settings.pipeline.foot_lock = foot_lock;
+        let plan = imubake::convert::Plan::resolve(settings).unwrap();
+        imubake::convert::animate(&capture, &plan).unwrap()
+    };
+    let (locked, free) = (take(true), take(false));
+    let (worst, matched, worst_pos) = check(bundles, &locked, &MIXAMO);
+    eprintln!(
+        "{matched} bundles of {} frames; worst bone {worst:.2e}° against the locked take, hips \
+         {worst_pos:.2e} m",
+        locked.frames()
+    );
+    assert!(
+        matched + 2 >= locked.frames(),
+        "{matched} of {}",
+        locked.frames()
+    );
+    assert!(worst < 1e-3, "worst bone {worst}°");
+    assert!(worst_pos < 1e-3, "hips {worst_pos} m");
+    let (unlocked, _, _) = check(bundles, &free, &MIXAMO);
+    eprintln!("against the take without the lock: worst bone {unlocked:.2}°");
+    // Measured 2026-12-07: 21.1° (the left knee at the first step's push-off, its foot held
+    // where its long stance began): the price docs/src/root-motion.md states.
+    assert!(unlocked > 0.5, "the lock changed nothing: {unlocked}°");
+    assert!(unlocked < 45.0, "the lock turned a bone by {unlocked}°");
+}
+
 /// imubake CSV over UDP: a header datagram, then a datagram per sample time, paced at twice
 /// real time; the frames are those of the whole-take conversion. Garbage datagrams are counted
 /// as dropped lines, never fatal.
