@@ -382,7 +382,11 @@ pub fn run(
         super::root::RootMode::Auto => super::root::RootMode::Fixed,
         mode => mode,
     };
-    let (roots, contacts) = super::root::root_positions(
+    let super::root::RootMotion {
+        positions: roots,
+        contacts,
+        ..
+    } = super::root::root_positions(
         &rig,
         root_mode,
         &local,

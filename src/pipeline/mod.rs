@@ -389,7 +389,11 @@ fn root_stage(
     still: &root::FeetStill,
 ) -> Result<(Animation, RootMode, Option<root::Contacts>), PipelineError> {
     let root_mode = root::resolve(options.root, rig, animated);
-    let (roots, contacts) = root::root_positions(
+    let root::RootMotion {
+        positions: roots,
+        contacts,
+        slips,
+    } = root::root_positions(
         rig,
         root_mode,
         &local,
@@ -405,7 +409,7 @@ fn root_stage(
                 &mut local,
                 &roots,
                 &c.per_frame,
-                &c.slip,
+                &slips,
                 options.fps.frame_time_s(),
             )
         });

@@ -787,10 +787,6 @@ pub struct Contacts {
     /// Per frame: left and right planted (for the glTF's contact curves).
     #[serde(skip)]
     pub per_frame: Vec<[bool; 2]>,
-    /// Per frame: how far each foot's pivot moved over the ground since the frame before
-    /// ([`RootFrame::slip`]).
-    #[serde(skip)]
-    pub slip: Vec<[Vector3<f64>; 2]>,
 }
 
 impl Contacts {
@@ -812,7 +808,6 @@ impl Contacts {
             right,
             airborne: intervals(frames.iter().map(|f| f.airborne)),
             per_frame,
-            slip: frames.iter().map(|f| f.slip).collect(),
         }
     }
 }
@@ -821,6 +816,19 @@ impl Contacts {
 /// ([`zupt`]; still at `T ≤ 1`), where the take has the foot sensor's raw readings; `None` where
 /// it has not.
 pub type FeetStill = [Option<Vec<f64>>; 2];
+
+/// Stage 7's output over a whole take.
+#[derive(Debug, Clone, Default)]
+pub struct RootMotion {
+    /// The root position per frame, rig units.
+    pub positions: Vec<Vector3<f64>>,
+    /// `feet` mode: the contacts.
+    pub contacts: Option<Contacts>,
+    /// `feet` mode: per frame, how far each foot's pivot moved over the ground since the frame
+    /// before ([`RootFrame::slip`]), what stage 8 takes back; empty otherwise (kept apart from
+    /// the contacts, which the writers keep: a 60-minute take's slips are about 10 MB).
+    pub slips: Vec<[Vector3<f64>; 2]>,
+}
 
 /// Stage 7 over a whole take: the root position at every frame (rig units) from every joint's
 /// local rotations (`local[joint][frame]`), and the contacts in `feet` mode. `mode` is resolved
@@ -832,11 +840,14 @@ pub fn root_positions(
     frame_time_s: f64,
     reference: &[UnitQuaternion<f64>],
     still: &FeetStill,
-) -> (Vec<Vector3<f64>>, Option<Contacts>) {
+) -> RootMotion {
     let frames = local.first().map_or(0, Vec::len);
     let mut core = RootCore::new(rig, mode, frame_time_s, reference);
     if core.mode() == RootMode::Fixed {
-        return (vec![rig.joints()[0].offset; frames], None);
+        return RootMotion {
+            positions: vec![rig.joints()[0].offset; frames],
+            ..RootMotion::default()
+        };
     }
     // What each frame's pose says (forward kinematics: the frame's own business) on every core,
     // in blocks of frames; then the core steps through the frames in order.
@@ -878,8 +889,16 @@ pub fn root_positions(
             all.push(f);
         }
     }
-    let contacts = (core.mode() == RootMode::Feet).then(|| Contacts::from_frames(&all));
-    (all.iter().map(|f| f.position).collect(), contacts)
+    let feet = core.mode() == RootMode::Feet;
+    RootMotion {
+        positions: all.iter().map(|f| f.position).collect(),
+        contacts: feet.then(|| Contacts::from_frames(&all)),
+        slips: if feet {
+            all.iter().map(|f| f.slip).collect()
+        } else {
+            Vec::new()
+        },
+    }
 }
 
 /// What each frame of a whole take says about which foot carries the body ([`support`]), from
@@ -1100,7 +1119,7 @@ mod tests {
             (Some(0.5), vec![[0, 15]]),
         ] {
             let still = [sensor.map(|t| vec![t; 16]), None];
-            let (_, contacts) = root_positions(&rig, RootMode::Feet, &local, dt, &rest, &still);
+            let contacts = root_positions(&rig, RootMode::Feet, &local, dt, &rest, &still).contacts;
             assert_eq!(contacts.unwrap().left, left_contact, "T = {sensor:?}");
         }
     }
@@ -1192,8 +1211,11 @@ mod tests {
             let local: Vec<Vec<UnitQuaternion<f64>>> = (0..rig.len())
                 .map(|j| knee.iter().map(|&k| pose(k)[j]).collect())
                 .collect();
-            let (positions, contacts) =
-                root_positions(&rig, RootMode::Feet, &local, dt, &rest, &[None, None]);
+            let RootMotion {
+                positions,
+                contacts,
+                ..
+            } = root_positions(&rig, RootMode::Feet, &local, dt, &rest, &[None, None]);
             let flights = contacts.unwrap().airborne;
             assert_eq!(flights.len(), 1, "{flights:?}");
             let [start, end] = flights[0];
