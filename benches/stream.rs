@@ -7,6 +7,7 @@
 //!
 //!   cargo bench --bench stream
 //!   IMUBAKE_BENCH_MINUTES=1 cargo bench --bench stream
+//!   IMUBAKE_BENCH_FOOT_LOCK=1 cargo bench --bench stream   # with `--foot-lock`
 
 mod common;
 
@@ -56,9 +57,12 @@ fn main() {
         panic!("a quaternion mapping");
     };
     let rig = load_rig("mixamo").expect("rig");
+    // With `IMUBAKE_BENCH_FOOT_LOCK=1`, stage 8 too (`--foot-lock`: the planted feet held by IK).
+    let foot_lock = std::env::var("IMUBAKE_BENCH_FOOT_LOCK").is_ok_and(|v| v == "1");
     let options = PipelineOptions {
         fps: "60".parse().expect("fps"),
         causal: true,
+        foot_lock,
         ..PipelineOptions::default()
     };
     // The rows, made before the clock starts (the synthetic log of benches/common, in memory).
@@ -127,8 +131,9 @@ fn main() {
     lines.finish(&mut samples).expect("finish");
     let per_frame_us = streaming.as_secs_f64() * 1e6 / streamed_frames as f64;
     println!(
-        "{minutes} min of 16 sensors at 100 Hz ({} rows), poses at 60 fps: {frames} frames in {:.2} s",
+        "{minutes} min of 16 sensors at 100 Hz ({} rows), poses at 60 fps{}: {frames} frames in {:.2} s",
         rows.len(),
+        if foot_lock { ", --foot-lock" } else { "" },
         start.elapsed().as_secs_f64()
     );
     println!(

@@ -62,8 +62,6 @@ struct Leg {
     upper: Vec<usize>,
     /// Joints strictly between the shank and the foot (they turn with the shank).
     lower: Vec<usize>,
-    /// The foot and the joints below it (toes): they keep their world rotations.
-    below: Vec<usize>,
 }
 
 impl Leg {
@@ -75,20 +73,12 @@ impl Leg {
         let foot = anatomy.limb(side, Limb::Foot)?;
         let upper = between(rig, thigh, shank)?;
         let lower = between(rig, shank, foot)?;
-        // Parents come before their children in a rig, so one pass finds the subtree.
-        let mut below = vec![foot];
-        for (i, j) in rig.joints().iter().enumerate().skip(foot + 1) {
-            if j.parent.is_some_and(|p| below.contains(&p)) {
-                below.push(i);
-            }
-        }
         Some(Leg {
             thigh,
             shank,
             foot,
             upper,
             lower,
-            below,
         })
     }
 }
@@ -206,15 +196,12 @@ fn reach(
         });
     let bent_ankle = knee + bend * (ankle - knee);
     let turn = swing(&(bent_ankle - hip), &(target - hip));
-    let kept: Vec<UnitQuaternion<f64>> = leg.below.iter().map(|&j| world[j]).collect();
+    // The foot and the joints below it keep their world rotations: left as they are.
     for &j in std::iter::once(&leg.thigh).chain(&leg.upper) {
         world[j] = turn * world[j];
     }
     for &j in std::iter::once(&leg.shank).chain(&leg.lower) {
         world[j] = turn * bend * world[j];
-    }
-    for (&j, q) in leg.below.iter().zip(kept) {
-        world[j] = q;
     }
 }
 
@@ -398,6 +385,18 @@ mod tests {
     use crate::rig::load_rig;
     use proptest::prelude::*;
 
+    /// The foot and the joints below it (toes), which keep their world rotations.
+    fn below(rig: &Rig, leg: &Leg) -> Vec<usize> {
+        // Parents come before their children in a rig, so one pass finds the subtree.
+        let mut below = vec![leg.foot];
+        for (i, j) in rig.joints().iter().enumerate().skip(leg.foot + 1) {
+            if j.parent.is_some_and(|p| below.contains(&p)) {
+                below.push(i);
+            }
+        }
+        below
+    }
+
     fn locals_of(rig: &Rig, world: &[UnitQuaternion<f64>]) -> Vec<UnitQuaternion<f64>> {
         rig.joints()
             .iter()
@@ -473,7 +472,7 @@ mod tests {
             (after[leg.thigh] - after[leg.shank]).angle(&(after[leg.foot] - after[leg.shank]));
         let by_hand = ((a * a + b * b - d * d) / (2.0 * a * b)).acos();
         assert!((knee - by_hand).abs() < 1e-9, "{knee} vs {by_hand}");
-        for &j in &leg.below {
+        for &j in &below(&rig, &leg) {
             assert!(
                 after_world[j].angle_to(&before[j]) < 1e-9,
                 "{}",
@@ -591,7 +590,7 @@ mod tests {
         for t in 0..frames {
             let (w0, p0) = fk(&before, t);
             let (w1, p1) = fk(&local, t);
-            for &j in &leg.below {
+            for &j in &below(&rig, &leg) {
                 assert!(w1[j].angle_to(&w0[j]) < 1e-9, "frame {t}");
             }
             if (10..30).contains(&t) {
@@ -605,7 +604,7 @@ mod tests {
                 );
             }
             assert!(local.iter().zip(&before).enumerate().all(|(j, (a, b))| {
-                leg.below.contains(&j) || j == leg.thigh || j == leg.shank || a[t] == b[t]
+                below(&rig, &leg).contains(&j) || j == leg.thigh || j == leg.shank || a[t] == b[t]
             }));
         }
     }
