@@ -588,7 +588,8 @@ const FETCHED_GAITS: &[(&str, &str)] = &[
 /// changes only the skate: `foot_lock_holds_the_standing_feet`). Targets for every
 /// gait: the hips' path within 3 % of the distance, skate ≤ 0.006 h per stance phase, per-frame
 /// contact precision and recall ≥ 0.9 against the source's own contacts, the source's airborne
-/// frames found with recall ≥ 0.8 (`contact_scores`). The scores are printed
+/// frames found with recall ≥ 0.8 (`contact_scores`). The same through a stream's incremental
+/// cores (`--causal`, as `live` runs them) is printed beside each, not asserted. The scores are printed
 /// (`cargo test --test motion -- --ignored every_gait --nocapture`); ignored until issue 49 makes
 /// it pass.
 #[test]
@@ -633,6 +634,11 @@ fn every_gait_walks_without_sliding() {
             };
             if let Some(miss) = gait_report(&label, &take) {
                 missed.push(miss);
+            }
+            // The same through a stream's cores (`live`), printed: one core for both.
+            let args = ["--root", "feet", "--foot-lock", "--causal"];
+            if let Some(take) = closed_loop_on(&path, mapping, frames.as_deref(), &args) {
+                let _ = gait_report(&format!("{label} (stream)"), &take);
             }
         }
     }
