@@ -302,23 +302,13 @@ fn pose_relative_to_hips(
     world: &mut Vec<UnitQuaternion<f64>>,
     positions: &mut Vec<Vector3<f64>>,
 ) -> f64 {
-    world.clear();
-    positions.clear();
+    rig.world_pose_into(local, Vector3::zeros(), world, positions);
     let mut low = f64::INFINITY;
-    for (i, j) in rig.joints().iter().enumerate() {
-        let (q, p) = match j.parent {
-            Some(parent) => (
-                world[parent] * local[i],
-                positions[parent] + world[parent] * j.offset,
-            ),
-            None => (local[i], Vector3::zeros()),
-        };
+    for ((j, q), p) in rig.joints().iter().zip(world.iter()).zip(positions.iter()) {
         low = low.min(p.y);
         if let Some(e) = j.end_site {
             low = low.min(p.y + (q * e).y);
         }
-        world.push(q);
-        positions.push(p);
     }
     low
 }
