@@ -147,12 +147,18 @@ fn live(args: &[&str]) -> Command {
 
 /// The whole-take conversion with the live session's settings: causal, 60 fps.
 fn whole_take(input: &Path, mapping: &Path) -> Animation {
+    whole_take_locking(input, mapping, false)
+}
+
+/// [`whole_take`] with the feet locked (`--foot-lock`) or not.
+fn whole_take_locking(input: &Path, mapping: &Path, foot_lock: bool) -> Animation {
     let mut settings = ConvertSettings {
         mapping: Some(mapping.to_path_buf()),
         ..Default::default()
     };
     settings.pipeline.fps = "60".parse().unwrap();
     settings.pipeline.causal = true;
+    settings.pipeline.foot_lock = foot_lock;
     imubake::convert::animate(input, &imubake::convert::Plan::resolve(settings).unwrap()).unwrap()
 }
 
@@ -341,18 +347,10 @@ fn a_live_session_locks_the_feet() {
     assert!(!stderr.contains("--foot-lock"), "{stderr}");
     let vmc = receiver.finish();
     let bundles = vmc["bundles"].as_array().unwrap();
-    let take = |foot_lock: bool| {
-        let mut settings = ConvertSettings {
-            mapping: Some(mapping.clone()),
-            ..Default::default()
-        };
-        settings.pipeline.fps = "60".parse().unwrap();
-        settings.pipeline.causal = true;
-        settings.pipeline.foot_lock = foot_lock;
-        let plan = imubake::convert::Plan::resolve(settings).unwrap();
-        imubake::convert::animate(&capture, &plan).unwrap()
-    };
-    let (locked, free) = (take(true), take(false));
+    let (locked, free) = (
+        whole_take_locking(&capture, &mapping, true),
+        whole_take(&capture, &mapping),
+    );
     let (worst, matched, worst_pos) = check(bundles, &locked, &MIXAMO);
     eprintln!(
         "{matched} bundles of {} frames; worst bone {worst:.2e}° against the locked take, hips \
