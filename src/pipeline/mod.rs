@@ -533,6 +533,7 @@ fn run_causal(
     let policy = options.heading_policy(mapping);
     calibration.check_heading(&sources.sensors, policy, &file)?;
     let root_mode = stream.root_mode();
+    let subject_height_m = stream.root_subject_height_m();
     drop(stream);
     let held = calibrate::held_pose(rig, window.as_ref());
     let moving = relative::moving(rig, &animated, options.unsensed, &held);
@@ -542,7 +543,8 @@ fn run_causal(
     let kept = feet
         .get(grid.first..(grid.first + grid.frames).min(feet.len()))
         .unwrap_or(&[]);
-    let contacts = (root_mode == RootMode::Feet).then(|| root::Contacts::from_frames(kept));
+    let contacts =
+        (root_mode == RootMode::Feet).then(|| root::Contacts::from_frames(kept, subject_height_m));
     let animation = match &contacts {
         Some(c) => animation.with_contacts(c.per_frame.clone())?,
         None => animation,

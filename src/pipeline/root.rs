@@ -119,8 +119,14 @@ pub const STEP_H: f64 = 0.06;
 pub const TAKEOFF_H_S: f64 = 0.45;
 /// … for this long, s.
 pub const TAKEOFF_S: f64 = 0.04;
-/// Gravity in standing heights per s² (9.81 m/s² on a 1.75 m body).
-pub const GRAVITY_H_S2: f64 = 9.80665 / 1.75;
+/// Standard gravity, m/s².
+pub const GRAVITY_M_S2: f64 = 9.80665;
+/// A subject's standing height when the rig's is not a person's, m: a rig whose standing height
+/// in metres lies in [`PERSON_HEIGHT_M`] is taken to be the subject's (a body model scaled with
+/// `--subject`, an actor's skeleton), else the body is taken to be this tall.
+pub const ASSUMED_HEIGHT_M: f64 = 1.75;
+/// The standing heights of people, children to the tallest adults, m.
+pub const PERSON_HEIGHT_M: std::ops::RangeInclusive<f64> = 1.0..=2.3;
 /// The feet's support falling this far below the path the body would have followed had it left
 /// the ground (ballistic) is a flight, × h: the ground only pushes, so a body whose feet would
 /// pull it down faster than gravity has left it (a run's flight, which rises too little for
@@ -237,6 +243,10 @@ pub struct RootCore {
     floor: f64,
     /// Standing height, rig units.
     height: f64,
+    /// The subject's standing height, m ([`subject_height_m`]).
+    subject_height_m: f64,
+    /// Gravity, standing heights per s²: [`GRAVITY_M_S2`] over the subject's height in metres.
+    gravity_h_s2: f64,
     dt: f64,
     feet: Option<[Foot; 2]>,
     state: Option<FeetState>,
@@ -421,12 +431,16 @@ impl RootCore {
             (RootMode::Feet, None) => RootMode::Ground,
             (m, _) => m,
         };
+        let height = (high - low).max(1e-9);
+        let subject_height_m = subject_height_m(height * rig.units().metres_per_unit());
         RootCore {
             mode,
             rig: rig.clone(),
             rest_root: rig.joints()[0].offset,
             floor: low,
-            height: (high - low).max(1e-9),
+            height,
+            subject_height_m,
+            gravity_h_s2: GRAVITY_M_S2 / subject_height_m,
             dt: frame_time_s,
             feet,
             state: None,
@@ -444,6 +458,16 @@ impl RootCore {
     /// The standing height `h`, rig units.
     pub fn standing_height(&self) -> f64 {
         self.height
+    }
+
+    /// Gravity in standing heights per s² (what a flight falls by).
+    pub fn gravity_h_s2(&self) -> f64 {
+        self.gravity_h_s2
+    }
+
+    /// The subject's standing height, m, that gravity is taken over ([`subject_height_m`]).
+    pub fn subject_height_m(&self) -> f64 {
+        self.subject_height_m
     }
 
     /// After a [`push`](Self::push): the frames before it that were found in the air only at it
@@ -564,7 +588,7 @@ impl RootCore {
         let mut pushing = false;
         if state.airborne {
             // Ballistic: the horizontal velocity kept, gravity vertically.
-            state.velocity.y -= GRAVITY_H_S2 * h * dt;
+            state.velocity.y -= self.gravity_h_s2 * h * dt;
             state.hips += state.velocity * dt;
             // A foot reaching its surface lands on the way down; on the way up the legs are still
             // unfolding under a push-off, and they carry the hips higher and faster.
@@ -703,6 +727,7 @@ impl RootCore {
     /// [`FLIGHT_H`] below that path the body is airborne on it.
     fn fall_behind_flight(&mut self, before: Vector3<f64>) {
         let (h, dt, frames) = (self.height, self.dt, self.stance_frames());
+        let gravity = self.gravity_h_s2;
         let state = self.state.as_mut().expect("feet mode has a state");
         let start = match state.ballistic {
             Some(going) => Some(going),
@@ -717,7 +742,7 @@ impl RootCore {
             None => None,
         };
         state.ballistic = start.and_then(|(mut p, mut v)| {
-            v.y -= GRAVITY_H_S2 * h * dt;
+            v.y -= gravity * h * dt;
             p += v * dt;
             let below = p.y - state.hips.y;
             if below >= FLIGHT_H * h {
@@ -734,6 +759,17 @@ impl RootCore {
                 None
             }
         });
+    }
+}
+
+/// The subject's standing height, m, for a rig standing `rig_height_m` tall: the rig's when a
+/// person's ([`PERSON_HEIGHT_M`]), else [`ASSUMED_HEIGHT_M`] (a character of another size, or a
+/// BVH whose unit was guessed wrong: CMU's, in 1/0.45 inch, reads as 0.26 m).
+pub fn subject_height_m(rig_height_m: f64) -> f64 {
+    if PERSON_HEIGHT_M.contains(&rig_height_m) {
+        rig_height_m
+    } else {
+        ASSUMED_HEIGHT_M
     }
 }
 
@@ -774,6 +810,8 @@ pub struct Contacts {
     pub left: Vec<[usize; 2]>,
     pub right: Vec<[usize; 2]>,
     pub airborne: Vec<[usize; 2]>,
+    /// The standing height, m, whose gravity the flights fell by ([`subject_height_m`]).
+    pub subject_height_m: f64,
     /// Per frame: left and right planted (for the glTF's contact curves).
     #[serde(skip)]
     pub per_frame: Vec<[bool; 2]>,
@@ -781,8 +819,9 @@ pub struct Contacts {
 
 impl Contacts {
     /// The intervals of the frames' contacts, and the per-frame flags they make (runs shorter
-    /// than [`MIN_FRAMES`] left out of both, so the two always agree).
-    pub fn from_frames(frames: &[RootFrame]) -> Contacts {
+    /// than [`MIN_FRAMES`] left out of both, so the two always agree), found by a core whose
+    /// flights fell as a body `subject_height_m` tall does.
+    pub fn from_frames(frames: &[RootFrame], subject_height_m: f64) -> Contacts {
         let left = intervals(frames.iter().map(|f| f.contact[0]));
         let right = intervals(frames.iter().map(|f| f.contact[1]));
         let mut per_frame = vec![[false; 2]; frames.len()];
@@ -797,6 +836,7 @@ impl Contacts {
             left,
             right,
             airborne: intervals(frames.iter().map(|f| f.airborne)),
+            subject_height_m,
             per_frame,
         }
     }
@@ -849,7 +889,7 @@ pub fn root_positions(
         .collect();
     let left_weights = (core.mode() == RootMode::Feet).then(|| {
         let cues = support_cues(&measured, core.dt, core.height);
-        let path = support::decode(&cues, core.dt, GRAVITY_H_S2);
+        let path = support::decode(&cues, core.dt, core.gravity_h_s2);
         support::left_weights(&path, SUPPORT_BLEND_FRAMES)
     });
     let mut all: Vec<RootFrame> = Vec::with_capacity(frames);
@@ -882,7 +922,7 @@ pub fn root_positions(
     let feet = core.mode() == RootMode::Feet;
     RootMotion {
         positions: all.iter().map(|f| f.position).collect(),
-        contacts: feet.then(|| Contacts::from_frames(&all)),
+        contacts: feet.then(|| Contacts::from_frames(&all, core.subject_height_m())),
         slips: if feet {
             all.iter().map(|f| f.slip).collect()
         } else {
@@ -1005,6 +1045,22 @@ mod tests {
         }
         assert_eq!(resolve(RootMode::Auto, &rig, &animated), RootMode::Feet);
         assert_eq!(resolve(RootMode::Fixed, &rig, &animated), RootMode::Fixed);
+    }
+
+    /// A person-sized rig is the subject's size; CMU's BVH read as centimetres (25.7 units of
+    /// 1/0.45 inch: 0.26 m) or a giant is not, and 1.75 m is assumed.
+    #[test]
+    fn gravity_is_the_subjects() {
+        assert_eq!(subject_height_m(1.45), 1.45);
+        assert_eq!(subject_height_m(1.0), 1.0);
+        assert_eq!(subject_height_m(2.3), 2.3);
+        assert_eq!(subject_height_m(0.257), 1.75);
+        assert_eq!(subject_height_m(4.0), 1.75);
+        let rig = load_rig("mixamo").unwrap();
+        let rest = vec![UnitQuaternion::identity(); rig.len()];
+        let core = RootCore::new(&rig, RootMode::Feet, 1.0 / 60.0, &rest);
+        let height_m = core.standing_height() * rig.units().metres_per_unit();
+        assert!((core.gravity_h_s2() - 9.80665 / height_m).abs() < 1e-12);
     }
 
     #[test]
@@ -1153,6 +1209,10 @@ mod tests {
         for (fold_s, flies) in [(0.1, true), (1.0, false)] {
             let mut core = RootCore::new(&rig, RootMode::Feet, dt, &rest);
             let h = core.standing_height();
+            // Mixamo's rig is a person's size (metres): it falls at g over its own height.
+            let height_m = h * rig.units().metres_per_unit();
+            assert!((1.5..2.0).contains(&height_m), "{height_m} m");
+            let g = 9.80665 / height_m;
             let mut knee = Vec::new();
             knee.extend((0..30).map(|_| 40.0));
             knee.extend((1..=18).map(|i| 40.0 - 25.0 * i as f64 / 18.0));
@@ -1181,10 +1241,7 @@ mod tests {
                     frames[i + 1].position,
                 );
                 let second = (c - 2.0 * b + a) / h;
-                assert!(
-                    (second.y + GRAVITY_H_S2 * dt * dt).abs() < 1e-9,
-                    "{i}: {second}"
-                );
+                assert!((second.y + g * dt * dt).abs() < 1e-9, "{i}: {second}");
                 assert!(
                     second.x.abs() < 1e-9 && second.z.abs() < 1e-9,
                     "{i}: {second}"
@@ -1215,10 +1272,7 @@ mod tests {
             );
             for i in start + 1..end {
                 let second = (positions[i + 1] - 2.0 * positions[i] + positions[i - 1]) / h;
-                assert!(
-                    (second.y + GRAVITY_H_S2 * dt * dt).abs() < 1e-9,
-                    "{i}: {second}"
-                );
+                assert!((second.y + g * dt * dt).abs() < 1e-9, "{i}: {second}");
             }
             for i in (0..start).chain(first..frames.len()) {
                 assert!((positions[i] - frames[i].position).norm() < 1e-12, "{i}");

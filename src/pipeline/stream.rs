@@ -495,6 +495,11 @@ impl PoseStream {
         self.root.mode()
     }
 
+    /// The subject's height, m, the root stage's flights fall by.
+    pub fn root_subject_height_m(&self) -> f64 {
+        self.root.subject_height_m()
+    }
+
     /// Holds the mapping's calibration pose(s) again from `t_s` (stream time): the seconds to hold
     /// them. Until the new window has passed, frames go on with the calibration in force.
     /// Refused when the mapping has no calibration window, or the first calibration is not

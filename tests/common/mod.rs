@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 pub mod mirror;
+pub mod rescale;
 pub mod reverse;
 pub mod twin;
 
