@@ -44,7 +44,8 @@
 //!   `ground` when both thighs are, else `fixed`.
 //!
 //! Every threshold is a fraction of the subject's standing height `h` (the rest pose's lowest
-//! point to its highest), since rigs come in metres or in any BVH unit. The stage is an
+//! point to its highest), since rigs come in metres or in any BVH unit; gravity too, g over the
+//! subject's height in metres ([`subject_height_m`]). The stage is an
 //! incremental core ([`RootCore`]): a frame's local rotations in, its root position and foot
 //! contacts out, for a whole take and a stream alike.
 
