@@ -88,3 +88,40 @@ fn a_subject_scales_the_rig() {
         "{message}"
     );
 }
+
+/// The subject's height is the one the flights fall by (`contacts.subject_height_m`, issue 49):
+/// the bundled walk, `--root feet`, onto mixamo scaled to 1.2 m (a child) and 1.9 m, is judged
+/// at that height (the calibration pose's, within 0.02 m of the subject file's); scaled to 0.7 m,
+/// no person's, at the assumed 1.75 m.
+#[test]
+fn a_subject_sets_the_flights_gravity() {
+    let dir = tempfile::tempdir().unwrap();
+    for (height_m, judged_m) in [(1.2, 1.2), (1.9, 1.9), (0.7, 1.75)] {
+        let subject = dir.path().join(format!("subject_{height_m}.yaml"));
+        std::fs::write(&subject, format!("height_m: {height_m}\n")).unwrap();
+        let out = dir.path().join(format!("out_{height_m}"));
+        let run = Command::new(imubake_bin())
+            .arg("convert")
+            .arg(repo_file("samples/walk.csv"))
+            .arg("--mapping")
+            .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
+            .arg("--subject")
+            .arg(&subject)
+            .args(["--format", "bvh", "--root", "feet", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let sidecar: Value =
+            serde_json::from_slice(&std::fs::read(out.join("walk.imubake.json")).unwrap()).unwrap();
+        let said = sidecar["contacts"]["subject_height_m"].as_f64().unwrap();
+        assert!(
+            (said - judged_m).abs() < 0.02,
+            "subject {height_m} m: flights judged at {said} m"
+        );
+    }
+}
