@@ -921,6 +921,15 @@ pub fn root_positions(
         }
     }
     let feet = core.mode() == RootMode::Feet;
+    if feet && std::env::var("IMUBAKE_NOREFIT").is_err() {
+        let low: Vec<f64> = measured
+            .iter()
+            .flat_map(|m| m.low.iter().copied())
+            .collect();
+        let h = core.height;
+        let bounds = (LANDING_SLACK_H * h, FLIGHT_H * h, STEP_H * h);
+        refit_flights(&mut all, &low, core.dt, core.gravity_h_s2 * h, bounds);
+    }
     RootMotion {
         positions: all.iter().map(|f| f.position).collect(),
         contacts: feet.then(|| Contacts::from_frames(&all, core.subject_height_m())),
@@ -930,6 +939,135 @@ pub fn root_positions(
             Vec::new()
         },
     }
+}
+
+/// A refitted flight's lowest point may pass this far below the lower of its take-off's and its
+/// landing's surfaces, × h (the sensors' noise on the legs).
+pub const LANDING_SLACK_H: f64 = 0.01;
+/// A refitted flight lasts at most this long, s (a standing high jump's is about 0.6 s).
+pub const MAX_FLIGHT_S: f64 = 1.0;
+
+/// A whole take's flights refitted between the frames on the feet that bound them. The core,
+/// going forwards, launches a flight at the velocity the feet gave the hips and lands it where a
+/// foot reaches its surface; a take-off's last frames are its fastest and the smoothing rounds
+/// them, so a flight launched too slowly lands early — while the body is still up — and one
+/// launched too fast late. Seen whole, a flight is one parabola from its take-off frame `a` to a
+/// landing frame `b`, both on the feet: `y(t) = y_a + v₀t − gt²/2` with `v₀ = (y_b − y_a)/T +
+/// gT/2`, `T = (b − a)·dt`, where `y_b = L − l_b` is where the feet put the hips at `b` (`L` the
+/// surface the core landed on, `l_b` the lowest point relative to the hips). The ground pushes
+/// with a finite force, so the hips' vertical velocity is continuous where the feet leave and
+/// reach it: `b` is the frame whose parabola best meets the feet's velocities on both sides —
+/// minimising `(v₀ − ẏ_a)² + (v₀ − gT − ẏ_b)²`, `ẏ_a` over the two frames before `a`, `ẏ_b`
+/// over the two after `b` (both from the feet) — among those whose lowest point stays above the
+/// surfaces ([`LANDING_SLACK_H`]) and rises [`FLIGHT_H`] above them at least (less is a foot
+/// skimming the ground, not a flight: the early landings' continuations rise about 0.02 h). Horizontally the flight keeps the core's velocity. Frames the
+/// core had on its feet before `b` join the flight (a false landing, and the false flight that
+/// followed it); frames it had in the air from `b` on stand on the feet; the frames after move
+/// with the landing, so the path goes on without a jump.
+fn refit_flights(
+    all: &mut [RootFrame],
+    low: &[f64],
+    dt: f64,
+    gravity: f64,
+    (slack, clear, step): (f64, f64, f64),
+) {
+    let n = all.len();
+    let max = (MAX_FLIGHT_S / dt).round() as usize;
+    // Frames before `next` have `shift` applied (a landing moved everything after it).
+    let mut shift = Vector3::zeros();
+    let mut next = 0;
+    let settle = |all: &mut [RootFrame], next: &mut usize, shift: Vector3<f64>, upto: usize| {
+        while *next <= upto.min(n - 1) {
+            all[*next].position += shift;
+            *next += 1;
+        }
+    };
+    let flights = intervals(all.iter().map(|f| f.airborne));
+    let mut covered = 0; // frames before this were refitted already
+    for [start, end] in flights {
+        if start < covered.max(3) || end + 3 >= n {
+            continue;
+        }
+        let (a, landed) = (start - 1, end + 1);
+        settle(all, &mut next, shift, (a + max + 2).max(landed + 2));
+        let ya = all[a].position.y;
+        let va = (ya - all[a - 2].position.y) / (2.0 * dt);
+        let take_off_level = ya + low[a];
+        // On the surface the core landed on, so that the frames after go on from it, when that
+        // is the one it left (within a step of it, [`STEP_H`]: a late landing's feet sink a
+        // little); a flight the core landed a step away is left as it is — a hop onto a step,
+        // or a surface the core lost in the air, which no refit can tell apart.
+        let level = all[landed].position.y + low[landed];
+        if (level - take_off_level).abs() >= step {
+            continue;
+        }
+        let surface = take_off_level.min(level);
+        let mut best: Option<(f64, usize, f64)> = None;
+        for b in a + MIN_FRAMES + 1..=(a + max).min(n - 3) {
+            let span = (b - a) as f64 * dt;
+            let yb = level - low[b];
+            let v0 = (yb - ya) / span + gravity * span / 2.0;
+            let vb = (low[b] - low[b + 2]) / (2.0 * dt);
+            let cost = (v0 - va).powi(2) + (v0 - gravity * span - vb).powi(2);
+            if best.is_some_and(|(c, _, _)| c <= cost) {
+                continue;
+            }
+            // The lowest point's height above the surface over the flight, lowest and highest.
+            let (lowest, highest) = (a + 1..b)
+                .map(|k| {
+                    let t = (k - a) as f64 * dt;
+                    ya + v0 * t - gravity * t * t / 2.0 + low[k] - surface
+                })
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), y| {
+                    (l.min(y), h.max(y))
+                });
+            if lowest >= -slack && highest >= clear {
+                best = Some((cost, b, v0));
+            }
+        }
+        let Some((_, b, v0)) = best else {
+            continue;
+        };
+        // The frames the refit decides: up to the first on the feet in both.
+        let mut m = b.max(landed);
+        while m < n && all[m].airborne {
+            m += 1;
+        }
+        if m + 1 >= n {
+            continue;
+        }
+        settle(all, &mut next, shift, m);
+        // Horizontally the core's flight, on average.
+        let carried = (all[end].position - all[a].position) / (end - a) as f64;
+        let from = all[a].position;
+        for (k, frame) in all.iter_mut().enumerate().take(m).skip(a + 1) {
+            let t = (k - a) as f64 * dt;
+            frame.position.x = from.x + carried.x * (k - a) as f64;
+            frame.position.z = from.z + carried.z * (k - a) as f64;
+            if k < b {
+                frame.position.y = from.y + v0 * t - gravity * t * t / 2.0;
+                frame.airborne = true;
+                frame.contact = [false; 2];
+            } else {
+                frame.position.y = level - low[k];
+                frame.airborne = false;
+            }
+        }
+        let landing = Vector3::new(
+            from.x + carried.x * (m - a) as f64,
+            all[m].position.y,
+            from.z + carried.z * (m - a) as f64,
+        );
+        // The frames from m move with the landing: those settled already by this much, the
+        // rest by the whole shift when they are.
+        let moved = landing - all[m].position;
+        shift += moved;
+        for frame in &mut all[m..next] {
+            frame.position += moved;
+        }
+        covered = m;
+    }
+    settle(all, &mut next, shift, n - 1);
 }
 
 /// What each frame of a whole take says about which foot carries the body ([`support`]), from
@@ -1062,6 +1200,66 @@ mod tests {
         let core = RootCore::new(&rig, RootMode::Feet, 1.0 / 60.0, &rest);
         let height_m = core.standing_height() * rig.units().metres_per_unit();
         assert!((core.gravity_h_s2() - 9.80665 / height_m).abs() < 1e-12);
+    }
+
+    /// A hop (by hand): the hips rise at 1 unit/s on the feet, fly 0.2 s under g = 10 units/s²
+    /// with the legs still (v₀ = gT/2 = 1), and land going down at 1 unit/s, the legs giving. A
+    /// core that launched it at 0.6 units/s landed it after 5 frames and stood on the feet
+    /// after; the refit finds the flight whole — airborne for the 11 frames between, on the
+    /// true parabola, the frames after where the feet put them.
+    #[test]
+    fn a_flight_launched_too_slowly_is_refitted_between_the_feet() {
+        let (dt, g, a, n) = (1.0 / 60.0, 10.0, 20usize, 60usize);
+        let flight = 12; // frames from take-off to landing: 0.2 s
+        // The true hips' height, and the lowest point relative to the hips (the pose's).
+        let truth = |k: usize| -> f64 {
+            let t = (k as f64 - a as f64) * dt;
+            if k <= a {
+                1.0 + t
+            } else if k < a + flight {
+                1.0 + t - g * t * t / 2.0
+            } else {
+                1.0 - (t - flight as f64 * dt)
+            }
+        };
+        let low: Vec<f64> = (0..n)
+            .map(|k| {
+                if k > a && k < a + flight {
+                    -truth(a)
+                } else {
+                    -truth(k)
+                }
+            })
+            .collect();
+        let frame = |y: f64, airborne: bool| RootFrame {
+            position: Vector3::new(0.0, y, 0.0),
+            contact: [!airborne; 2],
+            airborne,
+            slip: [Vector3::zeros(); 2],
+        };
+        let mut all: Vec<RootFrame> = (0..n)
+            .map(|k| {
+                if k <= a {
+                    frame(truth(k), false)
+                } else if k <= a + 5 {
+                    let t = (k - a) as f64 * dt;
+                    frame(truth(a) + 0.6 * t - g * t * t / 2.0, true)
+                } else {
+                    frame(-low[k], false)
+                }
+            })
+            .collect();
+        refit_flights(&mut all, &low, dt, g, (0.01, 0.03, 0.06));
+        for (k, f) in all.iter().enumerate() {
+            let air = k > a && k < a + flight;
+            assert_eq!(f.airborne, air, "{k}");
+            assert!(
+                (f.position.y - truth(k)).abs() < 1e-9,
+                "{k}: {} vs {}",
+                f.position.y,
+                truth(k)
+            );
+        }
     }
 
     #[test]
@@ -1255,7 +1453,10 @@ mod tests {
             assert!(peak > frames[first - 1].position.y, "it rose first");
             // A whole take puts the frames the stream gave out on the feet before it saw the
             // flight on its path: the same flight from an earlier frame, one parabola throughout
-            // (the stream jumped onto it), the same positions before and after.
+            // (the stream jumped onto it), the same positions before and after. Refitted between
+            // its take-off and its landing ([`refit_flights`]), it lands a frame early here: these
+            // legs stop folding at once, a landing no real leg makes (it would give), so the
+            // hips' velocity meets the parabola's nowhere and the refit takes the frame before.
             let local: Vec<Vec<UnitQuaternion<f64>>> = (0..rig.len())
                 .map(|j| knee.iter().map(|&k| pose(k)[j]).collect())
                 .collect();
@@ -1268,14 +1469,14 @@ mod tests {
             assert_eq!(flights.len(), 1, "{flights:?}");
             let [start, end] = flights[0];
             assert!(
-                start < first && start > fold_from && end == last,
+                start < first && start > fold_from && (last - 1..=last).contains(&end),
                 "{flights:?} vs {air:?}"
             );
             for i in start + 1..end {
                 let second = (positions[i + 1] - 2.0 * positions[i] + positions[i - 1]) / h;
                 assert!((second.y + g * dt * dt).abs() < 1e-9, "{i}: {second}");
             }
-            for i in (0..start).chain(first..frames.len()) {
+            for i in (0..start).chain(last + 1..frames.len()) {
                 assert!((positions[i] - frames[i].position).norm() < 1e-12, "{i}");
             }
         }
