@@ -921,7 +921,7 @@ pub fn root_positions(
         }
     }
     let feet = core.mode() == RootMode::Feet;
-    if feet && std::env::var("IMUBAKE_NOREFIT").is_err() {
+    if feet {
         let low: Vec<f64> = measured
             .iter()
             .flat_map(|m| m.low.iter().copied())
