@@ -960,10 +960,11 @@ pub const MAX_FLIGHT_S: f64 = 1.0;
 /// minimising `(v₀ − ẏ_a)² + (v₀ − gT − ẏ_b)²`, `ẏ_a` over the two frames before `a`, `ẏ_b`
 /// over the two after `b` (both from the feet) — among those whose lowest point stays above the
 /// surfaces ([`LANDING_SLACK_H`]) and rises [`FLIGHT_H`] above them at least (less is a foot
-/// skimming the ground, not a flight: the early landings' continuations rise about 0.02 h). Horizontally the flight keeps the core's velocity. Frames the
-/// core had on its feet before `b` join the flight (a false landing, and the false flight that
-/// followed it); frames it had in the air from `b` on stand on the feet; the frames after move
-/// with the landing, so the path goes on without a jump.
+/// skimming the ground, not a flight: the early landings' continuations rise about 0.02 h).
+/// Horizontally the flight keeps the core's mean velocity. Frames the core had on its feet
+/// before `b` join the flight (a false landing, and the false flight that followed it); frames it
+/// had in the air from `b` on stand on the feet; the frames after move with the landing, so the
+/// path goes on without a jump. A stream, which has sent its frames, keeps the core's flights.
 fn refit_flights(
     all: &mut [RootFrame],
     low: &[f64],
