@@ -4,7 +4,23 @@ use crate::common;
 
 use common::{imubake_bin, repo_file};
 use serde_json::Value;
-use std::process::Command;
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// The bundled walk onto mixamo scaled by `subject`, `--root root`, as BVH into `out`.
+fn convert_walk(subject: &Path, root: &str, out: &Path) -> Output {
+    Command::new(imubake_bin())
+        .arg("convert")
+        .arg(repo_file("samples/walk.csv"))
+        .arg("--mapping")
+        .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
+        .arg("--subject")
+        .arg(subject)
+        .args(["--format", "bvh", "--root", root, "--out"])
+        .arg(out)
+        .output()
+        .unwrap()
+}
 
 /// `--subject` with `height_m` (and one segment): the written BVH's rest pose is the subject's
 /// height (its hierarchy read back by `bvh_anim`, an independent parser), the thigh the given
@@ -14,19 +30,7 @@ fn a_subject_scales_the_rig() {
     let dir = tempfile::tempdir().unwrap();
     let subject = dir.path().join("subject.yaml");
     std::fs::write(&subject, "height_m: 1.6\nsegments:\n  LeftUpLeg: 0.4\n").unwrap();
-    let convert = |out: &std::path::Path| {
-        Command::new(imubake_bin())
-            .arg("convert")
-            .arg(repo_file("samples/walk.csv"))
-            .arg("--mapping")
-            .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
-            .arg("--subject")
-            .arg(&subject)
-            .args(["--format", "bvh", "--root", "fixed", "--out"])
-            .arg(out)
-            .output()
-            .unwrap()
-    };
+    let convert = |out: &Path| convert_walk(&subject, "fixed", out);
     let out = dir.path().join("out");
     let run = convert(&out);
     assert!(
@@ -100,17 +104,7 @@ fn a_subject_sets_the_flights_gravity() {
         let subject = dir.path().join(format!("subject_{height_m}.yaml"));
         std::fs::write(&subject, format!("height_m: {height_m}\n")).unwrap();
         let out = dir.path().join(format!("out_{height_m}"));
-        let run = Command::new(imubake_bin())
-            .arg("convert")
-            .arg(repo_file("samples/walk.csv"))
-            .arg("--mapping")
-            .arg(repo_file("mappings/paper000_16imu_mixamo.json"))
-            .arg("--subject")
-            .arg(&subject)
-            .args(["--format", "bvh", "--root", "feet", "--out"])
-            .arg(&out)
-            .output()
-            .unwrap();
+        let run = convert_walk(&subject, "feet", &out);
         assert!(
             run.status.success(),
             "{}",
