@@ -524,9 +524,7 @@ fn a_walk_played_backwards_walks_without_sliding() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let backwards = dir.path().join("pymo_walk_backwards.bvh");
-    let text = std::fs::read_to_string(&bvh).unwrap();
-    std::fs::write(&backwards, common::reverse::reversed(&text)).unwrap();
+    let (backwards, _) = played_backwards(&bvh, dir.path());
     for seed in [3, 4, 5] {
         let Some(take) = closed_loop_seeded(
             &backwards,
@@ -581,6 +579,17 @@ const FETCHED_GAITS: &[(&str, &str)] = &[
         "data/06/06_08.bvh",
     ),
 ];
+
+/// `bvh` played backwards in time (`common::reverse`) into `dir`, with its frame count (a
+/// reference pose at frame 0 is then the last frame: play `0:{frames − 2}`).
+fn played_backwards(bvh: &Path, dir: &Path) -> (PathBuf, usize) {
+    let text = std::fs::read_to_string(bvh).unwrap();
+    let frames = imubake::bvh::parse(text.as_bytes()).unwrap().frame_count();
+    let name = bvh.file_stem().unwrap().to_string_lossy();
+    let file = dir.join(format!("{name}_backwards.bvh"));
+    std::fs::write(&file, common::reverse::reversed(&text)).unwrap();
+    (file, frames)
+}
 
 /// CMU's BVH lengths are in 1/0.45 inch (their ASF's `length 0.45` unit; subject 01 stands 25.7
 /// of them, 1.45 m): `bvh` copied into `dir` in centimetres (`common::rescale`), so that the
@@ -637,12 +646,9 @@ fn every_gait_walks_without_sliding() {
     }
     let mut missed = Vec::new();
     for (name, bvh, mapping, skip, backwards) in takes {
-        let text = std::fs::read_to_string(&bvh).unwrap();
-        let n = imubake::bvh::parse(text.as_bytes()).unwrap().frame_count();
         let mut runs = vec![(name.clone(), bvh.clone(), skip.then(|| "1:".to_string()))];
         if backwards {
-            let file = dir.path().join(format!("{name}_backwards.bvh"));
-            std::fs::write(&file, common::reverse::reversed(&text)).unwrap();
+            let (file, n) = played_backwards(&bvh, dir.path());
             // A reference pose first is the last frame played backwards.
             runs.push((
                 format!("{name} backwards"),
@@ -1078,10 +1084,7 @@ fn a_flight_falls_at_the_subjects_gravity() {
     // push the smoothing rounds, launched too slowly — and the whole take's refit
     // (`refit_flights`) lands each flight where the source's does: the hips' path within 5 %
     // (4.09 / 3.94 / 3.84 % on seeds 3 / 4 / 5; 8.26 / 8.03 % on seeds 3 / 4 before the refit).
-    let text = std::fs::read_to_string(&true_size).unwrap();
-    let frames = imubake::bvh::parse(text.as_bytes()).unwrap().frame_count();
-    let backwards = dir.path().join("cmu_01_01_backwards.bvh");
-    std::fs::write(&backwards, common::reverse::reversed(&text)).unwrap();
+    let (backwards, frames) = played_backwards(&true_size, dir.path());
     let played = format!("0:{}", frames - 2);
     let args = ["--root", "feet"];
     let take = closed_loop_on(&backwards, CMU_MAPPING, Some(&played), &args).unwrap();
