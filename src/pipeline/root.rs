@@ -244,10 +244,9 @@ pub struct RootCore {
     floor: f64,
     /// Standing height, rig units.
     height: f64,
-    /// The subject's standing height, m ([`subject_height_m`]).
+    /// The subject's standing height, m ([`subject_height_m`]): gravity is [`GRAVITY_M_S2`] over
+    /// it, in standing heights per s².
     subject_height_m: f64,
-    /// Gravity, standing heights per s²: [`GRAVITY_M_S2`] over the subject's height in metres.
-    gravity_h_s2: f64,
     dt: f64,
     feet: Option<[Foot; 2]>,
     state: Option<FeetState>,
@@ -441,7 +440,6 @@ impl RootCore {
             floor: low,
             height,
             subject_height_m,
-            gravity_h_s2: GRAVITY_M_S2 / subject_height_m,
             dt: frame_time_s,
             feet,
             state: None,
@@ -463,7 +461,7 @@ impl RootCore {
 
     /// Gravity in standing heights per s² (what a flight falls by).
     pub fn gravity_h_s2(&self) -> f64 {
-        self.gravity_h_s2
+        GRAVITY_M_S2 / self.subject_height_m
     }
 
     /// The subject's standing height, m, that gravity is taken over ([`subject_height_m`]).
@@ -532,7 +530,7 @@ impl RootCore {
         left_weight: Option<f64>,
         still: [Option<f64>; 2],
     ) -> RootFrame {
-        let h = self.height;
+        let (h, gravity) = (self.height, self.gravity_h_s2());
         let low = [lowest(now[0]), lowest(now[1])];
         let tips = self
             .feet
@@ -589,7 +587,7 @@ impl RootCore {
         let mut pushing = false;
         if state.airborne {
             // Ballistic: the horizontal velocity kept, gravity vertically.
-            state.velocity.y -= self.gravity_h_s2 * h * dt;
+            state.velocity.y -= gravity * h * dt;
             state.hips += state.velocity * dt;
             // A foot reaching its surface lands on the way down; on the way up the legs are still
             // unfolding under a push-off, and they carry the hips higher and faster.
@@ -728,7 +726,7 @@ impl RootCore {
     /// [`FLIGHT_H`] below that path the body is airborne on it.
     fn fall_behind_flight(&mut self, before: Vector3<f64>) {
         let (h, dt, frames) = (self.height, self.dt, self.stance_frames());
-        let gravity = self.gravity_h_s2;
+        let gravity = self.gravity_h_s2();
         let state = self.state.as_mut().expect("feet mode has a state");
         let start = match state.ballistic {
             Some(going) => Some(going),
@@ -890,7 +888,7 @@ pub fn root_positions(
         .collect();
     let left_weights = (core.mode() == RootMode::Feet).then(|| {
         let cues = support_cues(&measured, core.dt, core.height);
-        let path = support::decode(&cues, core.dt, core.gravity_h_s2);
+        let path = support::decode(&cues, core.dt, core.gravity_h_s2());
         support::left_weights(&path, SUPPORT_BLEND_FRAMES)
     });
     let mut all: Vec<RootFrame> = Vec::with_capacity(frames);
@@ -928,7 +926,7 @@ pub fn root_positions(
             .collect();
         let h = core.height;
         let bounds = (LANDING_SLACK_H * h, FLIGHT_H * h, STEP_H * h);
-        refit_flights(&mut all, &low, core.dt, core.gravity_h_s2 * h, bounds);
+        refit_flights(&mut all, &low, core.dt, core.gravity_h_s2() * h, bounds);
     }
     RootMotion {
         positions: all.iter().map(|f| f.position).collect(),
