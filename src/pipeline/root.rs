@@ -14,12 +14,15 @@
 //!   (L_f − y_f)`, `y_f` its lowest point relative to the hips, `L_f` the surface's height — the
 //!   other foot's when the weight passes to it, unless the feet are then a step apart
 //!   ([`STEP_H`]; a stair, a kerb: the body climbs, as paper 003's does), so sensor error cannot
-//!   make the floor wander. The contact weights `w_f` score each foot — how much higher it is
-//!   than the other, how fast it moves over the ground (its motion relative to the hips plus the
-//!   hips' recent velocity: nil for a planted foot whichever way the body moves — forwards,
-//!   backwards, sideways), how fast it rises relative to the hips (a foot pushing off rises
-//!   first), how fast it goes down over the ground (a foot on its way down has not landed: a
-//!   step down) — and blend smoothly between alike feet (double support), so a switch never jumps.
+//!   make the floor wander. A whole take reads that step where both feet stood or where the new
+//!   one landed rather than when the weight passes ([`transfer`]), and eases the hips across a
+//!   step down's gap (`smooth_gaps`). The contact weights `w_f` score each foot — how much
+//!   higher it is than the other, how fast it moves over the ground (its motion relative to the
+//!   hips plus the hips' recent velocity: nil for a planted foot whichever way the body moves —
+//!   forwards, backwards, sideways), how fast it rises relative to the hips (a foot pushing off
+//!   rises first), how fast it goes down over the ground (a foot on its way down has not landed:
+//!   a step down) — and blend smoothly between alike feet (double support), so a switch never
+//!   jumps.
 //!   A whole take decides the weights over all its frames instead ([`support`]: the foot whose
 //!   stillness implies the steadiest hips, a Viterbi path), since those scores read the hips'
 //!   recent velocity, which follows whichever foot they chose, and so can lock onto a sliding one.
@@ -50,6 +53,7 @@
 //! contacts out, for a whole take and a stream alike.
 
 pub mod support;
+pub mod transfer;
 pub mod zupt;
 
 use crate::rig::Rig;
@@ -503,7 +507,13 @@ impl RootCore {
                     &mut self.now,
                 );
                 let now = std::mem::take(&mut self.now);
-                let frame = self.step_feet(body_low, [&now[0], &now[1]], None, [None; 2]);
+                let frame = self.step_feet(
+                    body_low,
+                    [&now[0], &now[1]],
+                    None,
+                    [None; 2],
+                    Planned::default(),
+                );
                 self.now = now;
                 frame
             }
@@ -529,6 +539,7 @@ impl RootCore {
         now: [&[Vector3<f64>]; 2],
         left_weight: Option<f64>,
         still: [Option<f64>; 2],
+        plan: Planned,
     ) -> RootFrame {
         let (h, gravity) = (self.height, self.gravity_h_s2());
         let low = [lowest(now[0]), lowest(now[1])];
@@ -610,11 +621,16 @@ impl RootCore {
             state.hips.x -= step.x;
             state.hips.z -= step.z;
             // When the weight passes to the other foot, it stands on a surface as much higher
-            // than the other's as it is higher relative to the hips — the same one unless that
-            // is a step's height (a stair, a kerb; less is the sensors' error).
+            // than the other's as a whole take's planned transfer read it where both feet stood
+            // or where the new one landed ([`transfer`]); else as it is higher relative to the
+            // hips now. The same surface unless that is a step's height (a stair, a kerb; less
+            // is the sensors' error).
             let dominant = usize::from(weights[1] > weights[0]);
             if dominant != state.dominant {
-                let rise = low[dominant].1 - low[state.dominant].1;
+                let rise = match plan.rise {
+                    Some(rise) => rise,
+                    None => low[dominant].1 - low[state.dominant].1,
+                };
                 state.level[dominant] = if rise.abs() >= STEP_H * h {
                     state.level[state.dominant] + rise
                 } else {
@@ -626,7 +642,7 @@ impl RootCore {
             state.hips.y =
                 weights[0] * (state.level[0] - low[0].1) + weights[1] * (state.level[1] - low[1].1);
             // A push-off faster than a walk's rise, for [`TAKEOFF_S`]: airborne.
-            if (state.hips.y - before.y) / dt > TAKEOFF_H_S * h {
+            if (state.hips.y - before.y) / dt > TAKEOFF_H_S * h && !plan.gap {
                 state.rising += 1;
             } else {
                 state.rising = 0;
@@ -649,7 +665,8 @@ impl RootCore {
                 state.airborne = false;
             }
         }
-        if !state.airborne && !was_airborne {
+        // A planned transfer's gap is the legs easing a fall (a step down), not a flight.
+        if !state.airborne && !was_airborne && !plan.gap {
             self.fall_behind_flight(before);
         }
         let frames = self.stance_frames();
@@ -886,9 +903,14 @@ pub fn root_positions(
         .into_par_iter()
         .map(|start| measure_frames(&core, local, start..(start + block).min(frames)))
         .collect();
+    let (mut planned, mut gaps) = (Vec::new(), Vec::new());
     let left_weights = (core.mode() == RootMode::Feet).then(|| {
         let cues = support_cues(&measured, core.dt, core.height);
         let path = support::decode(&cues, core.dt, core.gravity_h_s2());
+        let low_h = feet_lowest(&measured, core.height);
+        let transfers = transfer::plan(&low_h, &cues, &path, core.dt, core.gravity_h_s2());
+        planned = planned_frames(&transfers, core.height, frames);
+        gaps = transfers.iter().filter_map(step_gap).collect();
         support::left_weights(&path, SUPPORT_BLEND_FRAMES)
     });
     let mut all: Vec<RootFrame> = Vec::with_capacity(frames);
@@ -902,7 +924,10 @@ pub fn root_positions(
             });
             let f = match &m.feet {
                 None => core.step_ground(low),
-                Some(feet) => core.step_feet(low, feet.frame(i), left_weight, still),
+                Some(feet) => {
+                    let plan = planned.get(n).copied().unwrap_or_default();
+                    core.step_feet(low, feet.frame(i), left_weight, still, plan)
+                }
             };
             // A flight found late: the frames since it started were in the air, on its path.
             let revised = core.revised();
@@ -927,6 +952,7 @@ pub fn root_positions(
         let h = core.height;
         let bounds = (LANDING_SLACK_H * h, FLIGHT_H * h, STEP_H * h);
         refit_flights(&mut all, &low, core.dt, core.gravity_h_s2() * h, bounds);
+        smooth_gaps(&mut all, &gaps, core.dt);
     }
     RootMotion {
         positions: all.iter().map(|f| f.position).collect(),
@@ -1093,6 +1119,74 @@ fn support_cues(measured: &[Measured], dt: f64, height: f64) -> Vec<support::Sup
         }
     }
     cues
+}
+
+/// What a whole take's planned transfers ([`transfer`]) say of one frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Planned {
+    /// The support path passes the weight here, to a surface this much higher (rig units).
+    rise: Option<f64>,
+    /// Within a transfer's gap: neither foot on its surface, the legs easing a fall.
+    gap: bool,
+}
+
+/// Each foot's lowest point relative to the hips per frame, h.
+fn feet_lowest(measured: &[Measured], height: f64) -> Vec<[f64; 2]> {
+    let mut out = Vec::new();
+    for m in measured {
+        if let Some(feet) = &m.feet {
+            for i in 0..m.low.len() {
+                out.push(feet.frame(i).map(|p| lowest(p).1 / height));
+            }
+        }
+    }
+    out
+}
+
+/// The transfers as frame-by-frame instructions to the core: each switch's step, and the
+/// frames of each step's gap, from the last one the old foot alone held the hips (the path's
+/// weights pass over ±[`SUPPORT_BLEND_FRAMES`]) to the landing.
+fn planned_frames(transfers: &[transfer::Transfer], height: f64, frames: usize) -> Vec<Planned> {
+    let mut out = vec![Planned::default(); frames];
+    for p in transfers {
+        if let Some(frame) = out.get_mut(p.switch) {
+            frame.rise = Some(p.rise_h * height);
+        }
+        if let Some((s, b)) = step_gap(p) {
+            let start = s.saturating_sub(SUPPORT_BLEND_FRAMES + 1);
+            for frame in out.iter_mut().take(b).skip(start) {
+                frame.gap = true;
+            }
+        }
+    }
+    out
+}
+
+/// A transfer's gap `(switch, landing)` when it steps onto another surface ([`STEP_H`]); on the
+/// same one the hips pass from foot to foot where the feet put them, as they always did.
+fn step_gap(p: &transfer::Transfer) -> Option<(usize, usize)> {
+    p.gap().filter(|_| p.rise_h.abs() >= STEP_H)
+}
+
+/// Across each step's gap `(s, b)` ([`transfer::Found::Gap`]) the hips pass from the old foot's
+/// surface to the new one's at the switch, in one frame; seen whole, they follow a cubic from the
+/// last frame before the weights start passing to the landing, meeting the path's heights and
+/// vertical velocities at both ends (a step down is a fall eased by the legs, not a drop). Gaps
+/// with a frame in the air are left alone.
+fn smooth_gaps(all: &mut [RootFrame], gaps: &[(usize, usize)], dt: f64) {
+    for &(s, b) in gaps {
+        let g = s.saturating_sub(SUPPORT_BLEND_FRAMES + 1);
+        if g == 0 || b + 1 >= all.len() || all[g - 1..=b + 1].iter().any(|f| f.airborne) {
+            continue;
+        }
+        let y = |t: usize| all[t].position.y;
+        let (v0, v1) = ((y(g) - y(g - 1)) / dt, (y(b + 1) - y(b)) / dt);
+        let (y0, y1, span) = (y(g), y(b), (b - g) as f64 * dt);
+        for (t, frame) in all.iter_mut().enumerate().take(b).skip(g + 1) {
+            let tau = (t - g) as f64 / (b - g) as f64;
+            frame.position.y = transfer::hermite(y0, v0, y1, v1, span, tau);
+        }
+    }
 }
 
 /// A block of frames as [`measure_feet`] (feet mode) or [`pose_relative_to_hips`] (ground mode)
