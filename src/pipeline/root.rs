@@ -906,7 +906,8 @@ pub fn root_positions(
     let (mut planned, mut gaps) = (Vec::new(), Vec::new());
     let left_weights = (core.mode() == RootMode::Feet).then(|| {
         let cues = support_cues(&measured, core.dt, core.height);
-        let path = support::decode(&cues, core.dt, core.gravity_h_s2());
+        let mut path = support::decode(&cues, core.dt, core.gravity_h_s2());
+        support::without_flickers(&mut path, MIN_FRAMES);
         let low_h = feet_lowest(&measured, core.height);
         let transfers = transfer::plan(&low_h, &cues, &path, core.dt, core.gravity_h_s2());
         planned = planned_frames(&transfers, core.height, frames);

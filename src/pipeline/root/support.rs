@@ -94,6 +94,25 @@ pub fn decode(cues: &[SupportCues], frame_time_s: f64, gravity_h_s2: f64) -> Vec
     path
 }
 
+/// A support path without its flickers: a foot that carries the body for fewer than
+/// `min_frames` frames between two stretches of the other (a frame or two where the sensors' noise
+/// tipped the balance; no foot lands and lifts that fast) leaves the weight with the other. The
+/// path's first and last stretches are kept, however short.
+pub fn without_flickers(path: &mut [usize], min_frames: usize) {
+    let n = path.len();
+    let mut t = 0;
+    while t < n {
+        let start = t;
+        while t < n && path[t] == path[start] {
+            t += 1;
+        }
+        if start > 0 && t < n && t - start < min_frames {
+            let other = path[start - 1];
+            path[start..t].fill(other);
+        }
+    }
+}
+
 /// The left foot's share of the weight per frame from a support path: the mean of
 /// `[path == left]` over `±blend` frames, so the weight passes over `2·blend + 1` frames
 /// rather than at once (the two feet's surfaces put the hips at heights that differ by the
@@ -189,5 +208,20 @@ mod tests {
                 .fold(f64::INFINITY, f64::min);
             prop_assert!(decoded <= cheapest + 1e-9, "{decoded} vs {cheapest}");
         }
+    }
+
+    /// A frame or two of the other foot between two stretches of one is noise; three frames
+    /// are a support, and the path's ends stay as they are.
+    #[test]
+    fn flickers_leave_the_weight_where_it_was() {
+        let mut path = vec![0, 0, 0, 0, 1, 0, 0, 0, 1, 1, 0, 0, 0, 1, 1, 1, 0, 0, 0, 1];
+        without_flickers(&mut path, 3);
+        assert_eq!(
+            path,
+            [0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 0, 0, 0, 1]
+        );
+        let mut starts_short = vec![1, 0, 0, 0];
+        without_flickers(&mut starts_short, 3);
+        assert_eq!(starts_short, [1, 0, 0, 0]);
     }
 }

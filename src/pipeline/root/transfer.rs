@@ -19,7 +19,7 @@
 //! - **A landing**: else the foot taking the weight came down while the other had left. A foot
 //!   coming down moves down relative to the hips, so their height above it (`−r_B`) rises until it
 //!   lands, and the body settles onto the leg after: the landing `b` is where `−r_B` peaks (a
-//!   maximum over [`PEAK_FRAMES`] frames each side), the one nearest `s`. Landed at `b ≤ s`: both
+//!   maximum over [`PEAK_S`] each side), the one nearest `s`. Landed at `b ≤ s`: both
 //!   were on the ground at `b`, the step is `r_B(b) − r_A(b)`. Landed at `b > s` (a **gap**):
 //!   nothing held the hips from `s` to `b` but the legs easing the fall (a step down), so their
 //!   vertical velocity changes steadily — constant acceleration from `v_s` (foot `A`'s) to `v_b`
@@ -47,8 +47,9 @@ pub const WINDOW_S: f64 = 0.5;
 /// Two planted feet imply the same hips velocity within this, × h / s (a swinging foot moves at
 /// about twice the body's speed; as [`super::PLANT_SPEED_H_S`], a planted foot's own slip).
 pub const AGREE_H_S: f64 = 0.3;
-/// A landing's peak of the hips' height above the foot dominates this many frames on each side.
-pub const PEAK_FRAMES: usize = 3;
+/// A landing's peak of the hips' height above the foot dominates this long on each side, s (at
+/// least a frame: 3 at 60 fps, 2 at 30, 1 at 24).
+pub const PEAK_S: f64 = 0.05;
 /// A gap across which the hips' vertical velocity changes faster than this, × g, is not a step
 /// down's eased fall but a flight's, read from a foot already in the air (measured: the runs and
 /// the sideways gallop of issue 49's battery 0.4–6 g, CMU 03's steps down 0.0–0.3 g, two at 0.5 g).
@@ -110,6 +111,7 @@ pub fn plan(
     let n = low_h.len().min(cues.len()).min(path.len());
     let switches: Vec<usize> = (1..n).filter(|&t| path[t] != path[t - 1]).collect();
     let window = (WINDOW_S / dt).round() as usize;
+    let peak = ((PEAK_S / dt).round() as usize).max(1);
     let mut out = Vec::with_capacity(switches.len());
     for (i, &s) in switches.iter().enumerate() {
         let (from, to) = (path[s - 1], path[s]);
@@ -119,10 +121,10 @@ pub fn plan(
         let lo = s
             .saturating_sub(window)
             .max(prev.map_or(0, |p| p + 1))
-            .max(PEAK_FRAMES);
+            .max(peak);
         let hi = (s + window)
             .min(next.map_or(n, |q| q - 1))
-            .min(n.saturating_sub(PEAK_FRAMES + 1));
+            .min(n.saturating_sub(peak + 1));
         let instant = Transfer {
             switch: s,
             from,
@@ -135,7 +137,7 @@ pub fn plan(
             continue;
         }
         let found = double_support(cues, (from, to), s, (lo, hi), [prev, next])
-            .or_else(|| landing(low_h, to, s, (lo, hi)))
+            .or_else(|| landing(low_h, to, s, (lo, hi), peak))
             .filter(|found| match *found {
                 Found::Gap(b) => {
                     let (v_s, v_b) = gap_velocities(low_h, from, to, s, b, dt);
@@ -229,13 +231,19 @@ fn double_support(
 }
 
 /// The landing of foot `to` nearest switch `s` within `lo..=hi`: where the hips' height above it
-/// peaks.
-fn landing(low_h: &[[f64; 2]], to: usize, s: usize, (lo, hi): (usize, usize)) -> Option<Found> {
+/// peaks over `peak` frames each side.
+fn landing(
+    low_h: &[[f64; 2]],
+    to: usize,
+    s: usize,
+    (lo, hi): (usize, usize),
+    peak: usize,
+) -> Option<Found> {
     let above = |t: usize| -low_h[t][to];
-    let peak =
-        |t: usize| (1..=PEAK_FRAMES).all(|j| above(t) >= above(t + j) && above(t) >= above(t - j));
+    let dominates =
+        |t: usize| (1..=peak).all(|j| above(t) >= above(t + j) && above(t) >= above(t - j));
     (lo..=hi)
-        .filter(|&t| peak(t))
+        .filter(|&t| dominates(t))
         .min_by_key(|&t| t.abs_diff(s))
         .map(|b| {
             if b <= s {
