@@ -210,6 +210,35 @@ mod tests {
         }
     }
 
+    proptest! {
+        /// Without its flickers a path has no stretch shorter than the minimum but its first and
+        /// last, keeps their feet, and is its own without them.
+        #[test]
+        fn no_flicker_is_left(path in prop::collection::vec(0usize..2, 0..60), min in 1usize..5) {
+            let mut clean = path.clone();
+            without_flickers(&mut clean, min);
+            let stretches = |p: &[usize]| {
+                let mut out: Vec<(usize, usize)> = Vec::new();
+                for &f in p {
+                    match out.last_mut() {
+                        Some((foot, len)) if *foot == f => *len += 1,
+                        _ => out.push((f, 1)),
+                    }
+                }
+                out
+            };
+            let s = stretches(&clean);
+            for &(_, len) in s.iter().skip(1).take(s.len().saturating_sub(2)) {
+                prop_assert!(len >= min, "{clean:?}");
+            }
+            prop_assert_eq!(clean.first(), path.first());
+            prop_assert_eq!(clean.last(), path.last());
+            let mut again = clean.clone();
+            without_flickers(&mut again, min);
+            prop_assert_eq!(again, clean);
+        }
+    }
+
     /// A frame or two of the other foot between two stretches of one is noise; three frames
     /// are a support, and the path's ends stay as they are.
     #[test]

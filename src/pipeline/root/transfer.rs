@@ -391,6 +391,37 @@ mod tests {
         assert!(step + span * (v_s + v_b) / 2.0 < -0.06);
     }
 
+    proptest::proptest! {
+        /// Any heights, cues and path, at any frame rate: one transfer a switch, in order, its
+        /// frames within the take, its step finite.
+        #[test]
+        fn every_switch_is_planned(
+            frames in proptest::collection::vec(
+                (-1.0f64..0.0, -1.0f64..0.0, -3.0f64..3.0, -3.0f64..3.0, 0usize..2),
+                0..80,
+            ),
+            fps in 10.0f64..240.0,
+        ) {
+            let low: Vec<[f64; 2]> = frames.iter().map(|f| [f.0, f.1]).collect();
+            let cues: Vec<SupportCues> = frames.iter().map(|f| cue(f.2, f.3)).collect();
+            let path: Vec<usize> = frames.iter().map(|f| f.4).collect();
+            let plans = plan(&low, &cues, &path, 1.0 / fps, G);
+            let switches: Vec<usize> =
+                (1..path.len()).filter(|&t| path[t] != path[t - 1]).collect();
+            proptest::prop_assert_eq!(plans.iter().map(|p| p.switch).collect::<Vec<_>>(), switches);
+            for p in &plans {
+                proptest::prop_assert!(p.rise_h.is_finite());
+                proptest::prop_assert_eq!((p.from, p.to), (path[p.switch - 1], path[p.switch]));
+                let inside = match p.found {
+                    Found::DoubleSupport(a, b) => a <= b && b < low.len(),
+                    Found::Landed(b) => b <= p.switch,
+                    Found::Gap(b) => b > p.switch && b < low.len(),
+                };
+                proptest::prop_assert!(inside, "{p:?}");
+            }
+        }
+    }
+
     /// The cubic meets both ends and both velocities (by finite differences).
     #[test]
     fn the_gaps_cubic_meets_both_feet() {
