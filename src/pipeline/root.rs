@@ -1127,7 +1127,8 @@ fn support_cues(measured: &[Measured], dt: f64, height: f64) -> Vec<support::Sup
 struct Planned {
     /// The support path passes the weight here, to a surface this much higher (rig units).
     rise: Option<f64>,
-    /// Within a transfer's gap: neither foot on its surface, the legs easing a fall.
+    /// Within a transfer's gap or just before it, as the weights start to pass: the legs easing
+    /// a fall (no flight is looked for).
     gap: bool,
 }
 
@@ -1173,13 +1174,20 @@ fn step_gap(p: &transfer::Transfer) -> Option<(usize, usize)> {
 /// surface to the new one's at the switch, in one frame; seen whole, they follow a cubic from the
 /// last frame before the weights start passing to the landing, meeting the path's heights and
 /// vertical velocities at both ends (a step down is a fall eased by the legs, not a drop). Gaps
-/// with a frame in the air are left alone.
+/// with a frame in the air, or starting within the one before, are left alone.
 fn smooth_gaps(all: &mut [RootFrame], gaps: &[(usize, usize)], dt: f64) {
+    // Frames before this were eased already: a gap that starts among them is left alone.
+    let mut eased = 0;
     for &(s, b) in gaps {
         let g = s.saturating_sub(SUPPORT_BLEND_FRAMES + 1);
-        if g == 0 || b + 1 >= all.len() || all[g - 1..=b + 1].iter().any(|f| f.airborne) {
+        if g == 0
+            || g <= eased
+            || b + 1 >= all.len()
+            || all[g - 1..=b + 1].iter().any(|f| f.airborne)
+        {
             continue;
         }
+        eased = b;
         let y = |t: usize| all[t].position.y;
         let (v0, v1) = ((y(g) - y(g - 1)) / dt, (y(b + 1) - y(b)) / dt);
         let (y0, y1, span) = (y(g), y(b), (b - g) as f64 * dt);

@@ -1266,7 +1266,8 @@ fn a_real_lower_body_take_stays_on_the_floor() {
 /// point stays within 0.02 h of the rest pose's floor, and it drifts by no more than 0.01 h from
 /// the take's first quarter to its last (issue 50's flat ground). Measured 2026-12-07: worst
 /// 0.0087 / 0.0087 / 0.0094 h, drift +0.0004 h at each; had a gap's feet not had to part
-/// (`transfer::PART_H`), each mid-stance read as a landing: at 24 fps 0.55 h off, drift −0.30 h.
+/// (`transfer::PART_H`), each mid-stance read as a landing: at 24 fps the planted lowest point
+/// 0.55 h off the floor at worst, drift −0.30 h (at 30 fps the hips sank 0.95 h over the take).
 #[test]
 fn the_bundled_walk_stays_on_its_floor() {
     let Some(py) = python() else {
