@@ -905,13 +905,12 @@ pub fn root_positions(
         .collect();
     let (mut planned, mut gaps) = (Vec::new(), Vec::new());
     let left_weights = (core.mode() == RootMode::Feet).then(|| {
-        let cues = support_cues(&measured, core.dt, core.height);
+        let (cues, low_h) = support_cues(&measured, core.dt, core.height);
         let mut path = support::decode(&cues, core.dt, core.gravity_h_s2());
         support::without_flickers(&mut path, MIN_FRAMES);
-        let low_h = feet_lowest(&measured, core.height);
         let transfers = transfer::plan(&low_h, &cues, &path, core.dt, core.gravity_h_s2());
         planned = planned_frames(&transfers, core.height, frames);
-        gaps = transfers.iter().filter_map(step_gap).collect();
+        gaps = transfers.iter().filter_map(eased_gap).collect();
         support::left_weights(&path, SUPPORT_BLEND_FRAMES)
     });
     let mut all: Vec<RootFrame> = Vec::with_capacity(frames);
@@ -1099,9 +1098,14 @@ fn refit_flights(
 /// What each frame of a whole take says about which foot carries the body ([`support`]), from
 /// the feet's points relative to the hips: the hips' velocity each foot's pivot ([`pivot_moved`],
 /// as [`RootCore::push`] moves the hips) implies, and its height above the other's, both
-/// in standing heights `height`.
-fn support_cues(measured: &[Measured], dt: f64, height: f64) -> Vec<support::SupportCues> {
-    let mut cues = Vec::new();
+/// in standing heights `height`; and each foot's lowest point relative to the hips, h (what the
+/// planned transfers read, [`transfer::plan`]).
+fn support_cues(
+    measured: &[Measured],
+    dt: f64,
+    height: f64,
+) -> (Vec<support::SupportCues>, Vec<[f64; 2]>) {
+    let (mut cues, mut low_h) = (Vec::new(), Vec::new());
     let mut previous: Option<[&[Vector3<f64>]; 2]> = None;
     for m in measured {
         let Some(feet) = &m.feet else {
@@ -1116,10 +1120,11 @@ fn support_cues(measured: &[Measured], dt: f64, height: f64) -> Vec<support::Sup
                 Some(before) => [0, 1].map(|f| -pivot_moved(before[f], now[f]) / (dt * height)),
             };
             cues.push(support::SupportCues { implied, above });
+            low_h.push(low.map(|l| l / height));
             previous = Some(now);
         }
     }
-    cues
+    (cues, low_h)
 }
 
 /// What a whole take's planned transfers ([`transfer`]) say of one frame.
@@ -1132,30 +1137,15 @@ struct Planned {
     gap: bool,
 }
 
-/// Each foot's lowest point relative to the hips per frame, h.
-fn feet_lowest(measured: &[Measured], height: f64) -> Vec<[f64; 2]> {
-    let mut out = Vec::new();
-    for m in measured {
-        if let Some(feet) = &m.feet {
-            for i in 0..m.low.len() {
-                out.push(feet.frame(i).map(|p| lowest(p).1 / height));
-            }
-        }
-    }
-    out
-}
-
 /// The transfers as frame-by-frame instructions to the core: each switch's step, and the
-/// frames of each step's gap, from the last one the old foot alone held the hips (the path's
-/// weights pass over ±[`SUPPORT_BLEND_FRAMES`]) to the landing.
+/// frames of each step's gap ([`eased_gap`]).
 fn planned_frames(transfers: &[transfer::Transfer], height: f64, frames: usize) -> Vec<Planned> {
     let mut out = vec![Planned::default(); frames];
     for p in transfers {
         if let Some(frame) = out.get_mut(p.switch) {
             frame.rise = Some(p.rise_h * height);
         }
-        if let Some((s, b)) = step_gap(p) {
-            let start = s.saturating_sub(SUPPORT_BLEND_FRAMES + 1);
+        if let Some((start, b)) = eased_gap(p) {
             for frame in out.iter_mut().take(b).skip(start) {
                 frame.gap = true;
             }
@@ -1164,22 +1154,25 @@ fn planned_frames(transfers: &[transfer::Transfer], height: f64, frames: usize) 
     out
 }
 
-/// A transfer's gap `(switch, landing)` when it steps onto another surface ([`STEP_H`]); on the
-/// same one the hips pass from foot to foot where the feet put them, as they always did.
-fn step_gap(p: &transfer::Transfer) -> Option<(usize, usize)> {
-    p.gap().filter(|_| p.rise_h.abs() >= STEP_H)
+/// The frames a transfer's gap eases the hips over, `(start, landing)`, when it steps onto
+/// another surface ([`STEP_H`]): from the last frame before the path's weights start passing
+/// (±[`SUPPORT_BLEND_FRAMES`] around the switch) to the landing. On the same surface the hips
+/// pass from foot to foot where the feet put them, as they always did.
+fn eased_gap(p: &transfer::Transfer) -> Option<(usize, usize)> {
+    p.gap()
+        .filter(|_| p.rise_h.abs() >= STEP_H)
+        .map(|(s, b)| (s.saturating_sub(SUPPORT_BLEND_FRAMES + 1), b))
 }
 
-/// Across each step's gap `(s, b)` ([`transfer::Found::Gap`]) the hips pass from the old foot's
-/// surface to the new one's at the switch, in one frame; seen whole, they follow a cubic from the
-/// last frame before the weights start passing to the landing, meeting the path's heights and
+/// Across each step's gap ([`transfer::Found::Gap`], eased over `(g, b)`: [`eased_gap`]) the hips
+/// pass from the old foot's surface to the new one's at the switch, in one frame; seen whole, they
+/// follow a cubic from `g` to the landing `b`, meeting the path's heights and
 /// vertical velocities at both ends (a step down is a fall eased by the legs, not a drop). Gaps
 /// with a frame in the air, or starting within the one before, are left alone.
 fn smooth_gaps(all: &mut [RootFrame], gaps: &[(usize, usize)], dt: f64) {
     // Frames before this were eased already: a gap that starts among them is left alone.
     let mut eased = 0;
-    for &(s, b) in gaps {
-        let g = s.saturating_sub(SUPPORT_BLEND_FRAMES + 1);
+    for &(g, b) in gaps {
         if g == 0
             || g <= eased
             || b + 1 >= all.len()

@@ -127,42 +127,38 @@ pub fn plan(
             .saturating_add(window)
             .min(next.map_or(n, |q| q - 1))
             .min(n.saturating_sub(peak + 1));
+        // How much higher `to` stands than `from` relative to the hips at `t`.
+        let step_at = |t: usize| low_h[t][to] - low_h[t][from];
         let instant = Transfer {
             switch: s,
             from,
             to,
-            rise_h: low_h[s][to] - low_h[s][from],
+            rise_h: step_at(s),
             found: Found::Landed(s),
         };
         if hi <= lo {
             out.push(instant);
             continue;
         }
-        let found = double_support(cues, (from, to), s, (lo, hi), [prev, next])
-            .or_else(|| landing(low_h, to, s, (lo, hi), peak))
-            .filter(|found| match *found {
-                Found::Gap(b) => {
-                    let (v_s, v_b) = gap_velocities(low_h, from, to, s, b, dt);
-                    let parted = (low_h[b][to] - low_h[b][from]) - (low_h[s][to] - low_h[s][from]);
-                    parted.abs() >= PART_H
-                        && ((v_b - v_s) / ((b - s) as f64 * dt)).abs() <= EASED_G * gravity_h_s2
-                }
-                _ => true,
-            })
-            .unwrap_or(Found::Landed(s));
-        let rise_h = match found {
+        // The step each way of finding it reads; none for a gap that is no eased fall.
+        let read = |found: Found| match found {
             Found::DoubleSupport(start, end) => {
-                (start..=end)
-                    .map(|t| low_h[t][to] - low_h[t][from])
-                    .sum::<f64>()
-                    / (end - start + 1) as f64
+                Some((start..=end).map(step_at).sum::<f64>() / (end - start + 1) as f64)
             }
-            Found::Landed(b) => low_h[b][to] - low_h[b][from],
+            Found::Landed(b) => Some(step_at(b)),
             Found::Gap(b) => {
                 let (v_s, v_b) = gap_velocities(low_h, from, to, s, b, dt);
-                low_h[b][to] - low_h[s][from] + (b - s) as f64 * dt * (v_s + v_b) / 2.0
+                let span = (b - s) as f64 * dt;
+                let eased = ((v_b - v_s) / span).abs() <= EASED_G * gravity_h_s2;
+                let parted = step_at(b) - step_at(s);
+                (eased && parted.abs() >= PART_H)
+                    .then(|| low_h[b][to] - low_h[s][from] + span * (v_s + v_b) / 2.0)
             }
         };
+        let (found, rise_h) = double_support(cues, (from, to), s, (lo, hi), [prev, next])
+            .or_else(|| landing(low_h, to, s, (lo, hi), peak))
+            .and_then(|found| read(found).map(|rise| (found, rise)))
+            .unwrap_or((Found::Landed(s), instant.rise_h));
         out.push(Transfer {
             rise_h,
             found,
