@@ -1228,18 +1228,9 @@ fn a_real_lower_body_take_stays_on_the_floor() {
         &std::fs::read(out.join("xio_lower_body_7imu.imubake.json")).unwrap(),
     )
     .unwrap();
-    let (left, right) = (
-        interval_flags(&sidecar, "left", p.lowest.len()),
-        interval_flags(&sidecar, "right", p.lowest.len()),
-    );
-    let planted: Vec<bool> = left.iter().zip(&right).map(|(l, r)| *l || *r).collect();
-    let worst = p
-        .lowest
-        .iter()
-        .zip(&planted)
-        .filter(|(_, planted)| **planted)
-        .map(|(y, _)| ((y - p.rest_lowest) / p.height).abs())
-        .fold(0.0, f64::max);
+    let planted = planted_heights(&p, &sidecar);
+    let worst = planted.iter().fold(0.0f64, |m, y| m.max(y.abs()));
+    let frames = p.lowest.len();
     let hips = &p.joints["Hips"];
     let path: f64 = hips
         .windows(2)
@@ -1251,14 +1242,27 @@ fn a_real_lower_body_take_stays_on_the_floor() {
         .map(|q| (horizontal(q) - horizontal(&hips[0])).norm() / p.height)
         .fold(0.0, f64::max);
     eprintln!(
-        "x-IMU3 lower body: {} of {} frames planted, worst {worst:.4} h off the floor; hips walked {path:.2} h, \
-         at most {reach:.2} h from the start",
-        planted.iter().filter(|p| **p).count(),
+        "x-IMU3 lower body: {} of {frames} frames planted, worst {worst:.4} h off the floor; hips \
+         walked {path:.2} h, at most {reach:.2} h from the start",
         planted.len()
     );
-    assert!(planted.iter().filter(|p| **p).count() > planted.len() / 2);
+    assert!(planted.len() > frames / 2);
     assert!(worst <= 0.02, "{worst:.4} h off the floor while planted");
     assert!(reach > 0.3, "the body stayed in place ({reach:.2} h)");
+}
+
+/// The lowest point's height above the rest pose's floor (h) on each frame the sidecar has a
+/// foot planted (its `left` or `right` contacts).
+fn planted_heights(p: &Positions, sidecar: &Value) -> Vec<f64> {
+    let frames = p.lowest.len();
+    let (left, right) = (
+        interval_flags(sidecar, "left", frames),
+        interval_flags(sidecar, "right", frames),
+    );
+    (0..frames)
+        .filter(|&k| left[k] || right[k])
+        .map(|k| (p.lowest[k] - p.rest_lowest) / p.height)
+        .collect()
 }
 
 /// The bundled walk, with default settings, on the bundled rig (of other proportions than the
@@ -1280,14 +1284,7 @@ fn the_bundled_walk_stays_on_its_floor() {
         let sidecar: Value =
             serde_json::from_slice(&std::fs::read(out.join("walk.imubake.json")).unwrap()).unwrap();
         let frames = p.lowest.len();
-        let (left, right) = (
-            interval_flags(&sidecar, "left", frames),
-            interval_flags(&sidecar, "right", frames),
-        );
-        let planted: Vec<f64> = (0..frames)
-            .filter(|&k| left[k] || right[k])
-            .map(|k| (p.lowest[k] - p.rest_lowest) / p.height)
-            .collect();
+        let planted = planted_heights(&p, &sidecar);
         let worst = planted.iter().fold(0.0f64, |m, y| m.max(y.abs()));
         let quarter = planted.len() / 4;
         let mean = |ys: &[f64]| ys.iter().sum::<f64>() / ys.len() as f64;
