@@ -133,7 +133,7 @@ fn closed_loop_on(
 }
 
 /// [`closed_loop_on`] on a skeleton whose hips and feet are `names` (read under CMU's names), the
-/// sensors' noise drawn from seed 3 (or `IMUBAKE_TEST_SEED`'s, to measure on other draws).
+/// sensors' noise drawn from [`test_seed`].
 fn closed_loop_named(
     bvh: &Path,
     mapping: &str,
@@ -141,8 +141,13 @@ fn closed_loop_named(
     convert_args: &[&str],
     names: [&str; 3],
 ) -> Option<Take> {
-    let seed = std::env::var("IMUBAKE_TEST_SEED").map_or(3, |s| s.parse().unwrap());
-    closed_loop_seeded(bvh, mapping, frames, convert_args, names, seed)
+    closed_loop_seeded(bvh, mapping, frames, convert_args, names, test_seed())
+}
+
+/// The seed the simulated sensors' noise is drawn from: 3, or `IMUBAKE_TEST_SEED`'s, to measure
+/// the same takes on other draws.
+fn test_seed() -> u64 {
+    std::env::var("IMUBAKE_TEST_SEED").map_or(3, |s| s.parse().unwrap())
 }
 
 /// [`closed_loop_named`] with the noise drawn from `seed`.
@@ -862,8 +867,11 @@ fn steps_down_and_up_are_read_where_the_feet_stand() {
 /// ≤ 0.006 h per contact; on flat ground the stance feet's drift ≤ 0.01 h (`ground_scores`); from
 /// raw readings (`simulate --raw`: fused, with the feet's zero-velocity cue) on the pymo walk, CMU
 /// 01_01 and 03_02, contacts at least as good as from orientations alone.
-/// Printed (`cargo test --test motion -- --ignored changing_ground --nocapture`); ignored until
-/// issue 50 makes it pass.
+/// Printed (`cargo test --test motion -- --ignored changing_ground --nocapture`, on other noise
+/// draws with `IMUBAKE_TEST_SEED`); ignored until issue 50 makes it pass. Seeds 3–7 (2026-12-07):
+/// 03_02's hips height 0.0175–0.0329 h RMS (within 0.02 h on seeds 3, 5 and 7 only: a step down's
+/// gap read short on seed 6); the pymo walk's precision from raw readings under that from
+/// orientations on four seeds of five (0.921–0.931 against 0.923–0.939; recall 0.945–0.950 against 0.939–0.952).
 #[test]
 #[ignore = "issue 50: root motion on changing ground does not meet the targets yet"]
 fn changing_ground_keeps_each_foot_on_its_own() {
@@ -955,7 +963,8 @@ fn changing_ground_keeps_each_foot_on_its_own() {
         let bvh = shared(file).unwrap();
         let args = ["--root", "feet"];
         let [orientations, raw] = [&[][..], &["--raw"][..]].map(|sim| {
-            let take = closed_loop_simulated(&bvh, mapping, frames, &args, names, 3, sim).unwrap();
+            let take = closed_loop_simulated(&bvh, mapping, frames, &args, names, test_seed(), sim)
+                .unwrap();
             contact_scores(&take)
         });
         eprintln!(
