@@ -26,6 +26,8 @@
 //!   A whole take decides the weights over all its frames instead ([`support`]: the foot whose
 //!   stillness implies the steadiest hips, a Viterbi path), since those scores read the hips'
 //!   recent velocity, which follows whichever foot they chose, and so can lock onto a sliding one.
+//!   Where the followed foot slid all the same, the hips' velocity leaves its course faster than
+//!   friction allows and comes back: a whole take bridges it ([`slide`]).
 //!   Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3 samples), which
 //!   seldom holds on real walks. Where the take has a foot sensor's raw readings, that sensor's
 //!   own zero-velocity test ([`zupt`], SHOE) also reports the foot planted. A foot's points are
@@ -52,6 +54,7 @@
 //! incremental core ([`RootCore`]): a frame's local rotations in, its root position and foot
 //! contacts out, for a whole take and a stream alike.
 
+pub mod slide;
 pub mod support;
 pub mod transfer;
 pub mod zupt;
@@ -953,6 +956,8 @@ pub fn root_positions(
         let bounds = (LANDING_SLACK_H * h, FLIGHT_H * h, STEP_H * h);
         refit_flights(&mut all, &low, core.dt, core.gravity_h_s2() * h, bounds);
         smooth_gaps(&mut all, &gaps, core.dt);
+        let weights = left_weights.as_deref().unwrap_or_default();
+        bridge_slides(&mut all, weights, core.dt, core.gravity_h_s2() * h, h);
     }
     RootMotion {
         positions: all.iter().map(|f| f.position).collect(),
@@ -962,6 +967,32 @@ pub fn root_positions(
         } else {
             Vec::new()
         },
+    }
+}
+
+/// A whole take's hips bridged across the slides of the feet they followed ([`slide`]). The
+/// feet's slips over the ground move by as much as the hips' steps changed, and a foot reported
+/// planted that now moves over the ground faster than [`PLANT_SPEED_H_S`] is planted no longer.
+fn bridge_slides(all: &mut [RootFrame], left_weight: &[f64], dt: f64, gravity: f64, height: f64) {
+    let before: Vec<Vector3<f64>> = all.iter().map(|f| f.position).collect();
+    let airborne: Vec<bool> = all.iter().map(|f| f.airborne).collect();
+    let mut hips = before.clone();
+    let windows = slide::bridge(&mut hips, &airborne, left_weight, dt, gravity);
+    for w in windows {
+        // The step after the window too: a smoothed one ends there.
+        for t in w.first..=(w.last + 1).min(all.len() - 1) {
+            let d = (hips[t] - hips[t - 1]) - (before[t] - before[t - 1]);
+            let frame = &mut all[t];
+            for f in 0..2 {
+                frame.slip[f] += Vector3::new(d.x, 0.0, d.z);
+                if !w.one_foot && frame.slip[f].norm() / dt > PLANT_SPEED_H_S * height {
+                    frame.contact[f] = false;
+                }
+            }
+        }
+    }
+    for (frame, p) in all.iter_mut().zip(hips) {
+        frame.position = p;
     }
 }
 
