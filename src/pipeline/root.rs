@@ -957,7 +957,7 @@ pub fn root_positions(
         refit_flights(&mut all, &low, core.dt, core.gravity_h_s2() * h, bounds);
         smooth_gaps(&mut all, &gaps, core.dt);
         let weights = left_weights.as_deref().unwrap_or_default();
-        bridge_slides(&mut all, weights, core.dt, core.gravity_h_s2() * h, h);
+        bridge_slides(&mut all, weights, core.dt, core.gravity_h_s2() * h);
     }
     RootMotion {
         positions: all.iter().map(|f| f.position).collect(),
@@ -971,9 +971,9 @@ pub fn root_positions(
 }
 
 /// A whole take's hips bridged across the slides of the feet they followed ([`slide`]). The
-/// feet's slips over the ground move by as much as the hips' steps changed, and a foot reported
-/// planted that now moves over the ground faster than [`PLANT_SPEED_H_S`] is planted no longer.
-fn bridge_slides(all: &mut [RootFrame], left_weight: &[f64], dt: f64, gravity: f64, height: f64) {
+/// feet's slips over the ground move by as much as the hips' steps changed, so that the foot lock
+/// ([`super::foot_lock`]) holds a planted foot where it stood; the contacts stay as reported.
+fn bridge_slides(all: &mut [RootFrame], left_weight: &[f64], dt: f64, gravity: f64) {
     let before: Vec<Vector3<f64>> = all.iter().map(|f| f.position).collect();
     let airborne: Vec<bool> = all.iter().map(|f| f.airborne).collect();
     let mut hips = before.clone();
@@ -983,11 +983,8 @@ fn bridge_slides(all: &mut [RootFrame], left_weight: &[f64], dt: f64, gravity: f
         for t in w.first..=(w.last + 1).min(all.len() - 1) {
             let d = (hips[t] - hips[t - 1]) - (before[t] - before[t - 1]);
             let frame = &mut all[t];
-            for f in 0..2 {
-                frame.slip[f] += Vector3::new(d.x, 0.0, d.z);
-                if !w.one_foot && frame.slip[f].norm() / dt > PLANT_SPEED_H_S * height {
-                    frame.contact[f] = false;
-                }
+            for slip in &mut frame.slip {
+                *slip += Vector3::new(d.x, 0.0, d.z);
             }
         }
     }

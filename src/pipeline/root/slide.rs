@@ -12,7 +12,8 @@
 //! motion.
 //!
 //! With `v(t)` the hips' horizontal velocity (a frame's step over `dt`) and `v̄(t)` its mean over
-//! [`SMOOTH_S`] around `t`, the smoothed acceleration is `a(t) = |v̄(t+1) − v̄(t−1)| / 2dt`. Each
+//! the `2k + 1` frames around `t`, `k = ⌊round(SMOOTH_S / dt) / 2⌋ ≥ 1` (7 frames at 60 fps, 3 at
+//! 30: about [`SMOOTH_S`]), the smoothed acceleration is `a(t) = |v̄(t+1) − v̄(t−1)| / 2dt`. Each
 //! frame on the feet with `a > SLIDE_ACCEL_G·g` starts a window, which grows over the frames on
 //! either side while `a > RELEASE_G·g`, then by half the smoothing on each side; overlapping
 //! windows merge. A window `[i, j]` is left alone when a frame of it or next to it is in the air
@@ -41,7 +42,7 @@ use nalgebra::Vector3;
 pub const SLIDE_ACCEL_G: f64 = 1.5;
 /// … which spreads over the frames around it still accelerating beyond this, × g.
 pub const RELEASE_G: f64 = 0.5;
-/// The velocity is smoothed over this long, s (centred).
+/// The velocity is smoothed over about this long, s (centred, an odd number of frames).
 pub const SMOOTH_S: f64 = 0.1;
 /// A window whose velocities before and after differ by more than this fraction of its excursion
 /// is a change of pace, not a slide.
@@ -72,7 +73,7 @@ pub fn bridge(
     gravity: f64,
 ) -> Vec<Bridged> {
     let n = hips.len().min(airborne.len()).min(left_weight.len());
-    let half = ((SMOOTH_S / (2.0 * dt)).round() as usize).max(1);
+    let half = ((SMOOTH_S / dt).round() as usize / 2).max(1);
     if n < 2 * half + 3 || dt <= 0.0 || gravity <= 0.0 {
         return Vec::new();
     }
@@ -132,9 +133,7 @@ pub fn bridge(
         if (v1 - v0).norm() > RETURN * excursion {
             continue;
         }
-        let one_foot = left_weight[i - 1..=j + 1]
-            .iter()
-            .all(|&w| w == left_weight[i]);
+        let one_foot = left_weight[i..=j].iter().all(|&w| w == left_weight[i]);
         if one_foot {
             // One foot carried throughout: the displacement is its, the path across smoothed.
             let (a, b) = (i - 1, j + 1);
