@@ -6,8 +6,8 @@
 //! they close, a foot stepping down off a block drags — the hips take the slide as their own
 //! motion, backwards: their velocity leaves its course and comes back within a few tenths of a
 //! second. The ground pushes the body horizontally by friction alone, `|a_h| ≤ μ (g + a_y)`:
-//! smoothed as below, a walk's or a run's hips accelerate at a few tenths of g, and the hardest in issue
-//! 49's sources (CMU 01_01's hop landings) at under 1.5 g. So a transient beyond
+//! smoothed as below, a walk's or a run's hips accelerate at a few tenths of g, and the hardest
+//! in issue 49's sources (CMU 01_01's hop landings) at under 1.5 g. So a transient beyond
 //! [`SLIDE_ACCEL_G`] g that returns to where it left is a followed foot's slide, not the body's
 //! motion.
 //!
@@ -15,7 +15,7 @@
 //! the `2k + 1` frames around `t`, `k = ⌊round(SMOOTH_S / dt) / 2⌋ ≥ 1` (7 frames at 60 fps, 3 at
 //! 30: about [`SMOOTH_S`]), the smoothed acceleration is `a(t) = |v̄(t+1) − v̄(t−1)| / 2dt`. Each
 //! frame on the feet with `a > SLIDE_ACCEL_G·g` starts a window, which grows over the frames on
-//! either side while `a > RELEASE_G·g`, then by half the smoothing on each side; overlapping
+//! either side while `a > RELEASE_G·g`, then by `k` frames on each side; overlapping
 //! windows merge. A window `[i, j]` is left alone when a frame of it or next to it is in the air
 //! (a flight's), when it lasts longer than [`LONGEST_S`], or when its velocities before and after
 //! (`v₀ = v̄(i−1)`, `v₁ = v̄(j+1)`) differ by more than [`RETURN`] times its excursion — the
@@ -31,10 +31,10 @@
 //!   displacement `H(j+1) − H(i−1)` is kept and the path between follows the cubic Hermite curve
 //!   meeting `H` and `v̄` at `i − 1` and `j + 1`.
 //!
-//! Measured on issue 49's sideways gallop (CMU 06_08) and issue 50's terrain (CMU 03_01–03_04),
-//! `every_gait_walks_without_sliding` and `changing_ground_keeps_each_foot_on_its_own` print the
-//! paths; no window opens on the other gaits there. A stream cannot wait for a slide's end and
-//! keeps its path.
+//! Measured on issue 49's sideways gallop (CMU 06_08:
+//! `a_sideways_gallop_is_bridged_across_its_slides`) and issue 50's terrain (CMU 03_01–03_04), `every_gait_walks_without_sliding` and
+//! `changing_ground_keeps_each_foot_on_its_own` print the paths; at 60 fps no window opens on
+//! the other gaits there. A stream cannot wait for a slide's end and keeps its path.
 
 use nalgebra::Vector3;
 
@@ -118,7 +118,7 @@ pub fn bridge(
         }
         t = j + 1;
     }
-    // Each frame's horizontal step, the bridged windows' replaced by the line's.
+    // Each frame's horizontal step, the bridged windows' replaced by the line's or the curve's.
     let mut bridged = Vec::new();
     let mut step: Vec<Vector3<f64>> = v.iter().map(|v| v * dt).collect();
     for [i, j] in windows {
@@ -274,7 +274,10 @@ mod tests {
         /// every window within the take, at most [`LONGEST_S`] long and on the feet.
         #[test]
         fn bridging_changes_only_what_it_says(
-            raw in prop::collection::vec((-3.0f64..3.0, -1.0f64..1.0, any::<bool>(), 0u8..3), 0..120),
+            raw in prop::collection::vec(
+                (-3.0f64..3.0, -1.0f64..1.0, any::<bool>(), 0u8..3),
+                0..120,
+            ),
         ) {
             let mut x = 0.0;
             let mut hips = Vec::new();
