@@ -32,10 +32,12 @@
 //!   meeting `H` and `v̄` at `i − 1` and `j + 1`.
 //!
 //! Measured on issue 49's sideways gallop (CMU 06_08:
-//! `a_sideways_gallop_is_bridged_across_its_slides`) and issue 50's terrain (CMU 03_01–03_04), `every_gait_walks_without_sliding` and
-//! `changing_ground_keeps_each_foot_on_its_own` print the paths; at 60 fps no window opens on
-//! the other gaits there. A stream cannot wait for a slide's end and keeps its path.
+//! `a_sideways_gallop_is_bridged_across_its_slides`) and issue 50's terrain (CMU 03_01–03_04):
+//! `every_gait_walks_without_sliding` and `changing_ground_keeps_each_foot_on_its_own` print the
+//! paths; at 60 fps no window opens on the other gaits there. A stream cannot wait for a slide's
+//! end and keeps its path.
 
+use super::transfer::hermite;
 use nalgebra::Vector3;
 
 /// A smoothed horizontal acceleration of the hips beyond this, × g, starts a window.
@@ -78,10 +80,10 @@ pub fn bridge(
         return Vec::new();
     }
     let flat = |v: Vector3<f64>| Vector3::new(v.x, 0.0, v.z);
-    let mut v: Vec<Vector3<f64>> = (0..n)
+    // The first frame has no step of its own: it takes the second's.
+    let v: Vec<Vector3<f64>> = (0..n)
         .map(|t| flat(hips[t.max(1)] - hips[t.max(1) - 1]) / dt)
         .collect();
-    v[0] = v[1];
     let smooth: Vec<Vector3<f64>> = (0..n)
         .map(|t| {
             let (a, b) = (t.saturating_sub(half), (t + half).min(n - 1));
@@ -139,15 +141,11 @@ pub fn bridge(
             let (a, b) = (i - 1, j + 1);
             let span = (b - a) as f64 * dt;
             let (p0, p1) = (flat(hips[a]), flat(hips[b]));
-            let (m0, m1) = (v0 * span, v1 * span);
             let mut at = p0;
             for (t, s) in step.iter_mut().enumerate().take(j + 1).skip(i) {
-                let u = (t - a) as f64 / (b - a) as f64;
-                let (u2, u3) = (u * u, u * u * u);
-                let p = p0 * (2.0 * u3 - 3.0 * u2 + 1.0)
-                    + m0 * (u3 - 2.0 * u2 + u)
-                    + p1 * (3.0 * u2 - 2.0 * u3)
-                    + m1 * (u3 - u2);
+                let tau = (t - a) as f64 / (b - a) as f64;
+                let axis = |k: usize| hermite(p0[k], v0[k], p1[k], v1[k], span, tau);
+                let p = Vector3::new(axis(0), 0.0, axis(2));
                 *s = p - at;
                 at = p;
             }

@@ -253,8 +253,9 @@ fn landing(
         })
 }
 
-/// A height over a gap: the cubic in `τ ∈ [0, 1]` from `y0` at velocity `v0` to `y1` at `v1`
-/// over `span` seconds (Hermite).
+/// A coordinate over a span (a height over a gap; one horizontal axis across a slide,
+/// [`super::slide`]): the cubic in `τ ∈ [0, 1]` from `y0` at velocity `v0` to `y1` at `v1` over
+/// `span` seconds (Hermite).
 pub fn hermite(y0: f64, v0: f64, y1: f64, v1: f64, span: f64, tau: f64) -> f64 {
     let (t2, t3) = (tau * tau, tau * tau * tau);
     (2.0 * t3 - 3.0 * t2 + 1.0) * y0
