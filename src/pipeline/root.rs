@@ -906,7 +906,7 @@ pub fn root_positions(
         .into_par_iter()
         .map(|start| measure_frames(&core, local, start..(start + block).min(frames)))
         .collect();
-    let (mut planned, mut gaps) = (Vec::new(), Vec::new());
+    let (mut planned, mut gaps, mut feet_low) = (Vec::new(), Vec::new(), Vec::new());
     let left_weights = (core.mode() == RootMode::Feet).then(|| {
         let (cues, low_h) = support_cues(&measured, core.dt, core.height);
         let mut path = support::decode(&cues, core.dt, core.gravity_h_s2());
@@ -914,6 +914,7 @@ pub fn root_positions(
         let transfers = transfer::plan(&low_h, &cues, &path, core.dt, core.gravity_h_s2());
         planned = planned_frames(&transfers, core.height, frames);
         gaps = transfers.iter().filter_map(eased_gap).collect();
+        feet_low = low_h;
         support::left_weights(&path, SUPPORT_BLEND_FRAMES)
     });
     let mut all: Vec<RootFrame> = Vec::with_capacity(frames);
@@ -954,7 +955,14 @@ pub fn root_positions(
             .collect();
         let h = core.height;
         let bounds = (LANDING_SLACK_H * h, FLIGHT_H * h, STEP_H * h);
-        refit_flights(&mut all, &low, core.dt, core.gravity_h_s2() * h, bounds);
+        refit_flights(
+            &mut all,
+            &low,
+            &feet_low,
+            core.dt,
+            core.gravity_h_s2() * h,
+            bounds,
+        );
         smooth_gaps(&mut all, &gaps, core.dt);
         let weights = left_weights.as_deref().unwrap_or_default();
         bridge_slides(&mut all, weights, core.dt, core.gravity_h_s2() * h);
@@ -1015,16 +1023,43 @@ pub const MAX_FLIGHT_S: f64 = 1.0;
 /// skimming the ground, not a flight: the early landings' continuations rise about 0.02 h).
 /// Horizontally the flight keeps the core's mean velocity. Frames the core had on its feet
 /// before `b` join the flight (a false landing, and the false flight that followed it); frames it
-/// had in the air from `b` on stand on the feet; the frames after move with the landing, so the
-/// path goes on without a jump. A stream, which has sent its frames, keeps the core's flights.
+/// had in the air from `b` on stand on the feet — the lower foot, planted, carries the hips
+/// horizontally too, by minus its motion relative to them (`feet_low`: each foot's lowest point
+/// relative to the hips, h; carried on at the flight's velocity, the landed feet slid: CMU 01_01
+/// played backwards, skate 0.0086 → 0.0005 h) — and the frames after move with the landing, so
+/// the path goes on without a jump. A stream, which has sent its frames, keeps the core's
+/// flights.
 fn refit_flights(
     all: &mut [RootFrame],
     low: &[f64],
+    feet_low: &[[f64; 2]],
     dt: f64,
     gravity: f64,
     (slack, clear, step): (f64, f64, f64),
 ) {
     let n = all.len();
+    let flights = intervals(all.iter().map(|f| f.airborne));
+    if flights.is_empty() {
+        return;
+    }
+    // Where the lower foot would move the hips horizontally each frame, were it planted: minus
+    // its motion relative to them, which is its slip over the ground less the hips' own step
+    // (`RootCore::push`); a frame the core had in the air has one too. Without the feet's
+    // heights, both feet's mean.
+    let feet_step: Vec<Vector3<f64>> = (0..n)
+        .map(|k| {
+            let hips = if k == 0 {
+                Vector3::zeros()
+            } else {
+                all[k].position - all[k - 1].position
+            };
+            let relative = |f: usize| all[k].slip[f] - Vector3::new(hips.x, 0.0, hips.z);
+            match feet_low.get(k) {
+                Some(low) => -relative(usize::from(low[1] < low[0])),
+                None => -(relative(0) + relative(1)) / 2.0,
+            }
+        })
+        .collect();
     let max = (MAX_FLIGHT_S / dt).round() as usize;
     // Frames before `next` have `shift` applied (a landing moved everything after it).
     let mut shift = Vector3::zeros();
@@ -1035,7 +1070,6 @@ fn refit_flights(
             *next += 1;
         }
     };
-    let flights = intervals(all.iter().map(|f| f.airborne));
     let mut covered = 0; // frames before this were refitted already
     for [start, end] in flights {
         if start < covered.max(3) || end + 3 >= n {
@@ -1090,26 +1124,31 @@ fn refit_flights(
             continue;
         }
         settle(all, &mut next, shift, m);
-        // Horizontally the core's flight, on average.
+        // Horizontally the core's flight, on average, until the landing; from there the feet.
         let carried = (all[end].position - all[a].position) / (end - a) as f64;
         let from = all[a].position;
-        for (k, frame) in all.iter_mut().enumerate().take(m).skip(a + 1) {
+        for k in a + 1..m {
             let t = (k - a) as f64 * dt;
-            frame.position.x = from.x + carried.x * (k - a) as f64;
-            frame.position.z = from.z + carried.z * (k - a) as f64;
+            let previous = all[k - 1].position;
+            let frame = &mut all[k];
             if k < b {
+                frame.position.x = from.x + carried.x * (k - a) as f64;
+                frame.position.z = from.z + carried.z * (k - a) as f64;
                 frame.position.y = from.y + v0 * t - gravity * t * t / 2.0;
                 frame.airborne = true;
                 frame.contact = [false; 2];
             } else {
+                frame.position.x = previous.x + feet_step[k].x;
+                frame.position.z = previous.z + feet_step[k].z;
                 frame.position.y = level - low[k];
                 frame.airborne = false;
             }
         }
+        let before_landing = all[m - 1].position;
         let landing = Vector3::new(
-            from.x + carried.x * (m - a) as f64,
+            before_landing.x + feet_step[m].x,
             all[m].position.y,
-            from.z + carried.z * (m - a) as f64,
+            before_landing.z + feet_step[m].z,
         );
         // The frames from m move with the landing: those settled already by this much, the
         // rest by the whole shift when they are.
@@ -1372,7 +1411,7 @@ mod tests {
                 }
             })
             .collect();
-        refit_flights(&mut all, &low, dt, g, (0.01, 0.03, 0.06));
+        refit_flights(&mut all, &low, &[], dt, g, (0.01, 0.03, 0.06));
         for (k, f) in all.iter().enumerate() {
             let air = k > a && k < a + flight;
             assert_eq!(f.airborne, air, "{k}");
@@ -1381,6 +1420,91 @@ mod tests {
                 "{k}: {} vs {}",
                 f.position.y,
                 truth(k)
+            );
+        }
+    }
+
+    /// The same hop (by hand), moving forwards at 1 unit/s, by a core that launched it too fast
+    /// and landed it 3 frames late (frame 35, not 32). The refit lands it at 32; over frames
+    /// 32–34, which the core had in the air at 1 unit/s, the lower foot (the left) is planted and
+    /// moves back relative to the hips at 0.5 units/s while the right swings forward at 2: the
+    /// hips go on at 0.5 units/s, as they do from frame 35 on the feet, without a jump.
+    #[test]
+    fn a_flight_landed_early_by_the_refit_stands_on_the_lower_foot() {
+        let (dt, g, a, n) = (1.0 / 60.0, 10.0, 20usize, 60usize);
+        let (b, m) = (a + 12, a + 15); // the true landing, the core's
+        let truth = |k: usize| -> f64 {
+            let t = (k as f64 - a as f64) * dt;
+            if k <= a {
+                1.0 + t
+            } else if k < b {
+                1.0 + t - g * t * t / 2.0
+            } else {
+                1.0 - (t - (b - a) as f64 * dt)
+            }
+        };
+        let low: Vec<f64> = (0..n)
+            .map(|k| if k > a && k < b { -truth(a) } else { -truth(k) })
+            .collect();
+        // The core's horizontal path: still before the take-off, 1 unit/s in its flight, 0.5
+        // on the feet after.
+        let x_core = |k: usize| -> f64 {
+            if k <= a {
+                0.0
+            } else if k < m {
+                (k - a) as f64 * dt
+            } else {
+                (m - 1 - a) as f64 * dt + (k - m + 1) as f64 * 0.5 * dt
+            }
+        };
+        let mut all: Vec<RootFrame> = (0..n)
+            .map(|k| {
+                let airborne = k > a && k < m;
+                let y = if airborne {
+                    let t = (k - a) as f64 * dt;
+                    truth(a) + 1.4 * t - g * t * t / 2.0
+                } else {
+                    -low[k]
+                };
+                let step = if k == 0 {
+                    0.0
+                } else {
+                    x_core(k) - x_core(k - 1)
+                };
+                // Each foot's slip: the hips' step plus its motion relative to them; the left
+                // moves back 0.5 units/s relative to the hips from the landing on, the right
+                // forward 2.
+                let relative = if k >= b {
+                    [-0.5 * dt, 2.0 * dt]
+                } else {
+                    [0.0; 2]
+                };
+                RootFrame {
+                    position: Vector3::new(x_core(k), y, 0.0),
+                    contact: [!airborne; 2],
+                    airborne,
+                    slip: relative.map(|r| Vector3::new(step + r, 0.0, 0.0)),
+                }
+            })
+            .collect();
+        let feet_low = vec![[-0.5, -0.4]; n]; // the left foot lower
+        refit_flights(&mut all, &low, &feet_low, dt, g, (0.01, 0.03, 0.06));
+        for (k, f) in all.iter().enumerate() {
+            assert_eq!(f.airborne, k > a && k < b, "{k}");
+            assert!(
+                (f.position.y - truth(k)).abs() < 1e-9,
+                "{k}: y {}",
+                f.position.y
+            );
+            let x = if k < b {
+                x_core(k)
+            } else {
+                (b - 1 - a) as f64 * dt + (k - b + 1) as f64 * 0.5 * dt
+            };
+            assert!(
+                (f.position.x - x).abs() < 1e-12,
+                "{k}: x {} vs {x}",
+                f.position.x
             );
         }
     }
@@ -1599,8 +1723,20 @@ mod tests {
                 let second = (positions[i + 1] - 2.0 * positions[i] + positions[i - 1]) / h;
                 assert!((second.y + g * dt * dt).abs() < 1e-9, "{i}: {second}");
             }
-            for i in (0..start).chain(last + 1..frames.len()) {
+            for i in 0..start {
                 assert!((positions[i] - frames[i].position).norm() < 1e-12, "{i}");
+            }
+            // From its landing the feet carry the hips, a frame before the stream's: after it
+            // the frames move as the stream's did, at its heights, shifted along the ground by
+            // the feet's motion over that frame (the legs still folding: a little).
+            let offset = positions[last + 1] - frames[last + 1].position;
+            assert!(
+                offset.y.abs() < 1e-12 && offset.norm() < 0.01 * h,
+                "{offset} ({h})"
+            );
+            for i in last + 1..frames.len() {
+                let moved = positions[i] - frames[i].position;
+                assert!((moved - offset).norm() < 1e-12, "{i}: {moved} vs {offset}");
             }
         }
     }
