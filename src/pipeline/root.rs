@@ -1006,6 +1006,11 @@ fn bridge_slides(all: &mut [RootFrame], left_weight: &[f64], dt: f64, gravity: f
 pub const LANDING_SLACK_H: f64 = 0.01;
 /// A refitted flight lasts at most this long, s (a standing high jump's is about 0.6 s).
 pub const MAX_FLIGHT_S: f64 = 1.0;
+/// The feet's vertical velocities a flight's refit meets are taken over this long on each side,
+/// s: two frames at 60 fps, one at 30 or 24 (two frames at 30 fps average a push-off's fastest
+/// frame with a slower one: CMU 09_01 at 30 fps 1.67 → 1.08 %,
+/// `root_motion::a_run_at_30_fps_is_refitted_from_its_last_push`).
+pub const REFIT_VELOCITY_S: f64 = 1.0 / 30.0;
 
 /// A whole take's flights refitted between the frames on the feet that bound them. The core,
 /// going forwards, launches a flight at the velocity the feet gave the hips and lands it where a
@@ -1017,8 +1022,8 @@ pub const MAX_FLIGHT_S: f64 = 1.0;
 /// surface the core landed on, `l_b` the lowest point relative to the hips). The ground pushes
 /// with a finite force, so the hips' vertical velocity is continuous where the feet leave and
 /// reach it: `b` is the frame whose parabola best meets the feet's velocities on both sides —
-/// minimising `(v₀ − ẏ_a)² + (v₀ − gT − ẏ_b)²`, `ẏ_a` over the two frames before `a`, `ẏ_b`
-/// over the two after `b` (both from the feet) — among those whose lowest point stays above the
+/// minimising `(v₀ − ẏ_a)² + (v₀ − gT − ẏ_b)²`, `ẏ_a` over [`REFIT_VELOCITY_S`] before `a`,
+/// `ẏ_b` over as long after `b` (both from the feet) — among those whose lowest point stays above the
 /// surfaces ([`LANDING_SLACK_H`]) and rises [`FLIGHT_H`] above them at least (less is a foot
 /// skimming the ground, not a flight: the early landings' continuations rise about 0.02 h).
 /// Horizontally the flight keeps the core's mean velocity. Frames the core had on its feet
@@ -1061,6 +1066,8 @@ fn refit_flights(
         })
         .collect();
     let max = (MAX_FLIGHT_S / dt).round() as usize;
+    // The frames the feet's velocities are taken over on each side ([`REFIT_VELOCITY_S`]).
+    let across = ((REFIT_VELOCITY_S / dt).round() as usize).max(1);
     // Frames before `next` have `shift` applied (a landing moved everything after it).
     let mut shift = Vector3::zeros();
     let mut next = 0;
@@ -1078,7 +1085,7 @@ fn refit_flights(
         let (a, landed) = (start - 1, end + 1);
         settle(all, &mut next, shift, (a + max + 2).max(landed + 2));
         let ya = all[a].position.y;
-        let va = (ya - all[a - 2].position.y) / (2.0 * dt);
+        let va = (ya - all[a - across].position.y) / (across as f64 * dt);
         let take_off_level = ya + low[a];
         // On the surface the core landed on, so that the frames after go on from it, when that
         // is the one it left (within a step of it, [`STEP_H`]: a late landing's feet sink a
@@ -1094,7 +1101,7 @@ fn refit_flights(
             let span = (b - a) as f64 * dt;
             let yb = level - low[b];
             let v0 = (yb - ya) / span + gravity * span / 2.0;
-            let vb = (low[b] - low[b + 2]) / (2.0 * dt);
+            let vb = (low[b] - low[b + across]) / (across as f64 * dt);
             let cost = (v0 - va).powi(2) + (v0 - gravity * span - vb).powi(2);
             if best.is_some_and(|(c, _, _)| c <= cost) {
                 continue;
