@@ -638,6 +638,15 @@ fn in_centimetres(bvh: &Path, dir: &Path) -> PathBuf {
 /// Centimetres per CMU BVH unit.
 const CMU_CM_PER_UNIT: f64 = 2.54 / 0.45;
 
+/// `path` of the fetched CMU mirror (`CMU_MIRROR`) copied into `dir` as `name` at its true size
+/// ([`in_centimetres`]), or `None` where it was not fetched.
+fn fetched_in_centimetres(path: &str, dir: &Path, name: &str) -> Option<PathBuf> {
+    let bytes = common::mirror::fetched(CMU_MIRROR.0, CMU_MIRROR.1, path)?;
+    let file = dir.join(format!("{name}.bvh"));
+    std::fs::write(&file, bytes).unwrap();
+    Some(in_centimetres(&file, dir))
+}
+
 /// Issue 49's gaits: the pymo walk and the whole of CMU 01_01 (hops, turns), each also played
 /// backwards (`common::reverse`: frames in reverse order, a kinematically valid backwards gait),
 /// and the fetched runs, sideways walk and held-out walks and runs (`FETCHED_GAITS`; skipped
@@ -668,10 +677,7 @@ fn every_gait_walks_without_sliding() {
         takes.push((name.to_string(), bvh, mapping, skip, true));
     }
     for (i, (label, path)) in FETCHED_GAITS.iter().enumerate() {
-        if let Some(bytes) = common::mirror::fetched(CMU_MIRROR.0, CMU_MIRROR.1, path) {
-            let file = dir.path().join(format!("fetched{i}.bvh"));
-            std::fs::write(&file, bytes).unwrap();
-            let file = in_centimetres(&file, dir.path());
+        if let Some(file) = fetched_in_centimetres(path, dir.path(), &format!("fetched{i}")) {
             takes.push((label.to_string(), file, cmu, true, false));
         }
     }
@@ -1284,14 +1290,10 @@ fn runs_leave_the_ground_between_strides() {
 /// frames, as it was). Asserted: each within 1.5 %, their mean within 1.3 %.
 #[test]
 fn a_run_at_30_fps_is_refitted_from_its_last_push() {
-    let Some(bytes) = common::mirror::fetched(CMU_MIRROR.0, CMU_MIRROR.1, "data/09/09_01.bvh")
-    else {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(file) = fetched_in_centimetres("data/09/09_01.bvh", dir.path(), "run") else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("run.bvh");
-    std::fs::write(&file, bytes).unwrap();
-    let file = in_centimetres(&file, dir.path());
     let mut paths = Vec::new();
     for seed in [3, 4, 5] {
         let args = ["--root", "feet", "--foot-lock", "--fps", "30"];
@@ -1324,14 +1326,10 @@ fn cmu_path(file: &Path, args: &[&str], seed: u64) -> Option<(Take, f64, f64)> {
 /// target), skate within 0.006 h per contact.
 #[test]
 fn a_sideways_gallop_is_bridged_across_its_slides() {
-    let Some(bytes) = common::mirror::fetched(CMU_MIRROR.0, CMU_MIRROR.1, "data/06/06_08.bvh")
-    else {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(file) = fetched_in_centimetres("data/06/06_08.bvh", dir.path(), "gallop") else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("gallop.bvh");
-    std::fs::write(&file, bytes).unwrap();
-    let file = in_centimetres(&file, dir.path());
     let mut paths = Vec::new();
     for seed in [3, 4, 5] {
         let args = ["--root", "feet", "--foot-lock"];
