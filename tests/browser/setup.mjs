@@ -8,11 +8,16 @@
 //
 //   node tests/browser/setup.mjs URL TRUTH.json SHOT.png
 //
-// Output: {"console": [...], "failed": [...], "slots": [{"bone", "start_s", "lit", "seen_at_s"}],
+// URL `-`: the browser is started first, `ready` printed on a line of its own, and the URL read
+// from a line of stdin — the stream replays in real time from the server's start, and a
+// browser starting on a loaded machine can take longer than the stream's still lead-in.
+//
+// Output (after `ready`, when URL is `-`): {"console": [...], "failed": [...], "slots": [{"bone", "start_s", "lit", "seen_at_s"}],
 // "state": the page's last board, "message": the page's message after Save}.
 //   IMUBAKE_NODE_MODULES  node_modules holding playwright-core (scripts/test.sh installs it)
 //   IMUBAKE_CHROMIUM      the browser (default /usr/bin/chromium)
 import { createRequire } from "node:module";
+import { createInterface } from "node:readline";
 import { readFileSync } from "node:fs";
 import path from "node:path";
 
@@ -36,7 +41,15 @@ try {
   page.on("pageerror", (e) => out.console.push(`pageerror: ${e.message}`));
   page.on("requestfailed", (r) => out.failed.push(`${r.url()}: ${r.failure()?.errorText}`));
   page.on("response", (r) => { if (r.status() >= 400) out.failed.push(`${r.url()}: ${r.status()}`); });
-  await page.goto(url);
+  let target = url;
+  if (url === "-") {
+    process.stdout.write("ready\n");
+    const stdin = createInterface({ input: process.stdin });
+    target = (await stdin[Symbol.asyncIterator]().next()).value?.trim();
+    stdin.close();
+    if (!target) throw new Error("no URL on stdin");
+  }
+  await page.goto(target);
   const now = () => page.evaluate(() => window.imubakeSetup.state?.now_s ?? -1);
   // Stream time (seconds), polled: the board's latest sample.
   const until = async (t, limit_s = 120) => {

@@ -14,7 +14,8 @@ use imubake::intrinsics::SensorCalibration;
 use imubake::mapping::{MappingFile, load_mapping};
 use imubake::rig::subject::Subject;
 use serde_json::Value;
-use std::process::Command;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::process::{Command, Stdio};
 
 #[test]
 fn a_suit_is_set_up_in_the_browser_and_its_files_convert_a_take() {
@@ -31,6 +32,25 @@ fn a_suit_is_set_up_in_the_browser_and_its_files_convert_a_take() {
         .arg("3"));
     let truth: Value = serde_json::from_slice(&std::fs::read(&truth_path).unwrap()).unwrap();
     let out = dir.path().join("suit");
+
+    // The browser first (its start under load can outlast the stream's 3 s still lead-in, and the
+    // replay runs in real time from the server's start), then the server, whose URL goes to the
+    // waiting driver.
+    let shot = dir.path().join("setup.png");
+    let mut driver = Command::new("node")
+        .arg(repo_file("tests/browser/setup.mjs"))
+        .arg("-")
+        .arg(&truth_path)
+        .arg(&shot)
+        .env("IMUBAKE_NODE_MODULES", &modules)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut page = BufReader::new(driver.stdout.take().unwrap());
+    let mut ready = String::new();
+    page.read_line(&mut ready).unwrap();
+    assert_eq!(ready.trim(), "ready", "the driver did not start its browser");
     let mut cmd = Command::new(imubake_bin());
     cmd.arg("setup")
         .arg("--source")
@@ -38,22 +58,21 @@ fn a_suit_is_set_up_in_the_browser_and_its_files_convert_a_take() {
         .arg("--out")
         .arg(&out);
     let served = serve(cmd, true);
-
-    // The board's socket takes its page's origin only (its commands change the files).
+    {
+        let mut stdin = driver.stdin.take().unwrap();
+        writeln!(stdin, "{}", served.url).unwrap();
+    }
+    // While the page loads (the server ends with its stream): the board's socket takes its
+    // page's origin only (its commands change the files).
     let host = served.authority().to_string();
     for origin in [None, Some("http://evil.example"), Some("null")] {
         let (code, _) = upgrade_at(&host, "/setup", &host, origin);
         assert_eq!(code, 403, "Origin {origin:?}");
     }
-
-    let shot = dir.path().join("setup.png");
-    let page = run(Command::new("node")
-        .arg(repo_file("tests/browser/setup.mjs"))
-        .arg(&served.url)
-        .arg(&truth_path)
-        .arg(&shot)
-        .env("IMUBAKE_NODE_MODULES", &modules));
-    let page: Value = serde_json::from_slice(&page.stdout).unwrap();
+    let mut report = String::new();
+    page.read_to_string(&mut report).unwrap();
+    assert!(driver.wait().unwrap().success(), "{report}");
+    let page: Value = serde_json::from_str(&report).unwrap();
     assert_eq!(page["console"], Value::Array(vec![]), "{page}");
     assert_eq!(page["failed"], Value::Array(vec![]));
     assert_eq!(page["errors"], Value::Array(vec![]));
