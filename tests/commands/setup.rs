@@ -50,7 +50,11 @@ fn a_suit_is_set_up_in_the_browser_and_its_files_convert_a_take() {
     let mut page = BufReader::new(driver.stdout.take().unwrap());
     let mut ready = String::new();
     page.read_line(&mut ready).unwrap();
-    assert_eq!(ready.trim(), "ready", "the driver did not start its browser");
+    assert_eq!(
+        ready.trim(),
+        "ready",
+        "the driver did not start its browser"
+    );
     let mut cmd = Command::new(imubake_bin());
     cmd.arg("setup")
         .arg("--source")
