@@ -142,10 +142,24 @@ pub const PERSON_HEIGHT_M: std::ops::RangeInclusive<f64> = 1.0..=2.3;
 /// bends, and a toe about 0.04 h long bent 45° at a walk's push-off hides about 0.03 h.
 pub const FLIGHT_H: f64 = 0.03;
 /// … only after the feet have held the body this long, s (a run's stance lasts 0.1 s or more),
-/// with the hips going up no faster than [`TAKEOFF_H_S`] (faster is a hop's, seen the first
-/// way, or the weight passing to a foot a step higher): the take-off's horizontal velocity is
-/// the hips' mean over the stance.
+/// with the hips going up no faster than [`TAKEOFF_H_S`] (or [`PUSH_OFF_MAX_H_S`]; the path
+/// launched at no more than [`TAKEOFF_H_S`]): the take-off's horizontal velocity is the hips'
+/// mean over the stance.
 pub const STANCE_S: f64 = 0.1;
+/// … × h / s, on one foot for [`STANCE_S`] since the weight last passed to it: a run's push-off
+/// sampled at 30 fps or less shows the hips rising a little faster than [`TAKEOFF_H_S`] for a
+/// frame, too short for [`TAKEOFF_S`] (CMU 09_01 at 30 fps, seed 5: under 1.25 ×
+/// [`TAKEOFF_H_S`]). The weight passing to a foot that stands higher relative to the hips throws
+/// them up faster, or as fast just after it, and is no push-off: paths launched there (even at
+/// [`TAKEOFF_H_S`]) left the feet 0.03 h below them and made false flights of 9 to 33 frames —
+/// CMU 05_05's dance, between 1.5 and 2 × [`TAKEOFF_H_S`], and the uneven-ground walk 03_04
+/// within a stance of its transfers. 1.5 × [`TAKEOFF_H_S`].
+pub const PUSH_OFF_MAX_H_S: f64 = 0.675;
+/// The hips' velocity on the feet is smoothed with this time constant, s — α = 2/3 a frame at
+/// 60 fps, 1/(60·ln 3) s — what a take-off or a late-found flight carries. Per frame (α = 2/3
+/// at any rate) it lagged by about a frame, 42 ms at 24 fps: a run's push-off, sampled there
+/// at about 0.4 h/s, launched its flights at about 0.3 and they stayed on the feet.
+pub const VELOCITY_TAU_S: f64 = 0.015_170_654;
 /// The heel behind the ankle, as a fraction of the foot's reach from its joint to its toes
 /// (the ankle stands about a quarter of the foot's length in front of the heel).
 pub const HEEL_BACK: f64 = 0.25;
@@ -286,6 +300,9 @@ struct FeetState {
     stance: std::collections::VecDeque<Vector3<f64>>,
     /// The foot that carried most weight at the previous frame.
     dominant: usize,
+    /// Frames on the ground since the weight last passed from one foot to the other (or the
+    /// body landed).
+    since_switch: usize,
     /// The hips' velocity over the last frames (smoothed), rig units per second.
     velocity: Vector3<f64>,
     airborne: bool,
@@ -566,6 +583,7 @@ impl RootCore {
                 revised: Vec::new(),
                 stance: std::collections::VecDeque::new(),
                 dominant: usize::from(w_left < 0.5),
+                since_switch: 0,
                 velocity: Vector3::zeros(),
                 airborne: false,
             });
@@ -612,6 +630,7 @@ impl RootCore {
                     state.airborne = false;
                     state.level[1 - f] = state.level[f];
                     state.dominant = f;
+                    state.since_switch = 0;
                 } else {
                     state.velocity.y += (on_foot - state.hips.y) / dt;
                     state.hips.y = on_foot;
@@ -640,6 +659,9 @@ impl RootCore {
                     state.level[state.dominant]
                 };
                 state.dominant = dominant;
+                state.since_switch = 0;
+            } else {
+                state.since_switch += 1;
             }
             // Vertically each foot on its surface, weighted.
             state.hips.y =
@@ -678,8 +700,8 @@ impl RootCore {
         if state.airborne {
             state.stance.clear();
         } else {
-            // Smoothed over about three frames: the velocity a take-off carries.
-            state.velocity += (v - state.velocity) * (2.0 / 3.0);
+            // Smoothed ([`VELOCITY_TAU_S`]): the velocity a take-off carries.
+            state.velocity += (v - state.velocity) * (1.0 - (-dt / VELOCITY_TAU_S).exp());
             state.stance.push_back(state.hips);
             if state.stance.len() > frames + 1 {
                 state.stance.pop_front();
@@ -741,9 +763,12 @@ impl RootCore {
     /// The flight the feet cannot see, on a frame the body was on the ground before and after:
     /// where the feet put the hips this frame (`state.hips`) against the ballistic path from the
     /// last frame they held them at or above it (`before`, the hips a frame ago, starts a new
-    /// one) — started only after a stance of [`STANCE_S`] with the hips going up (no faster
-    /// than [`TAKEOFF_H_S`]), at their mean horizontal velocity over it. Once the feet fall
-    /// [`FLIGHT_H`] below that path the body is airborne on it.
+    /// one) — started only after a stance of [`STANCE_S`] with the hips going up no faster than
+    /// [`TAKEOFF_H_S`] (or [`PUSH_OFF_MAX_H_S`] a stance after the weight last passed from one
+    /// foot to the other), at their mean horizontal velocity over it and their vertical one no
+    /// faster than [`TAKEOFF_H_S`] (a path that rises at most TAKEOFF_H_S²/2g, about 0.018 h for
+    /// a person, less than [`FLIGHT_H`]). Once the feet fall [`FLIGHT_H`] below that path the
+    /// body is airborne on it.
     fn fall_behind_flight(&mut self, before: Vector3<f64>) {
         let (h, dt, frames) = (self.height, self.dt, self.stance_frames());
         let gravity = self.gravity_h_s2();
@@ -752,11 +777,16 @@ impl RootCore {
             Some(going) => Some(going),
             None if state.stance.len() > frames
                 && state.velocity.y > 0.0
-                && state.velocity.y <= TAKEOFF_H_S * h =>
+                && (state.velocity.y <= TAKEOFF_H_S * h
+                    || (state.velocity.y <= PUSH_OFF_MAX_H_S * h
+                        && state.since_switch > frames)) =>
             {
                 let mean = state.stance_velocity(dt).unwrap_or_default();
                 state.path.clear();
-                Some((before, Vector3::new(mean.x, state.velocity.y, mean.z)))
+                // No faster than a take-off's rise: a frame or two faster (too short for
+                // [`TAKEOFF_S`]) is a run's push-off sampled at 30 fps or less.
+                let up = state.velocity.y.min(TAKEOFF_H_S * h);
+                Some((before, Vector3::new(mean.x, up, mean.z)))
             }
             None => None,
         };

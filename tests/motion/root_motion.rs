@@ -1289,8 +1289,11 @@ fn runs_leave_the_ground_between_strides() {
 /// 30 fps, seeds 3, 4, 5, `--root feet --foot-lock`: a flight's refit (`refit_flights`) meets the
 /// feet's vertical velocities taken over 1/30 s on each side (`REFIT_VELOCITY_S`); over two
 /// frames, as at 60 fps, they averaged a push-off's fastest frame with a slower one and the path
-/// was 1.67 / 1.45 / 1.55 % off, now 1.08 / 1.12 / 1.31 % (2026-12-07; at 60 fps the window is two
-/// frames, as it was). Asserted: each within 1.5 %, their mean within 1.3 %.
+/// was 1.67 / 1.45 / 1.55 % off, then 1.08 / 1.12 / 1.31 % (at 60 fps the window is two
+/// frames, as it was); with the hips' velocity smoothed over a time (`VELOCITY_TAU_S`) and a
+/// push-off seen faster than `TAKEOFF_H_S` for a frame still launching a late-found flight, 0.94 /
+/// 0.95 / 0.90 % (2026-12-07; the smoothing alone lost seed 5's first flight, 3.26 %). Asserted:
+/// each within 1.5 %, their mean within 1.3 %.
 #[test]
 fn a_run_at_30_fps_is_refitted_from_its_last_push() {
     let dir = tempfile::tempdir().unwrap();
@@ -1309,6 +1312,67 @@ fn a_run_at_30_fps_is_refitted_from_its_last_push() {
     }
     let mean = paths.iter().sum::<f64>() / paths.len() as f64;
     assert!(mean <= 1.3, "mean path {mean:.2} %");
+}
+
+/// CMU 02_03 (`FETCHED_GAITS`' run; skipped where not fetched) at its true size converted at
+/// 24 fps, seeds 3, 4, 5, `--root feet --foot-lock`. Its flights last two or three frames there.
+/// The hips' velocity on the feet was smoothed by 2/3 a frame, which at 24 fps lagged the
+/// push-off by about a frame: the flights launched too slowly to leave the feet, the core found
+/// 0, 2 and 2 of the source's 8 airborne frames and the path was 5.85 / 6.98 / 7.08 % off. Smoothed
+/// over a time (`VELOCITY_TAU_S`, the same 2/3 at 60 fps), with a late-found flight's path
+/// launched at no more than `TAKEOFF_H_S` rather than not at all above it, it finds 8 of 8 on
+/// each and the path is 3.25 / 3.07 / 3.20 % (2026-12-07). Asserted: airborne recall ≥ 0.8 and the path within 4 % on
+/// each.
+#[test]
+fn a_run_at_24_fps_leaves_the_ground() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(file) = fetched_in_centimetres("data/02/02_03.bvh", dir.path(), "run") else {
+        return;
+    };
+    for seed in [3, 4, 5] {
+        let args = ["--root", "feet", "--foot-lock", "--fps", "24"];
+        let Some((take, path, walked)) = cmu_path(&file, &args, seed) else {
+            return;
+        };
+        let scores = contact_scores(&take);
+        eprintln!(
+            "CMU 02_03 at 24 fps, seed {seed}: path {path:.2} % of {walked:.2} h, airborne recall \
+             {:.3} of {} frames",
+            scores.airborne_recall, scores.airborne_frames
+        );
+        assert!(scores.airborne_recall >= 0.8, "seed {seed}");
+        assert!(path <= 4.0, "seed {seed}: path {path:.2} %");
+    }
+}
+
+/// CMU 05_05 (`FETCHED_GAITS`' modern dance with leaps; skipped where not fetched) at its true
+/// size, seeds 3, 4, 5, `--root feet --foot-lock`: where the weight passes to a foot that
+/// stands higher relative to the hips, the feet throw the hips up for a frame faster than a
+/// run's push-off (`PUSH_OFF_MAX_H_S`), and a late-found flight launched there (at
+/// `TAKEOFF_H_S`) left the feet below it and flew 9 frames the source stands through: airborne
+/// precision 0.970 → 0.762 and the path 3.64 → 8.35 % on seed 3 where any rise up to 2 ×
+/// `TAKEOFF_H_S` launched one (2026-12-07). Asserted: the frames reported airborne are the source's (precision ≥ 0.9) on each seed. The path is printed
+/// only: its leaps are found 32 of 99 frames on seed 3, 20 on seed 4, whose path is 8.30 %
+/// (a leap the core does not see as one; issue 49's open part).
+#[test]
+fn a_dance_passing_its_weight_up_does_not_fly() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(file) = fetched_in_centimetres("data/05/05_05.bvh", dir.path(), "dance") else {
+        return;
+    };
+    for seed in [3, 4, 5] {
+        let args = ["--root", "feet", "--foot-lock"];
+        let Some((take, path, walked)) = cmu_path(&file, &args, seed) else {
+            return;
+        };
+        let scores = contact_scores(&take);
+        eprintln!(
+            "CMU 05_05, seed {seed}: path {path:.2} % of {walked:.2} h, airborne precision {:.3} \
+             recall {:.3} of {} frames",
+            scores.airborne_precision, scores.airborne_recall, scores.airborne_frames
+        );
+        assert!(scores.airborne_precision >= 0.9, "seed {seed}");
+    }
 }
 
 /// A CMU take (`file`, its frame 0 a reference pose) through [`closed_loop_seeded`] with
