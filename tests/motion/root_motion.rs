@@ -1246,12 +1246,12 @@ fn hops_played_backwards_land_on_their_feet() {
 /// 1.00 %, airborne recall 1.00 on each; 02_03 2.35 / 0.83 / 0.88 %, 0.61 / 1.00 / 1.00 — on seed
 /// 3 its first flight's refit lands inside the second (read as the file reads, these runs fall at
 /// a 1.75 m body's gravity, 20 % too gently; at the true size 02_03 is 1.14 %, issue 49's
-/// battery). Once the refit's landings stand on the feet (`hops_played_backwards_land_on_their_feet`,
-/// 2026-12-07): 09_01 1.17 / 0.93 / 1.25 %; 02_03 5.48 / 1.34 / 1.50 % — on seed 3 the frames
-/// between that misplaced landing and the core's now follow a foot instead of the flight, which
-/// costs 3.1 %. With the hips' velocity smoothed over a time (`VELOCITY_TAU_S`): 09_01 seed 4
-/// 0.92 %, the rest as they were. Asserted: every path within 7 %, 09_01's
-/// airborne recall at least 0.6 on every seed and its mean path within 3 %.
+/// battery). Once the refit's landings stand on the feet
+/// (`hops_played_backwards_land_on_their_feet`, 2026-12-07): 09_01 1.17 / 0.93 / 1.25 %; 02_03
+/// 5.48 / 1.34 / 1.50 % — on seed 3 the frames between that misplaced landing and the core's now
+/// follow a foot instead of the flight, which costs 3.1 %. With the hips' velocity smoothed over a
+/// time (`VELOCITY_TAU_S`): 09_01 seed 4 0.92 %, the rest as they were. Asserted: every path
+/// within 7 %, 09_01's airborne recall at least 0.6 on every seed and its mean path within 3 %.
 #[test]
 fn runs_leave_the_ground_between_strides() {
     let dir = tempfile::tempdir().unwrap();
@@ -1297,16 +1297,12 @@ fn runs_leave_the_ground_between_strides() {
 /// each within 1.5 %, their mean within 1.3 %.
 #[test]
 fn a_run_at_30_fps_is_refitted_from_its_last_push() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some(file) = fetched_in_centimetres("data/09/09_01.bvh", dir.path(), "run") else {
+    let args = ["--root", "feet", "--foot-lock", "--fps", "30"];
+    let Some(runs) = fetched_on_three_seeds("data/09/09_01.bvh", &args) else {
         return;
     };
     let mut paths = Vec::new();
-    for seed in [3, 4, 5] {
-        let args = ["--root", "feet", "--foot-lock", "--fps", "30"];
-        let Some((_, path, walked)) = cmu_path(&file, &args, seed) else {
-            return;
-        };
+    for (seed, _, path, walked) in runs {
         eprintln!("CMU 09_01 at 30 fps, seed {seed}: path {path:.2} % of {walked:.2} h");
         assert!(path <= 1.5, "seed {seed}: path {path:.2} %");
         paths.push(path);
@@ -1322,19 +1318,15 @@ fn a_run_at_30_fps_is_refitted_from_its_last_push() {
 /// 0, 2 and 2 of the source's 8 airborne frames and the path was 5.85 / 6.98 / 7.08 % off. Smoothed
 /// over a time (`VELOCITY_TAU_S`, the same 2/3 at 60 fps), with a late-found flight's path
 /// launched at no more than `TAKEOFF_H_S` rather than not at all above it, it finds 8 of 8 on
-/// each and the path is 3.25 / 3.07 / 3.20 % (2026-12-07). Asserted: airborne recall ≥ 0.8 and the path within 4 % on
-/// each.
+/// each and the path is 3.25 / 3.07 / 3.20 % (2026-12-07). Asserted: airborne recall ≥ 0.8 and
+/// the path within 4 % on each.
 #[test]
 fn a_run_at_24_fps_leaves_the_ground() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some(file) = fetched_in_centimetres("data/02/02_03.bvh", dir.path(), "run") else {
+    let args = ["--root", "feet", "--foot-lock", "--fps", "24"];
+    let Some(runs) = fetched_on_three_seeds("data/02/02_03.bvh", &args) else {
         return;
     };
-    for seed in [3, 4, 5] {
-        let args = ["--root", "feet", "--foot-lock", "--fps", "24"];
-        let Some((take, path, walked)) = cmu_path(&file, &args, seed) else {
-            return;
-        };
+    for (seed, take, path, walked) in runs {
         let scores = contact_scores(&take);
         eprintln!(
             "CMU 02_03 at 24 fps, seed {seed}: path {path:.2} % of {walked:.2} h, airborne recall \
@@ -1352,21 +1344,17 @@ fn a_run_at_24_fps_leaves_the_ground() {
 /// run's push-off (`PUSH_OFF_MAX_H_S`), and a late-found flight launched there (at
 /// `TAKEOFF_H_S`) left the feet below it and flew 9 frames the source stands through: airborne
 /// precision 0.970 → 0.762 and the path 3.64 → 8.35 % on seed 3 where any rise up to 2 ×
-/// `TAKEOFF_H_S` launched one (2026-12-07). Asserted: the frames reported airborne are the source's (precision ≥ 0.9) on each seed. The path is printed
-/// only (seeds 3 / 4 / 5: 3.64 / 8.30 / 3.12 %, airborne precision 0.970 / 0.952 / 1.000): its
-/// leaps are found 32, 20 and 11 of 99 frames (a leap the core does not see as one; issue 49's
-/// open part).
+/// `TAKEOFF_H_S` launched one (2026-12-07). Asserted: the frames reported airborne are the
+/// source's (precision ≥ 0.9) on each seed. The path is printed only (seeds 3 / 4 / 5: 3.64 /
+/// 8.30 / 3.12 %, airborne precision 0.970 / 0.952 / 1.000): its leaps are found 32, 20 and 11
+/// of 99 frames (a leap the core does not see as one; issue 49's open part).
 #[test]
 fn a_dance_passing_its_weight_up_does_not_fly() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some(file) = fetched_in_centimetres("data/05/05_05.bvh", dir.path(), "dance") else {
+    let args = ["--root", "feet", "--foot-lock"];
+    let Some(runs) = fetched_on_three_seeds("data/05/05_05.bvh", &args) else {
         return;
     };
-    for seed in [3, 4, 5] {
-        let args = ["--root", "feet", "--foot-lock"];
-        let Some((take, path, walked)) = cmu_path(&file, &args, seed) else {
-            return;
-        };
+    for (seed, take, path, walked) in runs {
         let scores = contact_scores(&take);
         eprintln!(
             "CMU 05_05, seed {seed}: path {path:.2} % of {walked:.2} h, airborne precision {:.3} \
@@ -1386,25 +1374,36 @@ fn cmu_path(file: &Path, args: &[&str], seed: u64) -> Option<(Take, f64, f64)> {
     Some((take, 100.0 * rms / walked, walked))
 }
 
+/// The fetched CMU take `fetched` (a path of `CMU_MIRROR`) at its true size through
+/// [`cmu_path`] with `args` on the noise of seeds 3, 4 and 5: each seed, its take, path error (%)
+/// and distance walked (h); `None` where it was not fetched.
+fn fetched_on_three_seeds(fetched: &str, args: &[&str]) -> Option<Vec<(u64, Take, f64, f64)>> {
+    let dir = tempfile::tempdir().unwrap();
+    let file = fetched_in_centimetres(fetched, dir.path(), "take")?;
+    [3, 4, 5]
+        .into_iter()
+        .map(|seed| {
+            cmu_path(&file, args, seed).map(|(take, path, walked)| (seed, take, path, walked))
+        })
+        .collect()
+}
+
 /// CMU 06_08 (`FETCHED_GAITS`: walking sideways while dribbling, a gallop whose feet skim the
 /// ground as they close; skipped where not fetched), read at its true size, on three draws of the
 /// sensors' noise (seeds 3, 4, 5), `--root feet --foot-lock`: the hips followed the closing foot's
 /// slide backwards (smoothed, at over 2 g) and the path was 6.1 / 7.0 / 6.8 % off; bridged across
 /// the slides (`imubake::pipeline::root::slide`) it is 2.08 / 3.30 / 3.04 %, skate 0.0010–0.0016 h
-/// (2026-12-07; 1.97 % and 0.0005 h on seed 3 once the refit's landings stand on the feet). Asserted: every path within 3.5 % and their mean within 3 % (issue 49's
-/// target), skate within 0.006 h per contact.
+/// (2026-12-07; 1.97 % and 0.0005 h on seed 3 once the refit's landings stand on the feet).
+/// Asserted: every path within 3.5 % and their mean within 3 % (issue 49's target), skate within
+/// 0.006 h per contact.
 #[test]
 fn a_sideways_gallop_is_bridged_across_its_slides() {
-    let dir = tempfile::tempdir().unwrap();
-    let Some(file) = fetched_in_centimetres("data/06/06_08.bvh", dir.path(), "gallop") else {
+    let args = ["--root", "feet", "--foot-lock"];
+    let Some(runs) = fetched_on_three_seeds("data/06/06_08.bvh", &args) else {
         return;
     };
     let mut paths = Vec::new();
-    for seed in [3, 4, 5] {
-        let args = ["--root", "feet", "--foot-lock"];
-        let Some((take, path, walked)) = cmu_path(&file, &args, seed) else {
-            return;
-        };
+    for (seed, take, path, walked) in runs {
         let (contacts, excess) = contact_skate(&take);
         eprintln!(
             "CMU 06_08, seed {seed}: path {path:.2} % of {walked:.2} h, skate {excess:.4} h over \
