@@ -39,7 +39,7 @@ use crate::anim::{Animation, AnimationBuilder, Pose};
 use crate::mapping::{CalibrationWindow, HeadingPolicy, Mapping, MappingRecord, ResolvedSensor};
 use crate::rig::Rig;
 use crate::take::Take;
-use crate::take::Track;
+use crate::take::{ImuSample, Track};
 use crate::world::World;
 use calibrate::Calibration;
 use nalgebra::UnitQuaternion;
@@ -145,7 +145,7 @@ fn run_on(
     let (file, w) = (mapping_file.display().to_string(), &mut Vec::new());
     let (times, policy) = (TakeTimes::of(input.take()), options.heading_policy(mapping));
     let resolved = mapping.resolve(rig, mapping_file)?;
-    let feet_stillness = feet_stillness(input.take(), rig, &resolved, options.root);
+    let feet_readings = feet_readings(input.take(), rig, &resolved, options.root);
     let (world, sources, window) = stage(debug_span!("sources"), || {
         sources_and_window(input, rig, mapping, resolved, options, w)
     })?;
@@ -165,9 +165,9 @@ fn run_on(
     });
     let (animation, root_mode, contacts) = stage(debug_span!("root"), || {
         let frame_times_s: Vec<f64> = grid.times_s().collect();
-        let still = feet_stillness
-            .map(|r| r.map(|(times, t)| root::zupt::on_frames(&times, &t, &frame_times_s)));
-        root_stage(rig, local.local, &local.animated, options, &held, &still)
+        let pivots = feet_pivots(feet_readings, rig, &sources.sensors, &calibration, &held)
+            .map(|r| r.map(|(times, a)| root::zupt::on_frames(&times, &a, &frame_times_s)));
+        root_stage(rig, local.local, &local.animated, options, &held, &pivots)
     })?;
     Ok(Converted {
         animation,
@@ -356,16 +356,16 @@ fn local_rotations(
     }
 }
 
-/// The root stage's zero-velocity cue ([`root::zupt`]) from the raw readings (gyro, specific
-/// force) of the sensors the mapping puts on the feet (`resolved`), `[left, right]`: each
-/// reading's time and SHOE's statistic, taken before stage 1, which may consume the take. None in
-/// the root modes that have no contacts.
-fn feet_stillness(
+/// The raw readings (gyro, specific force) of the sensors the mapping puts on the feet
+/// (`resolved`), `[left, right]`, with the sensor's name: what the root stage's zero-velocity cue
+/// ([`root::zupt`]) reads, taken before stage 1, which may consume the take. None in the root
+/// modes that have no contacts.
+fn feet_readings(
     take: &Take,
     rig: &Rig,
     resolved: &[ResolvedSensor],
     mode: RootMode,
-) -> [Option<(Vec<f64>, Vec<f64>)>; 2] {
+) -> [Option<(String, Track<ImuSample>)>; 2] {
     let feet = root::foot_joints(rig).filter(|_| matches!(mode, RootMode::Feet | RootMode::Auto));
     let Some(feet) = feet else {
         return [None, None];
@@ -373,8 +373,35 @@ fn feet_stillness(
     feet.map(|foot| {
         let sensor = resolved.iter().find(|s| s.bone == foot)?;
         let readings = take.sensor(&sensor.sensor)?.inertial()?;
-        let t = root::zupt::Shoe::default().statistic(readings.times_s(), readings.values());
-        Some((readings.times_s().to_vec(), t))
+        Some((sensor.sensor.clone(), readings.clone()))
+    })
+}
+
+/// The feet's own cue ([`root::zupt::Shoe::pivot_acceleration_m_s2`]) from their readings: each
+/// reading's time and how fast the foot's least-moving point accelerates, m/s², about the foot's
+/// points ([`root::foot_points_from_sensor_m`], turned into the sensor's frame by its calibrated
+/// mount, `q_bone_sensor⁻¹`).
+fn feet_pivots(
+    readings: [Option<(String, Track<ImuSample>)>; 2],
+    rig: &Rig,
+    sensors: &[ResolvedSensor],
+    calibration: &Calibration,
+    held: &[UnitQuaternion<f64>],
+) -> [Option<(Vec<f64>, Vec<f64>)>; 2] {
+    let points = root::foot_points_from_sensor_m(rig, held);
+    let mut sides = [0, 1].into_iter();
+    readings.map(|r| {
+        let side = sides.next().unwrap_or_default();
+        let (name, track) = r?;
+        let i = sensors.iter().position(|s| s.sensor == name)?;
+        let mount = calibration.mounts.get(i)?;
+        let in_sensor: Vec<_> = points.as_ref()?[side]
+            .iter()
+            .map(|p| mount.inverse() * p)
+            .collect();
+        let shoe = root::zupt::Shoe::default();
+        let a = shoe.pivot_acceleration_m_s2(track.times_s(), track.values(), &in_sensor);
+        Some((track.times_s().to_vec(), a))
     })
 }
 
@@ -386,7 +413,7 @@ fn root_stage(
     animated: &[bool],
     options: &PipelineOptions,
     held: &[UnitQuaternion<f64>],
-    still: &root::FeetStill,
+    pivots: &root::FeetPivots,
 ) -> Result<(Animation, RootMode, Option<root::Contacts>), PipelineError> {
     let root_mode = root::resolve(options.root, rig, animated);
     let root::RootMotion {
@@ -399,7 +426,7 @@ fn root_stage(
         &local,
         options.fps.frame_time_s(),
         held,
-        still,
+        pivots,
     );
     let mut local = local;
     if let Some(c) = contacts.as_ref().filter(|_| options.foot_lock) {

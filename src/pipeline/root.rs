@@ -29,8 +29,10 @@
 //!   Where the followed foot slid all the same, the hips' velocity leaves its course faster than
 //!   friction allows and comes back: a whole take bridges it ([`slide`]).
 //!   Paper 003 thresholds the foot's angular speed instead (τ = 0.28 over 3 samples), which
-//!   seldom holds on real walks. Where the take has a foot sensor's raw readings, that sensor's
-//!   own zero-velocity test ([`zupt`], SHOE) also reports the foot planted. A foot's points are
+//!   seldom holds on real walks. Where the take has a foot sensor's raw readings, that sensor
+//!   says whether the foot turns about a point that stands ([`zupt`]: SHOE's force term about
+//!   each of the foot's points): a foot whose every point accelerates by more than
+//!   [`UNPLANTED_M_S2`] is not reported planted, one about a nearly still point is. A foot's points are
 //!   its joints, their end sites and a heel (a skeleton has none: below the ankle at the sole's
 //!   height, [`HEEL_BACK`] of the foot behind it). The body leaves the ground in two ways: the
 //!   legs throw the hips up faster than [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off),
@@ -163,6 +165,19 @@ pub const VELOCITY_TAU_S: f64 = 0.015_170_654;
 /// The heel behind the ankle, as a fraction of the foot's reach from its joint to its toes
 /// (the ankle stands about a quarter of the foot's length in front of the heel).
 pub const HEEL_BACK: f64 = 0.25;
+/// A foot whose own sensor says that none of its points accelerates by less than this, m/s²
+/// ([`zupt::Shoe::pivot_acceleration_m_s2`]), is not reported planted: at g a point gains the
+/// speed of a foot not in contact in issue 49's rule (0.12 h/s, 0.2 m/s) within a frame at
+/// 60 fps. The kinematic cues below read the fused orientations, and a fused foot's error at
+/// heel strike and push-off lets a landing or lifting foot pass for still for a frame or two.
+pub const UNPLANTED_M_S2: f64 = GRAVITY_M_S2;
+/// A foot turning about a point that accelerates by less than this, m/s², is reported planted
+/// (if near its surface) though it rolls and its pivot moves over the ground by up to
+/// [`PIVOT_SPEED`] × [`PLANT_SPEED_H_S`] by the kinematic cues: the sensor sees the heel or the
+/// toes stand where the fused orientations blur them.
+pub const PIVOT_M_S2: f64 = GRAVITY_M_S2 / 2.0;
+/// See [`PIVOT_M_S2`].
+pub const PIVOT_SPEED: f64 = 2.0;
 /// A foot whose lowest point is this close to its surface, × h …
 pub const PLANT_H: f64 = 0.02;
 /// … slower than this over the ground, × h / s …
@@ -203,6 +218,42 @@ pub fn foot_joints(rig: &Rig) -> Option<[usize; 2]> {
 /// [`foot_joints`] among joint names alone (a skeleton that is not a rig: a GLB's skin).
 pub fn foot_names<'a>(names: impl Iterator<Item = &'a str> + Clone) -> Option<[usize; 2]> {
     Anatomy::of_names(names).feet()
+}
+
+/// Each foot's points ([`foot_points`]: its joints, their end sites, the heel) in the foot bone's
+/// frame from where its sensor is taken to sit, in metres (`[left, right]`): what
+/// [`zupt::Shoe::pivot_statistic`] turns about, once turned into the sensor's frame by its mount.
+/// The sensor is taken at the middle of the foot bone (from its joint to its first child, or its
+/// end site): on the instep, where a foot's sensor is strapped — a real one sits a few centimetres
+/// off it, which the cue bears (`pivot_statistic_bears_a_misplaced_sensor`). The points are the
+/// calibrated pose's (`reference`), rig units scaled by the subject's height
+/// ([`subject_height_m`]). `None` for a rig without feet.
+pub fn foot_points_from_sensor_m(
+    rig: &Rig,
+    reference: &[UnitQuaternion<f64>],
+) -> Option<[Vec<Vector3<f64>>; 2]> {
+    let core = RootCore::new(rig, RootMode::Feet, 1.0, reference);
+    let feet = core.feet.as_ref()?;
+    let metres_per_unit = core.subject_height_m / core.height;
+    let (mut world, mut positions) = (Vec::new(), Vec::new());
+    pose_relative_to_hips(rig, reference, &mut world, &mut positions);
+    Some([0, 1].map(|side| {
+        let foot = &feet[side];
+        let f = foot.joints[0];
+        let toward = rig
+            .children(f)
+            .next()
+            .map(|c| rig.joints()[c].offset)
+            .or(rig.joints()[f].end_site)
+            .unwrap_or_default();
+        let sensor = toward / 2.0;
+        let mut points = Vec::new();
+        foot_points(rig, foot, &positions, &world, &mut points);
+        points
+            .iter()
+            .map(|p| (world[f].inverse() * (p - positions[f]) - sensor) * metres_per_unit)
+            .collect()
+    }))
 }
 
 /// What a root mode needs of the rig: `feet` asked for by name needs both feet (an error naming
@@ -558,7 +609,7 @@ impl RootCore {
         body_low: f64,
         now: [&[Vector3<f64>]; 2],
         left_weight: Option<f64>,
-        still: [Option<f64>; 2],
+        pivot: [Option<f64>; 2],
         plan: Planned,
     ) -> RootFrame {
         let (h, gravity) = (self.height, self.gravity_h_s2());
@@ -724,11 +775,18 @@ impl RootCore {
                 points.get(tips[f]).copied().unwrap_or_default() - points[0]
             };
             let roll = roll_speed(tip(&state.previous[f]), tip(now[f]), dt);
-            // A foot whose own sensor stands still ([`zupt`]) is planted where its surface is.
-            (!state.airborne || pushing)
-                && height <= PLANT_H * h
-                && ((speed <= PLANT_SPEED_H_S * h && roll <= PLANT_ROLL_H_S * h)
-                    || still[f].is_some_and(|t| t <= 1.0))
+            let still = speed <= PLANT_SPEED_H_S * h && roll <= PLANT_ROLL_H_S * h;
+            // The foot's own sensor ([`zupt`]): a foot none of whose points accelerates by less
+            // than [`UNPLANTED_M_S2`] is not planted; one turning about a point that hardly
+            // accelerates ([`PIVOT_M_S2`]) is, rolling and a little faster.
+            let planted = match pivot[f] {
+                None => still,
+                Some(a) => {
+                    (still && a <= UNPLANTED_M_S2)
+                        || (a <= PIVOT_M_S2 && speed <= PIVOT_SPEED * PLANT_SPEED_H_S * h)
+                }
+            };
+            (!state.airborne || pushing) && height <= PLANT_H * h && planted
         });
         for (previous, now) in state.previous.iter_mut().zip(now) {
             previous.clear();
@@ -891,10 +949,10 @@ impl Contacts {
     }
 }
 
-/// What each foot's own sensor said, frame by frame (`[left, right]`): SHOE's statistic
-/// ([`zupt`]; still at `T ≤ 1`), where the take has the foot sensor's raw readings; `None` where
-/// it has not.
-pub type FeetStill = [Option<Vec<f64>>; 2];
+/// What each foot's own sensor said, frame by frame (`[left, right]`): how fast the foot's
+/// least-moving point accelerates, m/s² ([`zupt::Shoe::pivot_acceleration_m_s2`]), where the
+/// take has the foot sensor's raw readings; `None` where it has not.
+pub type FeetPivots = [Option<Vec<f64>>; 2];
 
 /// Stage 7's output over a whole take.
 #[derive(Debug, Clone, Default)]
@@ -911,14 +969,14 @@ pub struct RootMotion {
 
 /// Stage 7 over a whole take: the root position at every frame (rig units) from every joint's
 /// local rotations (`local[joint][frame]`), and the contacts in `feet` mode. `mode` is resolved
-/// already; `still`, what the feet's own sensors said (frames past its end: not still).
+/// already; `pivots`, what the feet's own sensors said (frames past its end: moving).
 pub fn root_positions(
     rig: &Rig,
     mode: RootMode,
     local: &[Vec<UnitQuaternion<f64>>],
     frame_time_s: f64,
     reference: &[UnitQuaternion<f64>],
-    still: &FeetStill,
+    pivots: &FeetPivots,
 ) -> RootMotion {
     let frames = local.first().map_or(0, Vec::len);
     let mut core = RootCore::new(rig, mode, frame_time_s, reference);
@@ -952,7 +1010,7 @@ pub fn root_positions(
         for (i, &low) in m.low.iter().enumerate() {
             let n = all.len();
             let left_weight = left_weights.as_ref().map(|w| w[n]);
-            let still = still.each_ref().map(|s| {
+            let pivot = pivots.each_ref().map(|s| {
                 s.as_ref()
                     .map(|s| s.get(n).copied().unwrap_or(f64::INFINITY))
             });
@@ -960,7 +1018,7 @@ pub fn root_positions(
                 None => core.step_ground(low),
                 Some(feet) => {
                     let plan = planned.get(n).copied().unwrap_or_default();
-                    core.step_feet(low, feet.frame(i), left_weight, still, plan)
+                    core.step_feet(low, feet.frame(i), left_weight, pivot, plan)
                 }
             };
             // A flight found late: the frames since it started were in the air, on its path.
@@ -1618,17 +1676,20 @@ mod tests {
         }
     }
 
-    /// The foot's own sensor standing still ([`zupt`]: `T ≤ 1`) keeps it planted where the
-    /// kinematic rule alone would not (the rolling foot of [`a_rolling_foot_is_not_planted`] at
-    /// twice [`PLANT_ROLL_H_S`]); a sensor that moves (`T` = 2), or none, leaves the rule's
-    /// answer.
+    /// The foot's own sensor ([`zupt`]): a point the foot turns about that hardly accelerates
+    /// (2 m/s², under [`PIVOT_M_S2`]) keeps it planted where the kinematic rule alone would not
+    /// (the rolling foot of [`a_rolling_foot_is_not_planted`] at 1.5 × [`PLANT_ROLL_H_S`], its
+    /// lowest point sliding at 0.21–0.50 h/s as the foot turns about its ankle: under
+    /// [`PIVOT_SPEED`] × [`PLANT_SPEED_H_S`]; at twice the roll it slides at up to 0.67 h/s, and
+    /// stays unplanted); 6 m/s² (between it and [`UNPLANTED_M_S2`]), or no sensor, leaves the
+    /// rule's answer; 12 m/s² (over g) unplants even the standing frames.
     #[test]
-    fn a_foot_whose_sensor_stands_still_is_planted() {
+    fn a_foot_whose_point_stands_is_planted() {
         let rig = load_rig("mixamo").unwrap();
         let foot = Anatomy::of(&rig).limb(Side::Left, Limb::Foot).unwrap();
         let rest = vec![UnitQuaternion::identity(); rig.len()];
         let dt = 1.0 / 60.0;
-        let rate_rad_s = 2.0 * roll_limit_rad_s(&rig, &rest, dt);
+        let rate_rad_s = 1.5 * roll_limit_rad_s(&rig, &rest, dt);
         // Ten frames standing, then six rolling onto the heel.
         let poses: Vec<Vec<UnitQuaternion<f64>>> = (0..16)
             .map(|n| {
@@ -1644,12 +1705,14 @@ mod tests {
             .collect();
         for (sensor, left_contact) in [
             (None, vec![[0, 9]]),
-            (Some(2.0), vec![[0, 9]]),
-            (Some(0.5), vec![[0, 15]]),
+            (Some(6.0), vec![[0, 9]]),
+            (Some(2.0), vec![[0, 15]]),
+            (Some(12.0), vec![]),
         ] {
-            let still = [sensor.map(|t| vec![t; 16]), None];
-            let contacts = root_positions(&rig, RootMode::Feet, &local, dt, &rest, &still).contacts;
-            assert_eq!(contacts.unwrap().left, left_contact, "T = {sensor:?}");
+            let pivots = [sensor.map(|a| vec![a; 16]), None];
+            let contacts =
+                root_positions(&rig, RootMode::Feet, &local, dt, &rest, &pivots).contacts;
+            assert_eq!(contacts.unwrap().left, left_contact, "{sensor:?} m/s²");
         }
     }
 

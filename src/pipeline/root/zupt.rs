@@ -16,6 +16,10 @@
 //! show: a specific force off gravity by about [`Shoe::accel_m_s2`] or a rate of about
 //! [`Shoe::gyro_rad_s`] alone is at the bound. The defaults are OpenShoe's (σ_a = 0.01 m/s²,
 //! σ_ω = 0.1 °/s, γ = 3·10⁴, W = 3 at its rate): `A` ≈ 1.73 m/s², `Ω` ≈ 17.3 °/s.
+//!
+//! A walking foot seldom stands still altogether: it turns about its heel, then its toes. The
+//! root stage reads the force term about each of the foot's points instead
+//! ([`Shoe::pivot_acceleration_m_s2`]): how fast the least-moving point accelerates.
 
 use crate::take::{ImuSample, Track};
 
@@ -77,6 +81,74 @@ impl Shoe {
                     / window.len() as f64
             })
             .collect()
+    }
+
+    /// How fast the foot's least-moving point accelerates, m/s², per reading: SHOE's force term
+    /// about a pivot. A foot planted on its heel or its toes may turn (at a walk's heel strike
+    /// and push-off it turns at 200–300 °/s, so SHOE's rate term calls most of a stance moving —
+    /// `the_feet_sensors_stillness_is_shoes`); the point it turns about may not move. A point `r`
+    /// of the foot (sensor frame, m, from the sensor) that stands still makes the sensor move as a
+    /// rigid body turning about it, `a_s = −(ω̇ × r + ω × (ω × r))` in the sensor's frame (the
+    /// world's angular acceleration is `R ω̇`), so that the specific force less it,
+    ///
+    /// ```text
+    /// c_i(r) = a_i + ω̇_i × r + ω_i × (ω_i × r),
+    /// ```
+    ///
+    /// is gravity alone, and what is left over is the point's own acceleration. Over SHOE's window
+    /// `K` (its `W` readings around reading `k`), about the window's mean direction,
+    ///
+    /// ```text
+    /// a_k(r) = √( (1/W) Σ_{i∈K} ‖c_i(r) − g · c̄ / ‖c̄‖‖² ),   a_k = min over the points r,
+    /// ```
+    ///
+    /// with `ω̇` by central differences of the gyro (one-sided at the ends). Infinite with no
+    /// points.
+    pub fn pivot_acceleration_m_s2(
+        &self,
+        times_s: &[f64],
+        readings: &[ImuSample],
+        points_m: &[nalgebra::Vector3<f64>],
+    ) -> Vec<f64> {
+        let n = readings.len().min(times_s.len());
+        let rate_change: Vec<nalgebra::Vector3<f64>> = (0..n)
+            .map(|i| {
+                let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
+                let dt = times_s[b] - times_s[a];
+                if dt > 0.0 {
+                    (readings[b].gyro_rad_s - readings[a].gyro_rad_s) / dt
+                } else {
+                    nalgebra::Vector3::zeros()
+                }
+            })
+            .collect();
+        // SHOE's force term alone at unit scale is the mean square.
+        let force_alone = Shoe {
+            accel_m_s2: 1.0,
+            gyro_rad_s: f64::INFINITY,
+            ..*self
+        };
+        let mut least = vec![f64::INFINITY; n];
+        for r in points_m {
+            let about: Vec<ImuSample> = (0..n)
+                .map(|i| {
+                    let w = readings[i].gyro_rad_s;
+                    ImuSample {
+                        gyro_rad_s: w,
+                        accel_m_s2: readings[i].accel_m_s2
+                            + rate_change[i].cross(r)
+                            + w.cross(&w.cross(r)),
+                    }
+                })
+                .collect();
+            for (l, m) in least
+                .iter_mut()
+                .zip(force_alone.statistic(&times_s[..n], &about))
+            {
+                *l = l.min(m.sqrt());
+            }
+        }
+        least
     }
 
     /// [`Self::statistic`] of a track, on the frames at `frame_times_s` ([`on_frames`]).
@@ -161,9 +233,57 @@ mod tests {
         assert!((t[2] - (1.0 + 2.25) / 2.0).abs() < 1e-12, "{}", t[2]);
     }
 
+    /// A foot turning at 10 rad/s about its vertical (sensor z, up) around a point 0.1 m
+    /// ahead of the sensor (+x) that stands: the sensor swings on a circle about it, its specific
+    /// force `(r ω², 0, g)` = (10, 0, g) m/s² and constant. By hand: about that point
+    /// `c = f + ω × (ω × r) = (10 − 10, 0, g)`, gravity alone — 0; about the sensor itself `c = f`,
+    /// whose length is √(100 + g²) = 14.006 m/s² against g along its own direction: 4.199 m/s²;
+    /// the least of the two points is 0. Speeding the turn up by 50 rad/s² adds
+    /// `ω̇ × r` = (0, 5, 0) m/s² about the sensor's point, and the point still stands.
+    #[test]
+    fn a_foot_turning_about_a_standing_point_has_it_still() {
+        let shoe = Shoe::default();
+        let times: Vec<f64> = (0..20).map(|i| i as f64 * 0.01).collect();
+        let (w, r) = (10.0, 0.1);
+        let turning: Vec<ImuSample> = times
+            .iter()
+            .map(|_| reading([0.0, 0.0, w], [r * w * w, 0.0, G_M_S2]))
+            .collect();
+        let pivot = Vector3::new(r, 0.0, 0.0);
+        let about = |points: &[Vector3<f64>], readings: &[ImuSample]| {
+            shoe.pivot_acceleration_m_s2(&times, readings, points)
+        };
+        let sensor_point = (100.0 + G_M_S2 * G_M_S2).sqrt() - G_M_S2;
+        for (p, s) in about(&[pivot], &turning)
+            .iter()
+            .zip(about(&[Vector3::zeros()], &turning))
+        {
+            assert!(p.abs() < 1e-9, "{p}");
+            assert!((s - sensor_point).abs() < 1e-9, "{s} vs {sensor_point}");
+        }
+        assert!(
+            about(&[Vector3::zeros(), pivot], &turning)
+                .iter()
+                .all(|a| a.abs() < 1e-9)
+        );
+        // Speeding up: ω = 10 + 50 t about z; the sensor's tangential acceleration is
+        // −(ω̇ × r) = (0, −5, 0) on top of the centripetal r ω².
+        let speeding: Vec<ImuSample> = times
+            .iter()
+            .map(|t| {
+                let w = w + 50.0 * t;
+                reading([0.0, 0.0, w], [r * w * w, -50.0 * r, G_M_S2])
+            })
+            .collect();
+        for a in about(&[pivot], &speeding) {
+            assert!(a.abs() < 1e-9, "{a}");
+        }
+        assert!(about(&[], &turning).iter().all(|a| a.is_infinite()));
+    }
+
     proptest::proptest! {
-        /// Any readings at any increasing times, any frames: one value per frame, never
-        /// negative; and no panic.
+        /// Any readings at any increasing times, any frames: one value per frame (and one
+        /// pivot acceleration per reading), never negative; and no panic.
         #[test]
         fn any_readings_give_one_value_per_frame(
             steps in proptest::collection::vec(1e-4f64..0.1, 1..40),
@@ -178,13 +298,19 @@ mod tests {
                     reading([v[0], v[1], v[2]], [v[3], v[4], v[5]])
                 })
                 .collect();
-            let track = Track::new(times.clone(), readings).unwrap();
+            let track = Track::new(times.clone(), readings.clone()).unwrap();
             let mut frames = frames;
             frames.sort_by(f64::total_cmp);
             let shoe = Shoe { window_s, ..Shoe::default() };
             let t = shoe.frame_statistic(&track, &frames);
             proptest::prop_assert_eq!(t.len(), frames.len());
             for v in t {
+                proptest::prop_assert!(v >= 0.0, "{}", v);
+            }
+            let points = [Vector3::zeros(), Vector3::new(0.1, -0.05, 0.02)];
+            let a = shoe.pivot_acceleration_m_s2(&times, &readings, &points);
+            proptest::prop_assert_eq!(a.len(), times.len());
+            for v in a {
                 proptest::prop_assert!(v >= 0.0, "{}", v);
             }
         }
