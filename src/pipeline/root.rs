@@ -222,12 +222,14 @@ pub fn foot_names<'a>(names: impl Iterator<Item = &'a str> + Clone) -> Option<[u
 
 /// Each foot's points ([`foot_points`]: its joints, their end sites, the heel) in the foot bone's
 /// frame from where its sensor is taken to sit, in metres (`[left, right]`): what
-/// [`zupt::Shoe::pivot_statistic`] turns about, once turned into the sensor's frame by its mount.
-/// The sensor is taken at the middle of the foot bone (from its joint to its first child, or its
-/// end site): on the instep, where a foot's sensor is strapped — a real one sits a few centimetres
-/// off it, which the cue bears (`pivot_statistic_bears_a_misplaced_sensor`). The points are the
-/// calibrated pose's (`reference`), rig units scaled by the subject's height
-/// ([`subject_height_m`]). `None` for a rig without feet.
+/// [`zupt::Shoe::pivot_acceleration_m_s2`] turns about, once turned into the sensor's frame by
+/// its mount. The sensor is taken at the middle of the foot bone (from its joint to its first
+/// child, or its end site): on the instep, where a foot's sensor is strapped, and where `simulate
+/// --raw` puts it. A real one sits a few centimetres off it; a point off by `d` reads an
+/// acceleration off by about `|ω̇| d` (a hard heel strike, 100 rad/s², over 3 cm: 3 m/s², under
+/// [`PIVOT_M_S2`]) — not measured on real feet. The points are the calibrated pose's
+/// (`reference`), rig units scaled by the subject's height ([`subject_height_m`]). `None` for a
+/// rig without feet.
 pub fn foot_points_from_sensor_m(
     rig: &Rig,
     reference: &[UnitQuaternion<f64>],
