@@ -220,7 +220,7 @@ pub fn foot_names<'a>(names: impl Iterator<Item = &'a str> + Clone) -> Option<[u
     Anatomy::of_names(names).feet()
 }
 
-/// Each foot's points ([`foot_points`]: its joints, their end sites, the heel) in the foot bone's
+/// Each foot's points (`foot_points`: its joints, their end sites, the heel) in the foot bone's
 /// frame from where its sensor is taken to sit, in metres (`[left, right]`): what
 /// [`zupt::Shoe::pivot_acceleration_m_s2`] turns about, once turned into the sensor's frame by
 /// its mount. The sensor is taken at the middle of the foot bone (from its joint to its first
