@@ -389,11 +389,9 @@ fn feet_pivots(
     held: &[UnitQuaternion<f64>],
 ) -> [Option<(Vec<f64>, Vec<f64>)>; 2] {
     let points = root::foot_points_from_sensor_m(rig, held);
-    let mut sides = [0, 1].into_iter();
-    readings.map(|r| {
-        let side = sides.next().unwrap_or_default();
-        let (name, track) = r?;
-        let i = sensors.iter().position(|s| s.sensor == name)?;
+    [0, 1].map(|side| {
+        let (name, track) = readings[side].as_ref()?;
+        let i = sensors.iter().position(|s| &s.sensor == name)?;
         let mount = calibration.mounts.get(i)?;
         let in_sensor: Vec<_> = points.as_ref()?[side]
             .iter()

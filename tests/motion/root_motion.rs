@@ -875,6 +875,23 @@ fn steps_down_and_up_are_read_where_the_feet_stand() {
     }
 }
 
+/// The contacts' scores ([`contact_scores`]) of one take simulated with `seed`, `--root feet`:
+/// from orientations alone, and from raw readings (`simulate --raw`). `None` without Python.
+fn contacts_both_ways(
+    bvh: &Path,
+    mapping: &str,
+    frames: Option<&str>,
+    names: [&str; 3],
+    seed: u64,
+) -> Option<[ContactScores; 2]> {
+    let args = ["--root", "feet"];
+    let [orientations, raw] = [&[][..], &["--raw"][..]].map(|sim| {
+        closed_loop_simulated(bvh, mapping, frames, &args, names, seed, sim)
+            .map(|take| contact_scores(&take))
+    });
+    Some([orientations?, raw?])
+}
+
 /// Issue 50's raw readings: the feet's own sensors (`simulate --raw`, fused; the acceleration of
 /// the foot's least-moving point, `zupt::Shoe::pivot_acceleration_m_s2`) make the contacts at
 /// least as good as the orientations alone (0.5° of noise) do, on the pymo walk and CMU 01_01,
@@ -897,13 +914,9 @@ fn the_feet_sensors_keep_the_contacts_sharp() {
         };
         let mut gain = 0.0;
         for seed in 3..=5 {
-            let [orientations, raw] = [&[][..], &["--raw"][..]].map(|sim| {
-                let args = ["--root", "feet"];
-                let take =
-                    closed_loop_simulated(&bvh, mapping, frames, &args, CMU_JOINTS, seed, sim)?;
-                Some(contact_scores(&take))
-            });
-            let (Some(orientations), Some(raw)) = (orientations, raw) else {
+            let Some([orientations, raw]) =
+                contacts_both_ways(&bvh, mapping, frames, CMU_JOINTS, seed)
+            else {
                 return;
             };
             eprintln!(
@@ -1031,12 +1044,8 @@ fn changing_ground_keeps_each_foot_on_its_own() {
     ];
     for (label, file, mapping, frames, names) in raw_takes {
         let bvh = shared(file).unwrap();
-        let args = ["--root", "feet"];
-        let [orientations, raw] = [&[][..], &["--raw"][..]].map(|sim| {
-            let take = closed_loop_simulated(&bvh, mapping, frames, &args, names, test_seed(), sim)
-                .unwrap();
-            contact_scores(&take)
-        });
+        let [orientations, raw] =
+            contacts_both_ways(&bvh, mapping, frames, names, test_seed()).unwrap();
         eprintln!(
             "{label}: contacts from orientations precision {:.3} recall {:.3}, from raw readings \
              {:.3} {:.3}",
