@@ -979,38 +979,53 @@ fn changing_ground_keeps_each_foot_on_its_own() {
         "tests/fixtures/mappings/poser_16imu.json",
         POSER_JOINTS,
     )];
-    for trial in ["03_01", "03_03", "03_04"] {
-        if let Some(bytes) =
-            common::mirror::fetched(CMU_MIRROR.0, CMU_MIRROR.1, &format!("data/03/{trial}.bvh"))
-        {
-            let file = dir.path().join(format!("{trial}.bvh"));
+    // The same subject's other trials over that ground; and stairs: CMU 13_35 "climb 3 steps"
+    // (up three steps of about 0.13 h, a turn on top, down again) and 14_21 (another subject, the
+    // same stairs) — the CMU database, free for research and commercial use; cgspeed's BVH
+    // conversion (no restrictions added), kept by AtelierCircle/CMU-MoCap-10-14 (its
+    // CGSPEED.md), on 03_02's skeleton and, like it, easing out of a reference pose at first.
+    let poser = (
+        "tests/fixtures/mappings/poser_16imu.json",
+        POSER_JOINTS,
+        "60:",
+    );
+    let fetched = [
+        (
+            CMU_MIRROR,
+            "data/03/03_01.bvh",
+            "CMU 03_01 uneven",
+            (CMU_MAPPING, CMU_JOINTS, "1:"),
+        ),
+        (
+            CMU_MIRROR,
+            "data/03/03_03.bvh",
+            "CMU 03_03 uneven",
+            (CMU_MAPPING, CMU_JOINTS, "1:"),
+        ),
+        (
+            CMU_MIRROR,
+            "data/03/03_04.bvh",
+            "CMU 03_04 uneven",
+            (CMU_MAPPING, CMU_JOINTS, "1:"),
+        ),
+        (
+            STAIRS_MIRROR,
+            "13/13_35.bvh",
+            "CMU 13_35 up and down stairs",
+            poser,
+        ),
+        (
+            STAIRS_MIRROR,
+            "14/14_21.bvh",
+            "CMU 14_21 up and down stairs",
+            poser,
+        ),
+    ];
+    for (i, ((repo, commit), path, label, (mapping, names, frames))) in fetched.iter().enumerate() {
+        if let Some(bytes) = common::mirror::fetched(repo, commit, path) {
+            let file = dir.path().join(format!("fetched{i}.bvh"));
             std::fs::write(&file, bytes).unwrap();
-            terrain.push((
-                format!("CMU {trial} uneven (fetched)"),
-                file,
-                "1:",
-                CMU_MAPPING,
-                CMU_JOINTS,
-            ));
-        }
-    }
-    // Stair takes: CMU 13_35 "climb 3 steps" (up three steps of about 0.13 h, a turn on top,
-    // down again) and, held out, 14_21 (another subject, the same stairs): the CMU database, free
-    // for research and commercial use; cgspeed's BVH conversion (no restrictions added), kept by
-    // AtelierCircle/CMU-MoCap-10-14 (its CGSPEED.md). 03_02's skeleton, and like it they ease out
-    // of a reference pose over their first frames.
-    for (subject, trial) in [("13", "13_35"), ("14", "14_21")] {
-        let path = format!("{subject}/{trial}.bvh");
-        if let Some(bytes) = common::mirror::fetched(STAIRS_MIRROR.0, STAIRS_MIRROR.1, &path) {
-            let file = dir.path().join(format!("{trial}.bvh"));
-            std::fs::write(&file, bytes).unwrap();
-            terrain.push((
-                format!("CMU {trial} up and down stairs (fetched)"),
-                file,
-                "60:",
-                "tests/fixtures/mappings/poser_16imu.json",
-                POSER_JOINTS,
-            ));
+            terrain.push((format!("{label} (fetched)"), file, frames, mapping, *names));
         }
     }
     for (label, bvh, frames, mapping, names) in terrain {
