@@ -59,7 +59,7 @@ pub const AGREE_H_S: f64 = 0.3;
 pub const DEPART_S: f64 = 0.05;
 /// … the new foot's departing more than this many times as far as the old one's is a swing
 /// passing, not a double support. Measured (seed 3) on the stretches it judged: on the stairs of
-/// CMU 13_35 and 14_21 the tops of three swings down 3.4–4.7 and 13_35's first step 6.6 (on
+/// CMU 13_35 and 14_21 the tops of three swings down 3.4–4.7 and one as 13_35 starts 6.6 (on
 /// seeds 4 and 5 one more of 14_21's between 2 and 2.5), their other stretches 0.09–1.97; the
 /// uneven-ground walks CMU 03_01, 03_03 and 03_04, 104 stretches, 0.05–1.84 and one of 2.13,
 /// rejected without changing 03_04's scores (issue 50's battery prints them; issue 49's gaits
@@ -228,7 +228,7 @@ fn double_support(
         }
     };
     // Whether `from` rather than `to` ends the stretch `start..=end`.
-    let ended_by = |from: usize, start: usize, end: usize| {
+    let ended_by_from = |start: usize, end: usize| {
         let both = (start..=end).map(|t| mean(from, t) + mean(to, t));
         let v = both.sum::<Vector3<f64>>() / (2 * (end + 1 - start)) as f64;
         let last = (end + depart).min(cues.len().saturating_sub(2));
@@ -258,7 +258,7 @@ fn double_support(
             .any(|&o| distance(o, start, end) < d);
         if end + 1 - start >= super::MIN_FRAMES
             && !theirs
-            && ended_by(from, start, end)
+            && ended_by_from(start, end)
             && best.is_none_or(|b| d < b.0)
         {
             best = Some((d, start, end));
