@@ -32,8 +32,8 @@
 //!   seldom holds on real walks. Where the take has a foot sensor's raw readings, that sensor
 //!   says whether the foot turns about a point that stands ([`zupt`]: SHOE's force term about
 //!   each of the foot's points): a foot whose every point accelerates by more than
-//!   [`UNPLANTED_M_S2`] is not reported planted, one about a nearly still point is. A foot's points are
-//!   its joints, their end sites and a heel (a skeleton has none: below the ankle at the sole's
+//!   [`UNPLANTED_M_S2`] is not reported planted, one about a nearly still point is. A foot's
+//!   points are its joints, their end sites and a heel (a skeleton has none: below the ankle at the sole's
 //!   height, [`HEEL_BACK`] of the foot behind it). The body leaves the ground in two ways: the
 //!   legs throw the hips up faster than [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off),
 //!   or the feet fall [`FLIGHT_H`] below the ballistic path the hips would have taken from the
