@@ -33,13 +33,13 @@
 //!   says whether the foot turns about a point that stands ([`zupt`]: SHOE's force term about
 //!   each of the foot's points): a foot whose every point accelerates by more than
 //!   [`UNPLANTED_M_S2`] is not reported planted, one about a nearly still point is. A foot's
-//!   points are its joints, their end sites and a heel (a skeleton has none: below the ankle at the sole's
-//!   height, [`HEEL_BACK`] of the foot behind it). The body leaves the ground in two ways: the
-//!   legs throw the hips up faster than [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's push-off),
-//!   or the feet fall [`FLIGHT_H`] below the ballistic path the hips would have taken from the
-//!   last frame the feet held them (the ground only pushes: a body cannot be pulled down faster
-//!   than gravity, so feet that would pull it have left the ground — a run's flight, which rises
-//!   too little for the first way).
+//!   points are its joints, their end sites and a heel (a skeleton has none: below the ankle at
+//!   the sole's height, [`HEEL_BACK`] of the foot behind it). The body leaves the ground in two
+//!   ways: the legs throw the hips up faster than [`TAKEOFF_H_S`] for [`TAKEOFF_S`] (a hop's
+//!   push-off), or the feet fall [`FLIGHT_H`] below the ballistic path the hips would have taken
+//!   from the last frame the feet held them (the ground only pushes: a body cannot be pulled
+//!   down faster than gravity, so feet that would pull it have left the ground — a run's flight,
+//!   which rises too little for the first way).
 //!   Airborne, the hips keep the horizontal velocity of their last stance (its mean over up to
 //!   [`STANCE_S`]) and follow gravity. While they still rise the legs may be
 //!   unfolding under the push-off: a foot at its surface then carries them higher and faster
